@@ -1,0 +1,45 @@
+# The README's two commands: `make demo` and `make test`. Everything else is for developers.
+CARGO ?= cargo
+OUT ?= out
+DEMO_INPUT ?= fixtures/hdri/city_512.exr
+
+.PHONY: all build demo test unit lint fmt fmt-check bench bench-quick fuzz clean
+
+all: build
+
+build:
+	$(CARGO) build --release --workspace --bins
+
+# Bakes the embedded default fixture into out/ and says where the results are.
+demo: build
+	@if [ -x target/release/bake ] && [ -f pipelines/probe.ron ]; then \
+		target/release/bake run pipelines/probe.ron; \
+	else \
+		target/release/equirect-to-cube $(DEMO_INPUT) -o $(OUT)/cube --size 128 && \
+		target/release/irradiance $(DEMO_INPUT) -o $(OUT)/irradiance; \
+	fi
+	@echo "demo outputs are in $(OUT)/"
+
+# Workspace tests (unit, stress and end-to-end), then clippy and rustfmt.
+test: unit lint fmt-check
+
+unit:
+	$(CARGO) test --workspace
+
+lint:
+	$(CARGO) clippy --workspace --all-targets -- -D warnings
+
+fmt:
+	$(CARGO) fmt --all
+
+fmt-check:
+	$(CARGO) fmt --all --check
+
+bench:
+	scripts/bench.sh
+
+bench-quick:
+	scripts/bench.sh --quick
+
+clean:
+	rm -rf $(OUT)

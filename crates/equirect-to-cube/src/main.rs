@@ -1,0 +1,35 @@
+//! `equirect-to-cube`: parse, call `ibl_env::equirect_to_cube`, write, report.
+
+use clap::Parser;
+use ibl_core::envmap::load_environment;
+use ibl_env::equirect_to_cube::{run, Params};
+use std::path::PathBuf;
+
+/// Latitude-longitude HDR (or a cross, strip, face folder or KTX2 cube) to an area-filtered
+/// cubemap: DIR/px.exr … DIR/nz.exr, or DIR/cube.ktx2 with --layout ktx2.
+#[derive(Parser)]
+#[command(version, about)]
+struct Cli {
+    /// Input environment: .exr/.hdr/.png equirect or cross, a folder of faces, or a .ktx2 cube.
+    input: PathBuf,
+    /// Output folder (or file with --to-equirect).
+    #[arg(short, long)]
+    output: PathBuf,
+    #[command(flatten)]
+    params: Params,
+    #[command(flatten)]
+    common: ibl_cli::CommonArgs,
+}
+
+fn main() {
+    let cli = Cli::parse();
+    ibl_cli::run("equirect-to-cube", cli.common.clone(), |ctx| {
+        cli.params.validate()?;
+        let env = load_environment(&cli.input, cli.params.sanitize)?;
+        env.warnings().into_iter().for_each(|w| ctx.warn(w));
+        let baked = run(&cli.params, &env, &cli.output, ctx.progress())?;
+        ibl_core::io::write_many_atomic(&baked.files)?;
+        let outputs = baked.files.iter().map(|f| f.0.display().to_string()).collect();
+        Ok::<_, ibl_core::Error>((outputs, serde_json::json!({ "face_size": baked.face_size })))
+    })
+}

@@ -1,0 +1,240 @@
+//! End-to-end tests of the `equirect-to-cube` binary: orientation, accuracy against an
+//! independent area-filtered reference, containers, round trips and bad input.
+
+use glam::Vec3;
+use ibl_core::cube::{texel_direction, Face};
+use ibl_core::envmap::read_cube_chain;
+use ibl_core::equirect::{pixel_direction, sample_nearest};
+use ibl_core::io::{self, ColorSpace, WriteOptions};
+use ibl_core::Image;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_equirect-to-cube"))
+}
+
+fn fixture(rel: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures").join(rel)
+}
+
+fn run(args: &[&str]) -> Output {
+    bin().args(args).arg("--quiet").output().expect("binary runs")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// An equirect whose texels hold their own direction (offset by 2 to stay positive).
+fn direction_equirect(w: usize) -> Image {
+    let h = w / 2;
+    let mut img = Image::new(w, h, 3);
+    for j in 0..h {
+        for i in 0..w {
+            let d = pixel_direction(i, j, w, h);
+            img.texel_mut(i, j).copy_from_slice(&[d.x + 2.0, d.y + 2.0, d.z + 2.0]);
+        }
+    }
+    img
+}
+
+#[test]
+fn every_face_is_oriented_as_design_md() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = dir.path().join("dirs.exr");
+    io::write_image(&src, &direction_equirect(512), &WriteOptions::default()).unwrap();
+    let out = dir.path().join("cube");
+    let o = run(&[src.to_str().unwrap(), "-o", out.to_str().unwrap(), "--size", "16"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let n = 16;
+    let mut worst = 0.0f32;
+    for face in Face::ALL {
+        let img = io::read_image(&out.join(format!("{}.exr", face.name())), ColorSpace::Linear).unwrap();
+        assert_eq!((img.width, img.height), (n, n));
+        for (i, j) in [(0, 0), (n - 1, 0), (0, n - 1), (n - 1, n - 1), (n / 2, n / 2)] {
+            let t = img.rgb(i, j);
+            let got = Vec3::new(t[0] - 2.0, t[1] - 2.0, t[2] - 2.0);
+            let want = texel_direction(face, i, j, n);
+            // The footprint mean of a linear function is close to its centre value.
+            worst = worst.max(got.normalize().angle_between(want));
+        }
+    }
+    eprintln!("worst orientation error: {:.3} degrees", worst.to_degrees());
+    assert!(worst.to_degrees() < 2.0, "{worst}");
+}
+
+/// Independent reference: the mean over the texel footprint by a 64×64 grid of nearest
+/// source reads weighted by the exact face Jacobian, in f64.
+fn reference_face_texel(src: &Image, face: Face, i: usize, j: usize, n: usize) -> [f64; 3] {
+    let k = 64;
+    let mut acc = [0.0f64; 3];
+    let mut ws = 0.0f64;
+    for b in 0..k {
+        for a in 0..k {
+            let s = (i as f64 + (a as f64 + 0.5) / k as f64) * 2.0 / n as f64 - 1.0;
+            let t = (j as f64 + (b as f64 + 0.5) / k as f64) * 2.0 / n as f64 - 1.0;
+            let w = (1.0 + s * s + t * t).powf(-1.5);
+            let c = sample_nearest(src, face.direction(s as f32, t as f32));
+            for q in 0..3 {
+                acc[q] += c[q] as f64 * w;
+            }
+            ws += w;
+        }
+    }
+    acc.map(|v| v / ws)
+}
+
+#[test]
+fn faces_match_independent_area_filtered_reference() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("cube");
+    let src_path = fixture("hdri/city_512.exr");
+    let o = run(&[src_path.to_str().unwrap(), "-o", out.to_str().unwrap(), "--size", "64"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let mut src = io::read_image(&src_path, ColorSpace::Linear).unwrap();
+    ibl_core::image::check_texels(&mut src, &src_path, false).unwrap();
+    let n = 64;
+    let (mut num, mut den) = (0.0f64, 0.0f64);
+    for face in Face::ALL {
+        let img = io::read_image(&out.join(format!("{}.exr", face.name())), ColorSpace::Linear).unwrap();
+        for j in (0..n).step_by(5) {
+            for i in (0..n).step_by(5) {
+                let r = reference_face_texel(&src, face, i, j, n);
+                let g = img.rgb(i, j);
+                for q in 0..3 {
+                    num += (g[q] as f64 - r[q]).abs();
+                    den += r[q].abs();
+                }
+            }
+        }
+    }
+    let rel = num / den;
+    eprintln!("equirect-to-cube 64² from 512×256 vs 64×64-grid area reference: relative MAE {rel:.5}");
+    assert!(rel < 0.01, "{rel}");
+}
+
+#[test]
+fn ktx2_layout_and_inverse_round_trip() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = dir.path().join("dirs.exr");
+    let img = direction_equirect(128);
+    io::write_image(&src, &img, &WriteOptions::default()).unwrap();
+    let out = dir.path().join("k");
+    let o = run(&[src.to_str().unwrap(), "-o", out.to_str().unwrap(), "--layout", "ktx2", "--half"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let mips = read_cube_chain(&out.join("cube.ktx2")).unwrap();
+    assert_eq!(mips.levels[0].size, 32, "default size is the largest power of two not above width/4");
+    // Back to equirect through the KTX2 file.
+    let eq = dir.path().join("back.exr");
+    let o = run(&[out.join("cube.ktx2").to_str().unwrap(), "-o", eq.to_str().unwrap(), "--to-equirect", "--size", "64"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let back = io::read_image(&eq, ColorSpace::Linear).unwrap();
+    assert_eq!((back.width, back.height), (128, 64));
+    let mut worst = 0.0f32;
+    for j in 4..60 {
+        for i in 0..128 {
+            let a = back.rgb(i, j);
+            let b = img.rgb(i, j);
+            worst = worst.max((0..3).map(|q| (a[q] - b[q]).abs()).fold(0.0, f32::max));
+        }
+    }
+    eprintln!("equirect → cube (half) → equirect worst abs error on a unit-direction field: {worst:.4}");
+    assert!(worst < 0.05, "{worst}");
+}
+
+#[test]
+fn horizontal_cross_input_is_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let n = 8;
+    let mut cross = Image::new(4 * n, 3 * n, 3);
+    for (face, col, row) in [(Face::Px, 2, 1), (Face::Nx, 0, 1), (Face::Py, 1, 0), (Face::Ny, 1, 2), (Face::Pz, 1, 1), (Face::Nz, 3, 1)] {
+        for j in 0..n {
+            for i in 0..n {
+                let v = face as usize as f32 + 1.0;
+                cross.texel_mut(col * n + i, row * n + j).copy_from_slice(&[v, v, v]);
+            }
+        }
+    }
+    let src = dir.path().join("cross.exr");
+    io::write_image(&src, &cross, &WriteOptions::default()).unwrap();
+    let out = dir.path().join("c");
+    let o = run(&[src.to_str().unwrap(), "-o", out.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for face in Face::ALL {
+        let img = io::read_image(&out.join(format!("{}.exr", face.name())), ColorSpace::Linear).unwrap();
+        assert_eq!(img.rgb(3, 3)[0], face as usize as f32 + 1.0, "{face:?}");
+    }
+}
+
+fn assert_fails_cleanly(args: &[&str], out: &Path, expect: &str, code: i32) {
+    let o = bin().args(args).output().unwrap();
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(code), "{err}");
+    assert!(err.contains(expect), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "one line: {err}");
+    assert!(!out.exists() || std::fs::read_dir(out).unwrap().next().is_none(), "nothing written");
+}
+
+#[test]
+fn bad_inputs_fail_with_one_line_and_write_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let o = out.to_str().unwrap();
+    // Truncated EXR.
+    let good = std::fs::read(fixture("hdri/studio_256.exr")).unwrap();
+    let trunc = dir.path().join("trunc.exr");
+    std::fs::write(&trunc, &good[..good.len() / 2]).unwrap();
+    assert_fails_cleanly(&[trunc.to_str().unwrap(), "-o", o], &out, "trunc.exr", 2);
+    // Empty file, text file, missing file.
+    let empty = dir.path().join("empty.exr");
+    std::fs::write(&empty, b"").unwrap();
+    assert_fails_cleanly(&[empty.to_str().unwrap(), "-o", o], &out, "empty file", 2);
+    let text = dir.path().join("notes.txt");
+    std::fs::write(&text, b"not an image at all").unwrap();
+    assert_fails_cleanly(&[text.to_str().unwrap(), "-o", o], &out, "notes.txt", 3);
+    assert_fails_cleanly(&["/nonexistent/env.exr", "-o", o], &out, "no such file", 4);
+    // NaN texels: refused with a count, accepted with --sanitize.
+    let mut img = Image::new(16, 8, 3);
+    img.data[5] = f32::NAN;
+    img.data[7] = f32::INFINITY;
+    let nan = dir.path().join("nan.exr");
+    io::write_image(&nan, &img, &WriteOptions::default()).unwrap();
+    assert_fails_cleanly(&[nan.to_str().unwrap(), "-o", o], &out, "2 NaN/Inf", 2);
+    let ok = bin().args([nan.to_str().unwrap(), "-o", o, "--sanitize"]).output().unwrap();
+    assert!(ok.status.success());
+    assert!(stderr(&ok).contains("set 2 NaN/Inf"), "{}", stderr(&ok));
+    std::fs::remove_dir_all(&out).unwrap();
+    // Unsupported layout, bad size.
+    let odd = dir.path().join("odd.exr");
+    io::write_image(&odd, &Image::new(10, 3, 3), &WriteOptions::default()).unwrap();
+    assert_fails_cleanly(&[odd.to_str().unwrap(), "-o", o], &out, "layout", 3);
+    assert_fails_cleanly(&[nan.to_str().unwrap(), "-o", o, "--size", "0"], &out, "--size 0", 2);
+}
+
+#[test]
+fn unwritable_output_fails_and_keeps_previous_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    std::fs::create_dir(&out).unwrap();
+    // A folder where px.exr should go: the write fails, other earlier files stay intact.
+    std::fs::create_dir(out.join("px.exr")).unwrap();
+    let o = run(&[fixture("hdri/studio_256.exr").to_str().unwrap(), "-o", out.to_str().unwrap(), "--size", "8"]);
+    assert_eq!(o.status.code(), Some(4), "{}", stderr(&o));
+    let leftovers: Vec<_> = std::fs::read_dir(&out).unwrap().filter_map(|e| e.ok()).filter(|e| e.file_name().to_string_lossy().contains(".tmp-")).collect();
+    assert!(leftovers.is_empty());
+}
+
+#[test]
+fn damaged_fixture_negatives_are_clamped_with_a_warning() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let o = bin().args([fixture("hdri-damaged/esplanade.exr").to_str().unwrap(), "-o", out.to_str().unwrap(), "--size", "16"]).output().unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let err = stderr(&o);
+    assert!(err.contains("negative texel values") && err.contains("most negative -3"), "{err}");
+    for face in Face::ALL {
+        let img = io::read_image(&out.join(format!("{}.exr", face.name())), ColorSpace::Linear).unwrap();
+        assert!(img.data.iter().all(|v| v.is_finite() && *v >= 0.0));
+    }
+}

@@ -1,0 +1,439 @@
+//! Cube faces and directions (DESIGN.md table), exact texel solid angles, cubemaps with mip
+//! levels, seamless bilinear sampling across faces and solid-angle-weighted downsampling.
+
+use crate::error::{Error, Result};
+use crate::image::Image;
+use crate::Rgb;
+use glam::Vec3;
+
+/// Cube faces in file and KTX2 order: +X −X +Y −Y +Z −Z.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Face {
+    Px = 0,
+    Nx = 1,
+    Py = 2,
+    Ny = 3,
+    Pz = 4,
+    Nz = 5,
+}
+
+impl Face {
+    pub const ALL: [Face; 6] = [Face::Px, Face::Nx, Face::Py, Face::Ny, Face::Pz, Face::Nz];
+
+    /// File-name stem (`px` … `nz`).
+    pub fn name(self) -> &'static str {
+        ["px", "nx", "py", "ny", "pz", "nz"][self as usize]
+    }
+
+    pub fn from_index(i: usize) -> Face {
+        Face::ALL[i]
+    }
+
+    /// Unnormalised direction of face coordinates (sc, tc) ∈ [−1, 1]² (DESIGN.md table).
+    #[inline]
+    pub fn direction(self, sc: f32, tc: f32) -> Vec3 {
+        match self {
+            Face::Px => Vec3::new(1.0, -tc, -sc),
+            Face::Nx => Vec3::new(-1.0, -tc, sc),
+            Face::Py => Vec3::new(sc, 1.0, tc),
+            Face::Ny => Vec3::new(sc, -1.0, -tc),
+            Face::Pz => Vec3::new(sc, -tc, 1.0),
+            Face::Nz => Vec3::new(-sc, -tc, -1.0),
+        }
+    }
+
+    /// Face and (sc, tc) of a direction: the inverse of [`Face::direction`] on the major axis.
+    /// A zero vector maps to the centre of +X.
+    #[inline]
+    pub fn from_direction(d: Vec3) -> (Face, f32, f32) {
+        let a = d.abs();
+        if a.x >= a.y && a.x >= a.z {
+            if a.x == 0.0 {
+                return (Face::Px, 0.0, 0.0);
+            }
+            let inv = 1.0 / a.x;
+            if d.x > 0.0 {
+                (Face::Px, -d.z * inv, -d.y * inv)
+            } else {
+                (Face::Nx, d.z * inv, -d.y * inv)
+            }
+        } else if a.y >= a.z {
+            let inv = 1.0 / a.y;
+            if d.y > 0.0 {
+                (Face::Py, d.x * inv, d.z * inv)
+            } else {
+                (Face::Ny, d.x * inv, -d.z * inv)
+            }
+        } else {
+            let inv = 1.0 / a.z;
+            if d.z > 0.0 {
+                (Face::Pz, d.x * inv, -d.y * inv)
+            } else {
+                (Face::Nz, -d.x * inv, -d.y * inv)
+            }
+        }
+    }
+}
+
+/// Face coordinate of the centre of texel `i` on an `n`-texel edge: 2(i+0.5)/n − 1.
+#[inline]
+pub fn texel_coord(i: usize, n: usize) -> f32 {
+    (2.0 * (i as f32 + 0.5)) / n as f32 - 1.0
+}
+
+/// Unit direction through the centre of texel (i, j) of face `face` of an n×n cube.
+#[inline]
+pub fn texel_direction(face: Face, i: usize, j: usize, n: usize) -> Vec3 {
+    face.direction(texel_coord(i, n), texel_coord(j, n)).normalize()
+}
+
+/// Solid angle subtended by the face rectangle [0, x]×[0, y] on the unit-distance plane:
+/// atan2(xy, sqrt(x²+y²+1)). Differences of it give exact texel solid angles.
+#[inline]
+fn area_element(x: f64, y: f64) -> f64 {
+    (x * y).atan2((x * x + y * y + 1.0).sqrt())
+}
+
+/// Exact solid angle of texel (i, j) of an n×n face (the same on every face).
+pub fn texel_solid_angle(i: usize, j: usize, n: usize) -> f64 {
+    let inv = 2.0 / n as f64;
+    let x0 = i as f64 * inv - 1.0;
+    let y0 = j as f64 * inv - 1.0;
+    let x1 = x0 + inv;
+    let y1 = y0 + inv;
+    area_element(x0, y0) - area_element(x0, y1) - area_element(x1, y0) + area_element(x1, y1)
+}
+
+/// Solid angles of every texel of an n×n face, row-major (one table serves all six faces).
+pub fn solid_angle_table(n: usize) -> Vec<f32> {
+    let mut t = Vec::with_capacity(n * n);
+    for j in 0..n {
+        for i in 0..n {
+            t.push(texel_solid_angle(i, j, n) as f32);
+        }
+    }
+    t
+}
+
+/// Edge lengths of a mip chain from `size` down to `min_size` (both included when reachable):
+/// size, size/2, … (rounded down, never below 1). The one function for mip sizes.
+pub fn mip_sizes(size: usize, min_size: usize) -> Vec<usize> {
+    let mut sizes = vec![size.max(1)];
+    let mut s = size.max(1);
+    while s > min_size.max(1) && s > 1 {
+        s = (s / 2).max(1);
+        sizes.push(s);
+    }
+    sizes
+}
+
+/// A cubemap of RGB float faces, each `size`×`size`, in [`Face::ALL`] order.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Cubemap {
+    pub size: usize,
+    pub faces: [Image; 6],
+}
+
+impl Cubemap {
+    pub fn new(size: usize) -> Self {
+        Cubemap { size, faces: std::array::from_fn(|_| Image::new(size, size, 3)) }
+    }
+
+    /// Builds a cube from six square images of equal size (converted to RGB).
+    pub fn from_faces(faces: [Image; 6]) -> Result<Self> {
+        let size = faces[0].width;
+        for (f, img) in faces.iter().enumerate() {
+            if img.width != size || img.height != size || size == 0 {
+                return Err(Error::param(format!(
+                    "cube face {} is {}x{}, expected {size}x{size}",
+                    Face::from_index(f).name(),
+                    img.width,
+                    img.height
+                )));
+            }
+        }
+        Ok(Cubemap { size, faces: faces.map(|f| f.to_channels(3)) })
+    }
+
+    /// A cube whose every texel is `c`.
+    pub fn constant(size: usize, c: Rgb) -> Self {
+        let mut cube = Cubemap::new(size);
+        for face in &mut cube.faces {
+            for t in face.data.chunks_exact_mut(3) {
+                t.copy_from_slice(&c);
+            }
+        }
+        cube
+    }
+
+    #[inline]
+    pub fn texel(&self, face: Face, i: usize, j: usize) -> Rgb {
+        let o = (j * self.size + i) * 3;
+        let d = &self.faces[face as usize].data;
+        [d[o], d[o + 1], d[o + 2]]
+    }
+
+    /// Texel at integer coordinates that may lie one texel outside the face: such taps are
+    /// re-projected onto the neighbouring face through their direction, which makes bilinear
+    /// filtering seamless across edges and corners.
+    #[inline]
+    fn texel_wrapped(&self, face: Face, i: isize, j: isize) -> Rgb {
+        let n = self.size as isize;
+        if i >= 0 && j >= 0 && i < n && j < n {
+            return self.texel(face, i as usize, j as usize);
+        }
+        let sc = (2.0 * (i as f32 + 0.5)) / n as f32 - 1.0;
+        let tc = (2.0 * (j as f32 + 0.5)) / n as f32 - 1.0;
+        // The tap's direction lies past the edge, so its major axis names the neighbour.
+        let d = face.direction(sc, tc);
+        let (f2, s2, t2) = Face::from_direction(d);
+        let (i2, j2) = face_texel_index(s2, t2, self.size);
+        self.texel(f2, i2, j2)
+    }
+
+    /// Seamless bilinear sample in direction `d` (need not be normalised).
+    pub fn sample_bilinear(&self, d: Vec3) -> Rgb {
+        let (face, sc, tc) = Face::from_direction(d);
+        let n = self.size as f32;
+        let x = (sc + 1.0) * 0.5 * n - 0.5;
+        let y = (tc + 1.0) * 0.5 * n - 0.5;
+        let x0 = x.floor();
+        let y0 = y.floor();
+        let fx = x - x0;
+        let fy = y - y0;
+        let (x0, y0) = (x0 as isize, y0 as isize);
+        let a = self.texel_wrapped(face, x0, y0);
+        let b = self.texel_wrapped(face, x0 + 1, y0);
+        let c = self.texel_wrapped(face, x0, y0 + 1);
+        let e = self.texel_wrapped(face, x0 + 1, y0 + 1);
+        let mut out = [0.0; 3];
+        for k in 0..3 {
+            let top = a[k] + (b[k] - a[k]) * fx;
+            let bot = c[k] + (e[k] - c[k]) * fx;
+            out[k] = top + (bot - top) * fy;
+        }
+        out
+    }
+
+    /// Nearest texel in direction `d`.
+    pub fn sample_nearest(&self, d: Vec3) -> Rgb {
+        let (face, sc, tc) = Face::from_direction(d);
+        let (i, j) = face_texel_index(sc, tc, self.size);
+        self.texel(face, i, j)
+    }
+
+    /// Solid-angle-weighted 2×2 box reduction to a cube of half the size (odd sizes: the
+    /// last row/column is folded into the previous texel), the exact mean radiance of each
+    /// coarse texel's footprint.
+    pub fn downsample(&self) -> Cubemap {
+        let n = self.size;
+        let m = (n / 2).max(1);
+        if n == 1 {
+            return self.clone();
+        }
+        let sa = solid_angle_table(n);
+        let mut out = Cubemap::new(m);
+        for (fi, face) in out.faces.iter_mut().enumerate() {
+            let src = &self.faces[fi];
+            for j in 0..m {
+                for i in 0..m {
+                    let (i0, i1) = (2 * i, if i == m - 1 { n } else { 2 * i + 2 });
+                    let (j0, j1) = (2 * j, if j == m - 1 { n } else { 2 * j + 2 });
+                    let mut acc = [0.0f64; 3];
+                    let mut w = 0.0f64;
+                    for y in j0..j1 {
+                        for x in i0..i1 {
+                            let s = sa[y * n + x] as f64;
+                            let t = src.texel(x, y);
+                            for k in 0..3 {
+                                acc[k] += t[k] as f64 * s;
+                            }
+                            w += s;
+                        }
+                    }
+                    let dst = face.texel_mut(i, j);
+                    for k in 0..3 {
+                        dst[k] = (acc[k] / w) as f32;
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    /// Mean radiance over the sphere (solid-angle weighted), in f64 for energy tests.
+    pub fn mean_radiance(&self) -> [f64; 3] {
+        let sa = solid_angle_table(self.size);
+        let mut acc = [0.0f64; 3];
+        for face in &self.faces {
+            for (t, s) in face.data.chunks_exact(3).zip(&sa) {
+                for k in 0..3 {
+                    acc[k] += t[k] as f64 * *s as f64;
+                }
+            }
+        }
+        acc.map(|a| a / (4.0 * std::f64::consts::PI))
+    }
+}
+
+/// Texel index of face coordinates, clamped to the face.
+#[inline]
+pub fn face_texel_index(sc: f32, tc: f32, n: usize) -> (usize, usize) {
+    let fi = ((sc + 1.0) * 0.5 * n as f32).floor() as isize;
+    let fj = ((tc + 1.0) * 0.5 * n as f32).floor() as isize;
+    (fi.clamp(0, n as isize - 1) as usize, fj.clamp(0, n as isize - 1) as usize)
+}
+
+/// A mip chain of cubemaps, level 0 the largest.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CubeMips {
+    pub levels: Vec<Cubemap>,
+}
+
+impl CubeMips {
+    /// Box-filtered chain from `base` down to faces of `min_size` texels.
+    pub fn build(base: Cubemap, min_size: usize) -> Self {
+        let mut levels = vec![base];
+        while levels.last().unwrap().size > min_size.max(1) {
+            let next = levels.last().unwrap().downsample();
+            levels.push(next);
+        }
+        CubeMips { levels }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::PI;
+
+    fn close(a: Vec3, b: Vec3) -> bool {
+        (a - b).length() < 1e-5
+    }
+
+    #[test]
+    fn face_centres_and_corners_follow_design_table() {
+        // Centres.
+        let expect = [Vec3::X, -Vec3::X, Vec3::Y, -Vec3::Y, Vec3::Z, -Vec3::Z];
+        for (f, e) in Face::ALL.iter().zip(expect) {
+            assert!(close(f.direction(0.0, 0.0).normalize(), e), "{f:?}");
+        }
+        // Top-left corner (sc, tc) = (−1, −1) of each face, i.e. texel (0, 0) of row 0.
+        let tl = [
+            Vec3::new(1.0, 1.0, 1.0),
+            Vec3::new(-1.0, 1.0, -1.0),
+            Vec3::new(-1.0, 1.0, -1.0),
+            Vec3::new(-1.0, -1.0, 1.0),
+            Vec3::new(-1.0, 1.0, 1.0),
+            Vec3::new(1.0, 1.0, -1.0),
+        ];
+        for (f, e) in Face::ALL.iter().zip(tl) {
+            assert!(close(f.direction(-1.0, -1.0), e), "{f:?}");
+        }
+        // Bottom-right corner (1, 1).
+        let br = [
+            Vec3::new(1.0, -1.0, -1.0),
+            Vec3::new(-1.0, -1.0, 1.0),
+            Vec3::new(1.0, 1.0, 1.0),
+            Vec3::new(1.0, -1.0, -1.0),
+            Vec3::new(1.0, -1.0, 1.0),
+            Vec3::new(-1.0, -1.0, -1.0),
+        ];
+        for (f, e) in Face::ALL.iter().zip(br) {
+            assert!(close(f.direction(1.0, 1.0), e), "{f:?}");
+        }
+    }
+
+    #[test]
+    fn direction_texel_direction_round_trips() {
+        let n = 37;
+        for face in Face::ALL {
+            for j in 0..n {
+                for i in 0..n {
+                    let d = texel_direction(face, i, j, n);
+                    let (f2, s, t) = Face::from_direction(d);
+                    assert_eq!(f2, face);
+                    assert_eq!(face_texel_index(s, t, n), (i, j));
+                    assert!(close(f2.direction(s, t).normalize(), d));
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn solid_angles_sum_to_four_pi() {
+        for n in [1usize, 2, 3, 16, 255] {
+            let mut sum = 0.0f64;
+            for j in 0..n {
+                for i in 0..n {
+                    sum += texel_solid_angle(i, j, n);
+                }
+            }
+            assert!((6.0 * sum - 4.0 * PI).abs() < 1e-9, "n={n}: {}", 6.0 * sum);
+        }
+    }
+
+    #[test]
+    fn solid_angle_matches_numeric_integration() {
+        // dω = dA / (1+x²+y²)^{3/2} integrated by the midpoint rule over one texel.
+        let (n, i, j) = (8, 1, 6);
+        let k = 400;
+        let x0 = 2.0 * i as f64 / n as f64 - 1.0;
+        let y0 = 2.0 * j as f64 / n as f64 - 1.0;
+        let h = 2.0 / n as f64 / k as f64;
+        let mut s = 0.0;
+        for a in 0..k {
+            for b in 0..k {
+                let x = x0 + (a as f64 + 0.5) * h;
+                let y = y0 + (b as f64 + 0.5) * h;
+                s += h * h / (1.0 + x * x + y * y).powf(1.5);
+            }
+        }
+        assert!((s - texel_solid_angle(i, j, n)).abs() < 1e-8);
+    }
+
+    #[test]
+    fn mip_sizes_halve_to_the_floor() {
+        assert_eq!(mip_sizes(256, 8), vec![256, 128, 64, 32, 16, 8]);
+        assert_eq!(mip_sizes(100, 8), vec![100, 50, 25, 12, 6]);
+        assert_eq!(mip_sizes(1, 8), vec![1]);
+    }
+
+    #[test]
+    fn bilinear_is_seamless_across_edges_and_corners() {
+        // A cube holding a smooth function of direction: samples just either side of an edge
+        // and at a corner must agree with the function closely.
+        let n = 64;
+        let f = |d: Vec3| 1.0 + d.x + 0.5 * d.y * d.z;
+        let mut cube = Cubemap::new(n);
+        for face in Face::ALL {
+            for j in 0..n {
+                for i in 0..n {
+                    let v = f(texel_direction(face, i, j, n));
+                    cube.faces[face as usize].texel_mut(i, j).copy_from_slice(&[v, v, v]);
+                }
+            }
+        }
+        for d in [Vec3::new(1.0, 0.3, 0.999), Vec3::new(1.0, 0.3, 1.001), Vec3::new(1.0, 1.0, 1.0), Vec3::new(-1.0, 0.999, -1.0)] {
+            let got = cube.sample_bilinear(d)[0];
+            let want = f(d.normalize());
+            assert!((got - want).abs() < 0.01, "{d}: {got} vs {want}");
+        }
+    }
+
+    #[test]
+    fn downsample_preserves_mean_radiance() {
+        let n = 10;
+        let mut cube = Cubemap::new(n);
+        for (fi, face) in cube.faces.iter_mut().enumerate() {
+            for (k, v) in face.data.iter_mut().enumerate() {
+                *v = ((k * 7 + fi * 13) % 11) as f32;
+            }
+        }
+        let a = cube.mean_radiance();
+        let b = cube.downsample().mean_radiance();
+        for k in 0..3 {
+            assert!((a[k] - b[k]).abs() < 1e-5 * a[k].abs().max(1.0));
+        }
+    }
+}

@@ -1,0 +1,84 @@
+//! The core error type, grouped by cause: invalid input, unsupported input, I/O.
+
+use std::path::{Path, PathBuf};
+
+/// Everything that can go wrong in the core library.
+///
+/// Variants are grouped by cause so binaries can map them to exit codes:
+/// [`Error::InvalidInput`] and [`Error::NonFinite`] are bad data or parameters,
+/// [`Error::Unsupported`] is valid data we do not handle, [`Error::Io`] is the file system.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// The input is malformed, out of range or inconsistent.
+    #[error("{}: {reason}", path_or_param(.path))]
+    InvalidInput { path: Option<PathBuf>, reason: String },
+    /// The input has NaN or infinite texels (use `--sanitize` to set them to 0).
+    #[error("{}: {count} NaN/Inf texel values (use --sanitize to set them to 0)", .path.display())]
+    NonFinite { path: PathBuf, count: usize },
+    /// The input is well-formed but uses something we do not implement.
+    #[error("{}: unsupported: {what}", path_or_param(.path))]
+    Unsupported { path: Option<PathBuf>, what: String },
+    /// Reading or writing a file failed.
+    #[error("{}: {source}", .path.display())]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+fn path_or_param(p: &Option<PathBuf>) -> String {
+    match p {
+        Some(p) => p.display().to_string(),
+        None => "invalid parameter".to_string(),
+    }
+}
+
+/// Exit-code class of an error, shared by all binaries.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ErrorClass {
+    InvalidInput,
+    Unsupported,
+    Io,
+}
+
+impl Error {
+    /// Bad data in a named file.
+    pub fn invalid(path: impl AsRef<Path>, reason: impl Into<String>) -> Self {
+        Error::InvalidInput { path: Some(path.as_ref().to_path_buf()), reason: reason.into() }
+    }
+    /// A parameter out of range (no file involved).
+    pub fn param(reason: impl Into<String>) -> Self {
+        Error::InvalidInput { path: None, reason: reason.into() }
+    }
+    /// A valid but unsupported file.
+    pub fn unsupported(path: impl AsRef<Path>, what: impl Into<String>) -> Self {
+        Error::Unsupported { path: Some(path.as_ref().to_path_buf()), what: what.into() }
+    }
+    /// An I/O failure on a path.
+    pub fn io(path: impl AsRef<Path>, source: std::io::Error) -> Self {
+        Error::Io { path: path.as_ref().to_path_buf(), source }
+    }
+    /// Which exit-code class this error belongs to.
+    pub fn class(&self) -> ErrorClass {
+        match self {
+            Error::InvalidInput { .. } | Error::NonFinite { .. } => ErrorClass::InvalidInput,
+            Error::Unsupported { .. } => ErrorClass::Unsupported,
+            Error::Io { .. } => ErrorClass::Io,
+        }
+    }
+}
+
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// Errors of any library of the workspace say which exit-code class they belong to, so
+/// binaries can map them without knowing the library.
+pub trait Classify: std::error::Error {
+    fn class(&self) -> ErrorClass;
+}
+
+impl Classify for Error {
+    fn class(&self) -> ErrorClass {
+        Error::class(self)
+    }
+}

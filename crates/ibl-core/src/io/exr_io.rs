@@ -1,0 +1,112 @@
+//! OpenEXR reading (any channel set of R, G, B, A or one grey channel; half, float or uint;
+//! every compression the `exr` crate decodes, DWAB included) and writing (ZIP, float or half).
+
+use super::FloatDepth;
+use crate::error::{Error, Result};
+use crate::image::Image;
+use exr::prelude::*;
+use std::io::Cursor;
+use std::path::Path;
+
+fn channel_values(samples: &FlatSamples) -> Vec<f32> {
+    match samples {
+        FlatSamples::F16(v) => v.iter().map(|h| h.to_f32()).collect(),
+        FlatSamples::F32(v) => v.clone(),
+        FlatSamples::U32(v) => v.iter().map(|&u| u as f32).collect(),
+    }
+}
+
+/// Channel role from its name: the part after the last '.', so `diffuse.R` is red.
+fn role(name: &str) -> String {
+    name.rsplit('.').next().unwrap_or(name).to_ascii_uppercase()
+}
+
+pub fn decode(path: &Path, bytes: &[u8]) -> Result<Image> {
+    let bad = |e: exr::error::Error| Error::invalid(path, format!("not a readable EXR file: {e}"));
+    // Header first: refuse absurd sizes before the decoder allocates.
+    let meta = exr::meta::MetaData::read_from_buffered(Cursor::new(bytes), false).map_err(bad)?;
+    let header = meta.headers.first().ok_or_else(|| Error::invalid(path, "EXR file has no layers"))?;
+    if header.deep {
+        return Err(Error::unsupported(path, "deep EXR data"));
+    }
+    let size = header.layer_size;
+    Image::check_size(path, size.0 as u64, size.1 as u64)?;
+
+    let image = read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .first_valid_layer()
+        .all_attributes()
+        .from_buffered(Cursor::new(bytes))
+        .map_err(bad)?;
+    let layer = image.layer_data;
+    let (w, h) = (layer.size.0, layer.size.1);
+    let find = |r: &str| layer.channel_data.list.iter().position(|c| role(&c.name.to_string()) == r);
+    let (ri, gi, bi, ai) = (find("R"), find("G"), find("B"), find("A"));
+    let picked: Vec<usize> = match (ri, gi, bi) {
+        (Some(r), Some(g), Some(b)) => {
+            let mut v = vec![r, g, b];
+            v.extend(ai);
+            v
+        }
+        _ => {
+            let grey = find("Y").or(ri).or(gi).or(bi);
+            match grey.or(if layer.channel_data.list.len() == 1 { Some(0) } else { None }) {
+                Some(c) => vec![c],
+                None => {
+                    let names: Vec<String> = layer.channel_data.list.iter().map(|c| c.name.to_string()).collect();
+                    return Err(Error::unsupported(path, format!("EXR channels {names:?}: need R,G,B(,A) or a single channel")));
+                }
+            }
+        }
+    };
+    let planes: Vec<Vec<f32>> = picked.iter().map(|&c| channel_values(&layer.channel_data.list[c].sample_data)).collect();
+    let n = w * h;
+    if planes.iter().any(|p| p.len() != n) {
+        return Err(Error::invalid(path, "EXR channels are subsampled or truncated"));
+    }
+    let channels = planes.len();
+    let mut data = vec![0.0f32; n * channels];
+    for (c, plane) in planes.iter().enumerate() {
+        for (k, v) in plane.iter().enumerate() {
+            data[k * channels + c] = *v;
+        }
+    }
+    Image::from_data(w, h, channels, data)
+}
+
+pub fn encode(path: &Path, img: &Image, depth: FloatDepth) -> Result<Vec<u8>> {
+    let names = match img.channels {
+        1 => vec!["Y"],
+        2 => vec!["R", "G"],
+        3 => vec!["R", "G", "B"],
+        _ => vec!["R", "G", "B", "A"],
+    };
+    let n = img.width * img.height;
+    let list: SmallVec<[AnyChannel<FlatSamples>; 4]> = names
+        .iter()
+        .enumerate()
+        .map(|(c, name)| {
+            let plane = (0..n).map(|k| img.data[k * img.channels + c]);
+            let samples = match depth {
+                FloatDepth::F32 => FlatSamples::F32(plane.collect()),
+                FloatDepth::F16 => FlatSamples::F16(plane.map(f16::from_f32).collect()),
+            };
+            AnyChannel::new(*name, samples)
+        })
+        .collect();
+    let layer = Layer::new(
+        (img.width, img.height),
+        LayerAttributes::default(),
+        Encoding::SMALL_LOSSLESS,
+        AnyChannels::sort(list),
+    );
+    let image = exr::image::Image::from_layer(layer);
+    let mut out = Cursor::new(Vec::new());
+    image
+        .write()
+        .to_buffered(&mut out)
+        .map_err(|e| Error::invalid(path, format!("EXR encoding failed: {e}")))?;
+    Ok(out.into_inner())
+}

@@ -1,0 +1,121 @@
+//! 8/16-bit PNG and JPEG: sRGB or linear decoding, PNG encoding of data maps and of
+//! tone-mapped previews of HDR images.
+
+use super::{ColorSpace, WriteOptions};
+use crate::error::{Error, Result};
+use crate::image::Image;
+use std::io::Cursor;
+use std::path::Path;
+
+/// sRGB transfer function, encoded value → linear.
+#[inline]
+pub fn srgb_to_linear(c: f32) -> f32 {
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+/// Linear → sRGB-encoded value.
+#[inline]
+pub fn linear_to_srgb(c: f32) -> f32 {
+    if c <= 0.0031308 {
+        c * 12.92
+    } else {
+        1.055 * c.powf(1.0 / 2.4) - 0.055
+    }
+}
+
+pub fn decode(path: &Path, bytes: &[u8], color: ColorSpace) -> Result<Image> {
+    let bad = |e: image::ImageError| Error::invalid(path, format!("not a readable image: {e}"));
+    let reader = image::ImageReader::new(Cursor::new(bytes)).with_guessed_format().map_err(|e| Error::io(path, e))?;
+    let (w, h) = reader.into_dimensions().map_err(bad)?;
+    Image::check_size(path, w as u64, h as u64)?;
+    let mut reader = image::ImageReader::new(Cursor::new(bytes)).with_guessed_format().map_err(|e| Error::io(path, e))?;
+    reader.no_limits();
+    let dynimg = reader.decode().map_err(bad)?;
+    let channels = match dynimg.color().channel_count() {
+        1 => 1,
+        2 => 4, // grey + alpha: expand to RGBA
+        3 => 3,
+        _ => 4,
+    };
+    let data: Vec<f32> = match channels {
+        1 => dynimg.into_luma16().into_raw().into_iter().map(|v| v as f32 / 65535.0).collect(),
+        3 => dynimg.into_rgb16().into_raw().into_iter().map(|v| v as f32 / 65535.0).collect(),
+        _ => dynimg.into_rgba16().into_raw().into_iter().map(|v| v as f32 / 65535.0).collect(),
+    };
+    let mut img = Image::from_data(w as usize, h as usize, channels, data)?;
+    if color == ColorSpace::Srgb {
+        for px in img.data.chunks_exact_mut(channels) {
+            let colour = if channels == 4 { 3 } else { channels };
+            for v in &mut px[..colour] {
+                *v = srgb_to_linear(*v);
+            }
+        }
+    }
+    Ok(img)
+}
+
+/// Reinhard tone map for previews: c / (1 + luminance).
+fn tonemap(rgb: [f32; 3]) -> [f32; 3] {
+    let l = crate::luminance(rgb).max(0.0);
+    rgb.map(|c| (c / (1.0 + l)).clamp(0.0, 1.0))
+}
+
+pub fn encode_png(path: &Path, img: &Image, opts: &WriteOptions) -> Result<Vec<u8>> {
+    let ch = img.channels;
+    let mut values: Vec<f32> = Vec::with_capacity(img.data.len());
+    for px in img.data.chunks_exact(ch) {
+        let mut px = px.to_vec();
+        if opts.png_tonemap && ch >= 3 {
+            let t = tonemap([px[0], px[1], px[2]]);
+            px[..3].copy_from_slice(&t);
+        }
+        if opts.png_srgb || opts.png_tonemap {
+            let colour = if ch == 4 || ch == 2 { ch - 1 } else { ch };
+            for v in &mut px[..colour] {
+                *v = linear_to_srgb(v.clamp(0.0, 1.0));
+            }
+        }
+        values.extend(px);
+    }
+    let (w, h) = (img.width as u32, img.height as u32);
+    let color = match (ch, opts.png_bits) {
+        (1, 8) => image::ExtendedColorType::L8,
+        (2, 8) => image::ExtendedColorType::La8,
+        (3, 8) => image::ExtendedColorType::Rgb8,
+        (4, 8) => image::ExtendedColorType::Rgba8,
+        (1, 16) => image::ExtendedColorType::L16,
+        (2, 16) => image::ExtendedColorType::La16,
+        (3, 16) => image::ExtendedColorType::Rgb16,
+        (4, 16) => image::ExtendedColorType::Rgba16,
+        (_, b) => return Err(Error::unsupported(path, format!("PNG bit depth {b} (use 8 or 16)"))),
+    };
+    let raw: Vec<u8> = if opts.png_bits == 8 {
+        values.iter().map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8).collect()
+    } else {
+        // PNG stores 16-bit samples big-endian; the encoder takes native-endian bytes.
+        values.iter().flat_map(|v| ((v.clamp(0.0, 1.0) * 65535.0).round() as u16).to_ne_bytes()).collect()
+    };
+    let mut out = Vec::new();
+    use image::ImageEncoder;
+    image::codecs::png::PngEncoder::new(&mut out)
+        .write_image(&raw, w, h, color)
+        .map_err(|e| Error::invalid(path, format!("PNG encoding failed: {e}")))?;
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn srgb_transfer_round_trips() {
+        for k in 0..=255 {
+            let c = k as f32 / 255.0;
+            assert!((linear_to_srgb(srgb_to_linear(c)) - c).abs() < 1e-5);
+        }
+    }
+}

@@ -1,0 +1,186 @@
+//! File I/O: image readers and writers chosen by extension, KTX2 cubemaps, JSON/RON data,
+//! and the atomic write every output goes through.
+
+pub mod atomic;
+pub mod data;
+mod exr_io;
+pub mod ktx2;
+mod ldr;
+mod rgbe;
+
+pub use atomic::{write_atomic, write_many_atomic};
+
+use crate::error::{Error, Result};
+use crate::image::Image;
+use std::path::Path;
+
+/// How 8/16-bit images are decoded: colour textures are sRGB-encoded, data maps (normals,
+/// angle maps) are stored linearly.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ColorSpace {
+    Srgb,
+    Linear,
+}
+
+/// Sample type of a float output.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum FloatDepth {
+    #[default]
+    F32,
+    F16,
+}
+
+/// Encoding choices for [`encode_image`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct WriteOptions {
+    /// EXR sample type (KTX2 too).
+    pub float: FloatDepth,
+    /// PNG bit depth: 8 or 16.
+    pub png_bits: u8,
+    /// PNG holds HDR data: tone-map (Reinhard) and sRGB-encode it for preview.
+    pub png_tonemap: bool,
+    /// PNG holds colour (sRGB-encode) rather than data (store linearly).
+    pub png_srgb: bool,
+}
+
+impl Default for WriteOptions {
+    fn default() -> Self {
+        WriteOptions { float: FloatDepth::F32, png_bits: 16, png_tonemap: false, png_srgb: false }
+    }
+}
+
+/// Lower-case extension of a path, or "".
+pub fn extension(path: &Path) -> String {
+    path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase()
+}
+
+/// Reads `.exr`, `.hdr`, `.png`, `.jpg`/`.jpeg` into a linear float image.
+/// Checks sizes before allocating; never panics on malformed bytes.
+pub fn read_image(path: &Path, color: ColorSpace) -> Result<Image> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    decode_image(path, &bytes, color)
+}
+
+/// Decodes image bytes; `path` names the file in errors and selects the format by extension
+/// (falling back to the magic number).
+pub fn decode_image(path: &Path, bytes: &[u8], color: ColorSpace) -> Result<Image> {
+    if bytes.is_empty() {
+        return Err(Error::invalid(path, "empty file"));
+    }
+    let ext = extension(path);
+    let by_magic = if bytes.starts_with(&[0x76, 0x2f, 0x31, 0x01]) {
+        "exr"
+    } else if bytes.starts_with(b"#?") {
+        "hdr"
+    } else if bytes.starts_with(&[0x89, b'P', b'N', b'G']) {
+        "png"
+    } else if bytes.starts_with(&[0xff, 0xd8]) {
+        "jpg"
+    } else {
+        ""
+    };
+    let kind = match ext.as_str() {
+        "exr" | "hdr" | "png" | "jpg" | "jpeg" | "pic" => ext.as_str(),
+        _ => by_magic,
+    };
+    match kind {
+        "exr" => exr_io::decode(path, bytes),
+        "hdr" | "pic" => rgbe::decode(path, bytes),
+        "png" | "jpg" | "jpeg" => ldr::decode(path, bytes, color),
+        _ => Err(Error::unsupported(path, "not an EXR, HDR, PNG or JPEG image")),
+    }
+}
+
+/// Encodes an image for `path`'s extension (`.exr`, `.hdr`, `.png`).
+pub fn encode_image(path: &Path, img: &Image, opts: &WriteOptions) -> Result<Vec<u8>> {
+    match extension(path).as_str() {
+        "exr" => exr_io::encode(path, img, opts.float),
+        "hdr" => rgbe::encode(path, img),
+        "png" => ldr::encode_png(path, img, opts),
+        other => Err(Error::unsupported(path, format!("cannot write '.{other}' images (use .exr, .hdr or .png)"))),
+    }
+}
+
+/// Encodes and atomically writes an image.
+pub fn write_image(path: &Path, img: &Image, opts: &WriteOptions) -> Result<()> {
+    let bytes = encode_image(path, img, opts)?;
+    write_atomic(path, &bytes)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn test_image(channels: usize) -> Image {
+        let mut img = Image::new(13, 7, channels);
+        for (k, v) in img.data.iter_mut().enumerate() {
+            *v = (k as f32 * 0.37).sin().abs() * 10.0 + 0.001 * k as f32;
+        }
+        img
+    }
+
+    #[test]
+    fn exr_float_round_trip_is_exact() {
+        let dir = tempfile::tempdir().unwrap();
+        for ch in [1, 3, 4] {
+            let p = dir.path().join(format!("a{ch}.exr"));
+            let img = test_image(ch);
+            write_image(&p, &img, &WriteOptions::default()).unwrap();
+            let back = read_image(&p, ColorSpace::Linear).unwrap();
+            assert_eq!(back, img, "channels {ch}");
+        }
+    }
+
+    #[test]
+    fn exr_half_round_trip_is_exact_on_half_values() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("h.exr");
+        let mut img = test_image(3);
+        img.data.iter_mut().for_each(|v| *v = half::f16::from_f32(*v).to_f32());
+        write_image(&p, &img, &WriteOptions { float: FloatDepth::F16, ..Default::default() }).unwrap();
+        assert_eq!(read_image(&p, ColorSpace::Linear).unwrap(), img);
+    }
+
+    #[test]
+    fn png16_data_round_trip_is_exact_on_16_bit_values() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("d.png");
+        let mut img = test_image(4);
+        img.data.iter_mut().for_each(|v| *v = ((*v / 11.0).clamp(0.0, 1.0) * 65535.0).round() / 65535.0);
+        write_image(&p, &img, &WriteOptions::default()).unwrap();
+        assert_eq!(read_image(&p, ColorSpace::Linear).unwrap(), img);
+    }
+
+    #[test]
+    fn hdr_round_trip_within_rgbe_precision() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("e.hdr");
+        let img = test_image(3);
+        write_image(&p, &img, &WriteOptions::default()).unwrap();
+        let back = read_image(&p, ColorSpace::Linear).unwrap();
+        // RGBE keeps 8 mantissa bits relative to the largest channel.
+        for (a, b) in img.data.chunks(3).zip(back.data.chunks(3)) {
+            let m = a.iter().cloned().fold(0.0f32, f32::max);
+            for k in 0..3 {
+                assert!((a[k] - b[k]).abs() <= m / 128.0, "{a:?} {b:?}");
+            }
+        }
+        // And what RGBE returns survives a second round trip exactly.
+        write_image(&p, &back, &WriteOptions::default()).unwrap();
+        assert_eq!(read_image(&p, ColorSpace::Linear).unwrap(), back);
+    }
+
+    #[test]
+    fn malformed_bytes_are_errors_not_panics() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("t.exr");
+        write_image(&p, &test_image(3), &WriteOptions::default()).unwrap();
+        let bytes = std::fs::read(&p).unwrap();
+        for cut in [0, 4, 20, bytes.len() / 2, bytes.len() - 1] {
+            assert!(decode_image(&p, &bytes[..cut], ColorSpace::Linear).is_err(), "cut {cut}");
+        }
+        for name in ["x.hdr", "x.png", "x.jpg", "x.exr", "x.bin"] {
+            assert!(decode_image(Path::new(name), b"garbage bytes that are no image", ColorSpace::Linear).is_err());
+        }
+    }
+}

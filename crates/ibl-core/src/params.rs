@@ -1,0 +1,10 @@
+//! One `Params` struct per bake derives both `clap::Args` and serde; this makes clap's
+//! defaults the single source of defaults for the CLI, RON keys and `Default`.
+
+/// The value of `P` when no flag is given: what `Default` and serde's `default` use.
+/// Panics only if a `Params` field has no default, which its own unit test catches.
+pub fn clap_defaults<P: clap::Args + clap::FromArgMatches>() -> P {
+    let cmd = P::augment_args(clap::Command::new("defaults").no_binary_name(true));
+    let m = cmd.try_get_matches_from(Vec::<String>::new()).expect("every Params field has a default");
+    P::from_arg_matches(&m).expect("defaults parse")
+}

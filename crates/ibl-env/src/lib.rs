@@ -1,0 +1,5 @@
+//! Environment bakes that resample or project an environment: `equirect-to-cube` and
+//! `irradiance`. Each module holds its `Params` and a pure `run`.
+
+pub mod equirect_to_cube;
+pub mod irradiance;

@@ -1,0 +1,38 @@
+//! `irradiance`: parse, call `ibl_env::irradiance`, write, report.
+
+use clap::Parser;
+use ibl_core::envmap::load_environment;
+use ibl_env::irradiance::{run, Params};
+use std::path::PathBuf;
+
+/// Diffuse irradiance of an environment: DIR/sh.json (radiance projection and E/π
+/// coefficients) and the irradiance cube DIR/px.exr … nz.exr (E/π).
+#[derive(Parser)]
+#[command(version, about)]
+struct Cli {
+    /// Input environment: .exr/.hdr equirect or cross, a folder of faces, or a .ktx2 cube.
+    input: PathBuf,
+    /// Output folder.
+    #[arg(short, long)]
+    output: PathBuf,
+    #[command(flatten)]
+    params: Params,
+    #[command(flatten)]
+    common: ibl_cli::CommonArgs,
+}
+
+fn main() {
+    let cli = Cli::parse();
+    ibl_cli::run("irradiance", cli.common.clone(), |ctx| {
+        cli.params.validate()?;
+        let env = load_environment(&cli.input, cli.params.sanitize)?;
+        env.warnings().into_iter().for_each(|w| ctx.warn(w));
+        let baked = run(&cli.params, &env, &cli.output, ctx.progress())?;
+        if baked.negative_clamped > 0 {
+            ctx.warn(format!("SH ringing: clamped {} negative irradiance values to 0 (try --window or --exact)", baked.negative_clamped));
+        }
+        ibl_core::io::write_many_atomic(&baked.files)?;
+        let outputs = baked.files.iter().map(|f| f.0.display().to_string()).collect();
+        Ok::<_, ibl_core::Error>((outputs, serde_json::json!({ "coefficients": baked.coefficients, "negative_clamped": baked.negative_clamped })))
+    })
+}
