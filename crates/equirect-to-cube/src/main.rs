@@ -29,7 +29,11 @@ fn main() {
         env.warnings().into_iter().for_each(|w| ctx.warn(w));
         let baked = run(&cli.params, &env, &cli.output, ctx.progress())?;
         ibl_core::io::write_many_atomic(&baked.files)?;
-        let outputs = baked.files.iter().map(|f| f.0.display().to_string()).collect();
+        let outputs = baked
+            .files
+            .iter()
+            .map(|f| f.0.display().to_string())
+            .collect();
         Ok::<_, ibl_core::Error>((outputs, serde_json::json!({ "face_size": baked.face_size })))
     })
 }

@@ -15,11 +15,17 @@ fn bin() -> Command {
 }
 
 fn fixture(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures").join(rel)
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fixtures")
+        .join(rel)
 }
 
 fn run(args: &[&str]) -> Output {
-    bin().args(args).arg("--quiet").output().expect("binary runs")
+    bin()
+        .args(args)
+        .arg("--quiet")
+        .output()
+        .expect("binary runs")
 }
 
 fn stderr(o: &Output) -> String {
@@ -33,7 +39,8 @@ fn direction_equirect(w: usize) -> Image {
     for j in 0..h {
         for i in 0..w {
             let d = pixel_direction(i, j, w, h);
-            img.texel_mut(i, j).copy_from_slice(&[d.x + 2.0, d.y + 2.0, d.z + 2.0]);
+            img.texel_mut(i, j)
+                .copy_from_slice(&[d.x + 2.0, d.y + 2.0, d.z + 2.0]);
         }
     }
     img
@@ -45,14 +52,30 @@ fn every_face_is_oriented_as_design_md() {
     let src = dir.path().join("dirs.exr");
     io::write_image(&src, &direction_equirect(512), &WriteOptions::default()).unwrap();
     let out = dir.path().join("cube");
-    let o = run(&[src.to_str().unwrap(), "-o", out.to_str().unwrap(), "--size", "16"]);
+    let o = run(&[
+        src.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--size",
+        "16",
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let n = 16;
     let mut worst = 0.0f32;
     for face in Face::ALL {
-        let img = io::read_image(&out.join(format!("{}.exr", face.name())), ColorSpace::Linear).unwrap();
+        let img = io::read_image(
+            &out.join(format!("{}.exr", face.name())),
+            ColorSpace::Linear,
+        )
+        .unwrap();
         assert_eq!((img.width, img.height), (n, n));
-        for (i, j) in [(0, 0), (n - 1, 0), (0, n - 1), (n - 1, n - 1), (n / 2, n / 2)] {
+        for (i, j) in [
+            (0, 0),
+            (n - 1, 0),
+            (0, n - 1),
+            (n - 1, n - 1),
+            (n / 2, n / 2),
+        ] {
             let t = img.rgb(i, j);
             let got = Vec3::new(t[0] - 2.0, t[1] - 2.0, t[2] - 2.0);
             let want = texel_direction(face, i, j, n);
@@ -90,14 +113,24 @@ fn faces_match_independent_area_filtered_reference() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("cube");
     let src_path = fixture("hdri/city_512.exr");
-    let o = run(&[src_path.to_str().unwrap(), "-o", out.to_str().unwrap(), "--size", "64"]);
+    let o = run(&[
+        src_path.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--size",
+        "64",
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let mut src = io::read_image(&src_path, ColorSpace::Linear).unwrap();
     ibl_core::image::check_texels(&mut src, &src_path, false).unwrap();
     let n = 64;
     let (mut num, mut den) = (0.0f64, 0.0f64);
     for face in Face::ALL {
-        let img = io::read_image(&out.join(format!("{}.exr", face.name())), ColorSpace::Linear).unwrap();
+        let img = io::read_image(
+            &out.join(format!("{}.exr", face.name())),
+            ColorSpace::Linear,
+        )
+        .unwrap();
         for j in (0..n).step_by(5) {
             for i in (0..n).step_by(5) {
                 let r = reference_face_texel(&src, face, i, j, n);
@@ -110,7 +143,9 @@ fn faces_match_independent_area_filtered_reference() {
         }
     }
     let rel = num / den;
-    eprintln!("equirect-to-cube 64² from 512×256 vs 64×64-grid area reference: relative MAE {rel:.5}");
+    eprintln!(
+        "equirect-to-cube 64² from 512×256 vs 64×64-grid area reference: relative MAE {rel:.5}"
+    );
     assert!(rel < 0.01, "{rel}");
 }
 
@@ -121,13 +156,30 @@ fn ktx2_layout_and_inverse_round_trip() {
     let img = direction_equirect(128);
     io::write_image(&src, &img, &WriteOptions::default()).unwrap();
     let out = dir.path().join("k");
-    let o = run(&[src.to_str().unwrap(), "-o", out.to_str().unwrap(), "--layout", "ktx2", "--half"]);
+    let o = run(&[
+        src.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--layout",
+        "ktx2",
+        "--half",
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let mips = read_cube_chain(&out.join("cube.ktx2")).unwrap();
-    assert_eq!(mips.levels[0].size, 32, "default size is the largest power of two not above width/4");
+    assert_eq!(
+        mips.levels[0].size, 32,
+        "default size is the largest power of two not above width/4"
+    );
     // Back to equirect through the KTX2 file.
     let eq = dir.path().join("back.exr");
-    let o = run(&[out.join("cube.ktx2").to_str().unwrap(), "-o", eq.to_str().unwrap(), "--to-equirect", "--size", "64"]);
+    let o = run(&[
+        out.join("cube.ktx2").to_str().unwrap(),
+        "-o",
+        eq.to_str().unwrap(),
+        "--to-equirect",
+        "--size",
+        "64",
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let back = io::read_image(&eq, ColorSpace::Linear).unwrap();
     assert_eq!((back.width, back.height), (128, 64));
@@ -139,7 +191,9 @@ fn ktx2_layout_and_inverse_round_trip() {
             worst = worst.max((0..3).map(|q| (a[q] - b[q]).abs()).fold(0.0, f32::max));
         }
     }
-    eprintln!("equirect → cube (half) → equirect worst abs error on a unit-direction field: {worst:.4}");
+    eprintln!(
+        "equirect → cube (half) → equirect worst abs error on a unit-direction field: {worst:.4}"
+    );
     assert!(worst < 0.05, "{worst}");
 }
 
@@ -148,11 +202,20 @@ fn horizontal_cross_input_is_read() {
     let dir = tempfile::tempdir().unwrap();
     let n = 8;
     let mut cross = Image::new(4 * n, 3 * n, 3);
-    for (face, col, row) in [(Face::Px, 2, 1), (Face::Nx, 0, 1), (Face::Py, 1, 0), (Face::Ny, 1, 2), (Face::Pz, 1, 1), (Face::Nz, 3, 1)] {
+    for (face, col, row) in [
+        (Face::Px, 2, 1),
+        (Face::Nx, 0, 1),
+        (Face::Py, 1, 0),
+        (Face::Ny, 1, 2),
+        (Face::Pz, 1, 1),
+        (Face::Nz, 3, 1),
+    ] {
         for j in 0..n {
             for i in 0..n {
                 let v = face as usize as f32 + 1.0;
-                cross.texel_mut(col * n + i, row * n + j).copy_from_slice(&[v, v, v]);
+                cross
+                    .texel_mut(col * n + i, row * n + j)
+                    .copy_from_slice(&[v, v, v]);
             }
         }
     }
@@ -162,7 +225,11 @@ fn horizontal_cross_input_is_read() {
     let o = run(&[src.to_str().unwrap(), "-o", out.to_str().unwrap()]);
     assert!(o.status.success(), "{}", stderr(&o));
     for face in Face::ALL {
-        let img = io::read_image(&out.join(format!("{}.exr", face.name())), ColorSpace::Linear).unwrap();
+        let img = io::read_image(
+            &out.join(format!("{}.exr", face.name())),
+            ColorSpace::Linear,
+        )
+        .unwrap();
         assert_eq!(img.rgb(3, 3)[0], face as usize as f32 + 1.0, "{face:?}");
     }
 }
@@ -173,7 +240,10 @@ fn assert_fails_cleanly(args: &[&str], out: &Path, expect: &str, code: i32) {
     assert_eq!(o.status.code(), Some(code), "{err}");
     assert!(err.contains(expect), "{err}");
     assert_eq!(err.trim().lines().count(), 1, "one line: {err}");
-    assert!(!out.exists() || std::fs::read_dir(out).unwrap().next().is_none(), "nothing written");
+    assert!(
+        !out.exists() || std::fs::read_dir(out).unwrap().next().is_none(),
+        "nothing written"
+    );
 }
 
 #[test]
@@ -201,7 +271,10 @@ fn bad_inputs_fail_with_one_line_and_write_nothing() {
     let nan = dir.path().join("nan.exr");
     io::write_image(&nan, &img, &WriteOptions::default()).unwrap();
     assert_fails_cleanly(&[nan.to_str().unwrap(), "-o", o], &out, "2 NaN/Inf", 2);
-    let ok = bin().args([nan.to_str().unwrap(), "-o", o, "--sanitize"]).output().unwrap();
+    let ok = bin()
+        .args([nan.to_str().unwrap(), "-o", o, "--sanitize"])
+        .output()
+        .unwrap();
     assert!(ok.status.success());
     assert!(stderr(&ok).contains("set 2 NaN/Inf"), "{}", stderr(&ok));
     std::fs::remove_dir_all(&out).unwrap();
@@ -209,7 +282,12 @@ fn bad_inputs_fail_with_one_line_and_write_nothing() {
     let odd = dir.path().join("odd.exr");
     io::write_image(&odd, &Image::new(10, 3, 3), &WriteOptions::default()).unwrap();
     assert_fails_cleanly(&[odd.to_str().unwrap(), "-o", o], &out, "layout", 3);
-    assert_fails_cleanly(&[nan.to_str().unwrap(), "-o", o, "--size", "0"], &out, "--size 0", 2);
+    assert_fails_cleanly(
+        &[nan.to_str().unwrap(), "-o", o, "--size", "0"],
+        &out,
+        "--size 0",
+        2,
+    );
 }
 
 #[test]
@@ -219,9 +297,19 @@ fn unwritable_output_fails_and_keeps_previous_files() {
     std::fs::create_dir(&out).unwrap();
     // A folder where px.exr should go: the write fails, other earlier files stay intact.
     std::fs::create_dir(out.join("px.exr")).unwrap();
-    let o = run(&[fixture("hdri/studio_256.exr").to_str().unwrap(), "-o", out.to_str().unwrap(), "--size", "8"]);
+    let o = run(&[
+        fixture("hdri/studio_256.exr").to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--size",
+        "8",
+    ]);
     assert_eq!(o.status.code(), Some(4), "{}", stderr(&o));
-    let leftovers: Vec<_> = std::fs::read_dir(&out).unwrap().filter_map(|e| e.ok()).filter(|e| e.file_name().to_string_lossy().contains(".tmp-")).collect();
+    let leftovers: Vec<_> = std::fs::read_dir(&out)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().contains(".tmp-"))
+        .collect();
     assert!(leftovers.is_empty());
 }
 
@@ -229,12 +317,28 @@ fn unwritable_output_fails_and_keeps_previous_files() {
 fn damaged_fixture_negatives_are_clamped_with_a_warning() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out");
-    let o = bin().args([fixture("hdri-damaged/esplanade.exr").to_str().unwrap(), "-o", out.to_str().unwrap(), "--size", "16"]).output().unwrap();
+    let o = bin()
+        .args([
+            fixture("hdri-damaged/esplanade.exr").to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--size",
+            "16",
+        ])
+        .output()
+        .unwrap();
     assert!(o.status.success(), "{}", stderr(&o));
     let err = stderr(&o);
-    assert!(err.contains("negative texel values") && err.contains("most negative -3"), "{err}");
+    assert!(
+        err.contains("negative texel values") && err.contains("most negative -3"),
+        "{err}"
+    );
     for face in Face::ALL {
-        let img = io::read_image(&out.join(format!("{}.exr", face.name())), ColorSpace::Linear).unwrap();
+        let img = io::read_image(
+            &out.join(format!("{}.exr", face.name())),
+            ColorSpace::Linear,
+        )
+        .unwrap();
         assert!(img.data.iter().all(|v| v.is_finite() && *v >= 0.0));
     }
 }

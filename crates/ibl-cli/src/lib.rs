@@ -82,10 +82,16 @@ where
             eprintln!("{tool}: error: --threads must be at least 1");
             std::process::exit(2);
         }
-        let _ = rayon::ThreadPoolBuilder::new().num_threads(n).build_global();
+        let _ = rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build_global();
     }
     let show = !common.quiet && std::io::stderr().is_terminal();
-    let ctx = Ctx { progress: TerminalProgress::new(show), common, warnings: Default::default() };
+    let ctx = Ctx {
+        progress: TerminalProgress::new(show),
+        common,
+        warnings: Default::default(),
+    };
     let start = Instant::now();
     match body(&ctx) {
         Ok((outputs, details)) => {
@@ -98,9 +104,16 @@ where
                 details,
             };
             if ctx.common.json {
-                println!("{}", serde_json::to_string_pretty(&summary).expect("summary serialises"));
+                println!(
+                    "{}",
+                    serde_json::to_string_pretty(&summary).expect("summary serialises")
+                );
             } else if !ctx.common.quiet {
-                eprintln!("{tool}: wrote {} file(s) in {:.3} s", summary.outputs.len(), summary.seconds);
+                eprintln!(
+                    "{tool}: wrote {} file(s) in {:.3} s",
+                    summary.outputs.len(),
+                    summary.seconds
+                );
                 for o in &summary.outputs {
                     eprintln!("  {o}");
                 }

@@ -7,9 +7,17 @@ use std::path::PathBuf;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let (src, dst, k) = (PathBuf::from(&args[0]), PathBuf::from(&args[1]), args[2].parse::<usize>()?);
+    let (src, dst, k) = (
+        PathBuf::from(&args[0]),
+        PathBuf::from(&args[1]),
+        args[2].parse::<usize>()?,
+    );
     let half = args.iter().any(|a| a == "--half");
-    let linear = if io::extension(&dst) == "png" { ColorSpace::Linear } else { ColorSpace::Srgb };
+    let linear = if io::extension(&dst) == "png" {
+        ColorSpace::Linear
+    } else {
+        ColorSpace::Srgb
+    };
     let img = io::read_image(&src, linear)?;
     let (w, h) = (img.width / k, img.height / k);
     let mut out = Image::new(w, h, img.channels);
@@ -28,7 +36,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             }
         }
     }
-    let opts = WriteOptions { float: if half { FloatDepth::F16 } else { FloatDepth::F32 }, png_bits: 8, ..Default::default() };
+    let opts = WriteOptions {
+        float: if half {
+            FloatDepth::F16
+        } else {
+            FloatDepth::F32
+        },
+        png_bits: 8,
+        ..Default::default()
+    };
     io::write_image(&dst, &out, &opts)?;
     Ok(())
 }

@@ -84,7 +84,8 @@ pub fn texel_coord(i: usize, n: usize) -> f32 {
 /// Unit direction through the centre of texel (i, j) of face `face` of an n×n cube.
 #[inline]
 pub fn texel_direction(face: Face, i: usize, j: usize, n: usize) -> Vec3 {
-    face.direction(texel_coord(i, n), texel_coord(j, n)).normalize()
+    face.direction(texel_coord(i, n), texel_coord(j, n))
+        .normalize()
 }
 
 /// Solid angle subtended by the face rectangle [0, x]×[0, y] on the unit-distance plane:
@@ -136,7 +137,10 @@ pub struct Cubemap {
 
 impl Cubemap {
     pub fn new(size: usize) -> Self {
-        Cubemap { size, faces: std::array::from_fn(|_| Image::new(size, size, 3)) }
+        Cubemap {
+            size,
+            faces: std::array::from_fn(|_| Image::new(size, size, 3)),
+        }
     }
 
     /// Builds a cube from six square images of equal size (converted to RGB).
@@ -152,7 +156,10 @@ impl Cubemap {
                 )));
             }
         }
-        Ok(Cubemap { size, faces: faces.map(|f| f.to_channels(3)) })
+        Ok(Cubemap {
+            size,
+            faces: faces.map(|f| f.to_channels(3)),
+        })
     }
 
     /// A cube whose every texel is `c`.
@@ -281,7 +288,10 @@ impl Cubemap {
 pub fn face_texel_index(sc: f32, tc: f32, n: usize) -> (usize, usize) {
     let fi = ((sc + 1.0) * 0.5 * n as f32).floor() as isize;
     let fj = ((tc + 1.0) * 0.5 * n as f32).floor() as isize;
-    (fi.clamp(0, n as isize - 1) as usize, fj.clamp(0, n as isize - 1) as usize)
+    (
+        fi.clamp(0, n as isize - 1) as usize,
+        fj.clamp(0, n as isize - 1) as usize,
+    )
 }
 
 /// A mip chain of cubemaps, level 0 the largest.
@@ -410,11 +420,18 @@ mod tests {
             for j in 0..n {
                 for i in 0..n {
                     let v = f(texel_direction(face, i, j, n));
-                    cube.faces[face as usize].texel_mut(i, j).copy_from_slice(&[v, v, v]);
+                    cube.faces[face as usize]
+                        .texel_mut(i, j)
+                        .copy_from_slice(&[v, v, v]);
                 }
             }
         }
-        for d in [Vec3::new(1.0, 0.3, 0.999), Vec3::new(1.0, 0.3, 1.001), Vec3::new(1.0, 1.0, 1.0), Vec3::new(-1.0, 0.999, -1.0)] {
+        for d in [
+            Vec3::new(1.0, 0.3, 0.999),
+            Vec3::new(1.0, 0.3, 1.001),
+            Vec3::new(1.0, 1.0, 1.0),
+            Vec3::new(-1.0, 0.999, -1.0),
+        ] {
             let got = cube.sample_bilinear(d)[0];
             let want = f(d.normalize());
             assert!((got - want).abs() < 0.01, "{d}: {got} vs {want}");

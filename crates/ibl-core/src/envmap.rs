@@ -10,6 +10,8 @@ use crate::progress::Progress;
 use std::path::{Path, PathBuf};
 
 /// An environment as read from disk.
+// Both variants own megabytes of texels; boxing the larger header would buy nothing.
+#[allow(clippy::large_enum_variant)]
 #[derive(Clone, Debug)]
 pub enum Environment {
     /// Latitude-longitude image (DESIGN.md mapping).
@@ -48,9 +50,17 @@ impl Environment {
 
     /// Resamples to a cube with n×n faces (turned by `rotate_deg` about +Y). A cube of the
     /// same size and no rotation is returned as it is.
-    pub fn to_cube(&self, n: usize, filter: Filter, rotate_deg: f32, progress: &dyn Progress) -> Cubemap {
+    pub fn to_cube(
+        &self,
+        n: usize,
+        filter: Filter,
+        rotate_deg: f32,
+        progress: &dyn Progress,
+    ) -> Cubemap {
         match self {
-            Environment::Equirect(img) => equirect::equirect_to_cube(img, n, filter, rotate_deg, progress),
+            Environment::Equirect(img) => {
+                equirect::equirect_to_cube(img, n, filter, rotate_deg, progress)
+            }
             Environment::Cube(c) if c.size == n && rotate_deg == 0.0 => c.clone(),
             Environment::Cube(c) => cube_to_cube(c, n, filter, rotate_deg, progress),
         }
@@ -59,8 +69,19 @@ impl Environment {
 
 /// Resamples a cube to another size: exact box reduction for power-of-two down-sizing,
 /// otherwise a stratified average of bilinear taps over each texel.
-fn cube_to_cube(src: &Cubemap, n: usize, filter: Filter, rotate_deg: f32, progress: &dyn Progress) -> Cubemap {
-    if rotate_deg == 0.0 && filter == Filter::Area && n < src.size && src.size % n == 0 && (src.size / n).is_power_of_two() {
+fn cube_to_cube(
+    src: &Cubemap,
+    n: usize,
+    filter: Filter,
+    rotate_deg: f32,
+    progress: &dyn Progress,
+) -> Cubemap {
+    if rotate_deg == 0.0
+        && filter == Filter::Area
+        && n < src.size
+        && src.size.is_multiple_of(n)
+        && (src.size / n).is_power_of_two()
+    {
         let mut c = src.downsample();
         while c.size > n {
             c = c.downsample();
@@ -96,7 +117,10 @@ const IMAGE_EXTS: [&str; 5] = ["exr", "hdr", "png", "jpg", "jpeg"];
 
 /// Finds `stem.<ext>` in `dir` for any readable extension.
 fn find_with_stem(dir: &Path, stem: &str) -> Option<PathBuf> {
-    IMAGE_EXTS.iter().map(|e| dir.join(format!("{stem}.{e}"))).find(|p| p.is_file())
+    IMAGE_EXTS
+        .iter()
+        .map(|e| dir.join(format!("{stem}.{e}")))
+        .find(|p| p.is_file())
 }
 
 /// Reads one HDR image and applies the input policy (NaN/Inf refused unless `sanitize`,
@@ -115,17 +139,32 @@ pub fn load_environment(path: &Path, sanitize: bool) -> Result<LoadedEnvironment
         for face in Face::ALL {
             let p = find_with_stem(path, face.name())
                 .or_else(|| find_with_stem(path, &format!("m0_{}", face.name())))
-                .ok_or_else(|| Error::invalid(path, format!("folder has no face '{}' (expected px, nx, py, ny, pz, nz images)", face.name())))?;
+                .ok_or_else(|| {
+                    Error::invalid(
+                        path,
+                        format!(
+                            "folder has no face '{}' (expected px, nx, py, ny, pz, nz images)",
+                            face.name()
+                        ),
+                    )
+                })?;
             let (img, r) = read_hdr_image(&p, sanitize)?;
             merge(&mut report, &r);
             faces.push(img);
         }
         let faces: [Image; 6] = faces.try_into().expect("six faces");
         let cube = Cubemap::from_faces(faces).map_err(|e| Error::invalid(path, e.to_string()))?;
-        return Ok(LoadedEnvironment { env: Environment::Cube(cube), path: path.to_path_buf(), report });
+        return Ok(LoadedEnvironment {
+            env: Environment::Cube(cube),
+            path: path.to_path_buf(),
+            report,
+        });
     }
     if !path.exists() {
-        return Err(Error::io(path, std::io::Error::new(std::io::ErrorKind::NotFound, "no such file or folder")));
+        return Err(Error::io(
+            path,
+            std::io::Error::new(std::io::ErrorKind::NotFound, "no such file or folder"),
+        ));
     }
     if io::extension(path) == "ktx2" {
         let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
@@ -135,11 +174,19 @@ pub fn load_environment(path: &Path, sanitize: bool) -> Result<LoadedEnvironment
         for face in &mut cube.faces {
             merge(&mut report, &check_texels(face, path, sanitize)?);
         }
-        return Ok(LoadedEnvironment { env: Environment::Cube(cube), path: path.to_path_buf(), report });
+        return Ok(LoadedEnvironment {
+            env: Environment::Cube(cube),
+            path: path.to_path_buf(),
+            report,
+        });
     }
     let (img, report) = read_hdr_image(path, sanitize)?;
     let env = classify_layout(path, img)?;
-    Ok(LoadedEnvironment { env, path: path.to_path_buf(), report })
+    Ok(LoadedEnvironment {
+        env,
+        path: path.to_path_buf(),
+        report,
+    })
 }
 
 fn merge(into: &mut TexelReport, r: &TexelReport) {
@@ -156,8 +203,22 @@ pub fn classify_layout(path: &Path, img: Image) -> Result<Environment> {
     }
     // (columns, rows, face positions as (face, column, row, rotated 180°)).
     type Slot = (Face, usize, usize, bool);
-    let hcross: [Slot; 6] = [(Face::Px, 2, 1, false), (Face::Nx, 0, 1, false), (Face::Py, 1, 0, false), (Face::Ny, 1, 2, false), (Face::Pz, 1, 1, false), (Face::Nz, 3, 1, false)];
-    let vcross: [Slot; 6] = [(Face::Px, 2, 1, false), (Face::Nx, 0, 1, false), (Face::Py, 1, 0, false), (Face::Ny, 1, 2, false), (Face::Pz, 1, 1, false), (Face::Nz, 1, 3, true)];
+    let hcross: [Slot; 6] = [
+        (Face::Px, 2, 1, false),
+        (Face::Nx, 0, 1, false),
+        (Face::Py, 1, 0, false),
+        (Face::Ny, 1, 2, false),
+        (Face::Pz, 1, 1, false),
+        (Face::Nz, 3, 1, false),
+    ];
+    let vcross: [Slot; 6] = [
+        (Face::Px, 2, 1, false),
+        (Face::Nx, 0, 1, false),
+        (Face::Py, 1, 0, false),
+        (Face::Ny, 1, 2, false),
+        (Face::Pz, 1, 1, false),
+        (Face::Nz, 1, 3, true),
+    ];
     let hstrip: [Slot; 6] = std::array::from_fn(|k| (Face::from_index(k), k, 0, false));
     let vstrip: [Slot; 6] = std::array::from_fn(|k| (Face::from_index(k), 0, k, false));
     let layout = if 3 * w == 4 * h {
@@ -181,7 +242,8 @@ pub fn classify_layout(path: &Path, img: Image) -> Result<Environment> {
         for j in 0..n {
             for i in 0..n {
                 let (si, sj) = if flip { (n - 1 - i, n - 1 - j) } else { (i, j) };
-                f.texel_mut(i, j).copy_from_slice(&img.rgb(col * n + si, row * n + sj));
+                f.texel_mut(i, j)
+                    .copy_from_slice(&img.rgb(col * n + si, row * n + sj));
             }
         }
         f
@@ -190,7 +252,17 @@ pub fn classify_layout(path: &Path, img: Image) -> Result<Environment> {
 }
 
 /// Output container for cubemaps.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, clap::ValueEnum)]
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    PartialEq,
+    Eq,
+    Default,
+    serde::Serialize,
+    serde::Deserialize,
+    clap::ValueEnum,
+)]
 #[serde(rename_all = "kebab-case")]
 pub enum Layout {
     /// One EXR per face (`px.exr` … or `m{l}_px.exr` … for chains).
@@ -202,12 +274,24 @@ pub enum Layout {
 
 /// Encodes a cube (or chain) for `dir` without touching the disk: `(path, bytes)` pairs.
 /// A single level is named `px.exr`…, a chain `m{l}_px.exr`…; KTX2 is `dir/<ktx_name>.ktx2`.
-pub fn encode_cube_outputs(dir: &Path, mips: &CubeMips, layout: Layout, depth: FloatDepth, ktx_name: &str) -> Result<Vec<(PathBuf, Vec<u8>)>> {
+pub fn encode_cube_outputs(
+    dir: &Path,
+    mips: &CubeMips,
+    layout: Layout,
+    depth: FloatDepth,
+    ktx_name: &str,
+) -> Result<Vec<(PathBuf, Vec<u8>)>> {
     match layout {
-        Layout::Ktx2 => Ok(vec![(dir.join(format!("{ktx_name}.ktx2")), io::ktx2::encode_cube(mips, depth))]),
+        Layout::Ktx2 => Ok(vec![(
+            dir.join(format!("{ktx_name}.ktx2")),
+            io::ktx2::encode_cube(mips, depth),
+        )]),
         Layout::Faces => {
             use rayon::prelude::*;
-            let opts = WriteOptions { float: depth, ..Default::default() };
+            let opts = WriteOptions {
+                float: depth,
+                ..Default::default()
+            };
             let chain = mips.levels.len() > 1;
             let jobs: Vec<(PathBuf, &Image)> = mips
                 .levels
@@ -215,23 +299,40 @@ pub fn encode_cube_outputs(dir: &Path, mips: &CubeMips, layout: Layout, depth: F
                 .enumerate()
                 .flat_map(|(l, cube)| {
                     Face::ALL.iter().map(move |f| {
-                        let name = if chain { format!("m{l}_{}.exr", f.name()) } else { format!("{}.exr", f.name()) };
+                        let name = if chain {
+                            format!("m{l}_{}.exr", f.name())
+                        } else {
+                            format!("{}.exr", f.name())
+                        };
                         (dir.join(name), &cube.faces[*f as usize])
                     })
                 })
                 .collect();
-            jobs.into_par_iter().map(|(p, img)| io::encode_image(&p, img, &opts).map(|b| (p, b))).collect()
+            jobs.into_par_iter()
+                .map(|(p, img)| io::encode_image(&p, img, &opts).map(|b| (p, b)))
+                .collect()
         }
     }
 }
 
 /// Paths [`encode_cube_outputs`] would write (for planning and cleaning).
-pub fn cube_output_paths(dir: &Path, levels: usize, layout: Layout, ktx_name: &str) -> Vec<PathBuf> {
+pub fn cube_output_paths(
+    dir: &Path,
+    levels: usize,
+    layout: Layout,
+    ktx_name: &str,
+) -> Vec<PathBuf> {
     match layout {
         Layout::Ktx2 => vec![dir.join(format!("{ktx_name}.ktx2"))],
         Layout::Faces => (0..levels)
             .flat_map(|l| {
-                Face::ALL.iter().map(move |f| if levels > 1 { dir.join(format!("m{l}_{}.exr", f.name())) } else { dir.join(format!("{}.exr", f.name())) })
+                Face::ALL.iter().map(move |f| {
+                    if levels > 1 {
+                        dir.join(format!("m{l}_{}.exr", f.name()))
+                    } else {
+                        dir.join(format!("{}.exr", f.name()))
+                    }
+                })
             })
             .collect(),
     }
@@ -252,7 +353,9 @@ pub fn read_cube_chain(path: &Path) -> Result<CubeMips> {
         let faces: Vec<Image> = Face::ALL
             .iter()
             .map(|f| {
-                let p = find_with_stem(path, &format!("m{l}_{}", f.name())).ok_or_else(|| Error::invalid(path, format!("missing face m{l}_{}", f.name())))?;
+                let p = find_with_stem(path, &format!("m{l}_{}", f.name())).ok_or_else(|| {
+                    Error::invalid(path, format!("missing face m{l}_{}", f.name()))
+                })?;
                 io::read_image(&p, ColorSpace::Linear)
             })
             .collect::<Result<_>>()?;
@@ -261,7 +364,12 @@ pub fn read_cube_chain(path: &Path) -> Result<CubeMips> {
     if levels.is_empty() {
         match load_environment(path, false)?.env {
             Environment::Cube(c) => levels.push(c),
-            Environment::Equirect(_) => return Err(Error::invalid(path, "expected a cube, found an equirect image")),
+            Environment::Equirect(_) => {
+                return Err(Error::invalid(
+                    path,
+                    "expected a cube, found an equirect image",
+                ))
+            }
         }
     }
     Ok(CubeMips { levels })
@@ -276,7 +384,8 @@ mod tests {
         for (f, face) in c.faces.iter_mut().enumerate() {
             for j in 0..n {
                 for i in 0..n {
-                    face.texel_mut(i, j).copy_from_slice(&[f as f32, i as f32, j as f32]);
+                    face.texel_mut(i, j)
+                        .copy_from_slice(&[f as f32, i as f32, j as f32]);
                 }
             }
         }
@@ -290,20 +399,32 @@ mod tests {
         // A smooth function of direction painted into an hcross must come back continuous.
         let n = 16;
         let mut img = Image::new(4 * n, 3 * n, 3);
-        let slots = [(Face::Px, 2, 1), (Face::Nx, 0, 1), (Face::Py, 1, 0), (Face::Ny, 1, 2), (Face::Pz, 1, 1), (Face::Nz, 3, 1)];
+        let slots = [
+            (Face::Px, 2, 1),
+            (Face::Nx, 0, 1),
+            (Face::Py, 1, 0),
+            (Face::Ny, 1, 2),
+            (Face::Pz, 1, 1),
+            (Face::Nz, 3, 1),
+        ];
         for (face, col, row) in slots {
             for j in 0..n {
                 for i in 0..n {
                     let d = crate::cube::texel_direction(face, i, j, n);
-                    img.texel_mut(col * n + i, row * n + j).copy_from_slice(&[d.x, d.y, d.z]);
+                    img.texel_mut(col * n + i, row * n + j)
+                        .copy_from_slice(&[d.x, d.y, d.z]);
                 }
             }
         }
-        let Environment::Cube(c) = classify_layout(Path::new("x.exr"), img).unwrap() else { panic!() };
+        let Environment::Cube(c) = classify_layout(Path::new("x.exr"), img).unwrap() else {
+            panic!()
+        };
         for face in Face::ALL {
             let t = c.texel(face, 3, 5);
             let d = crate::cube::texel_direction(face, 3, 5, n);
-            assert!((t[0] - d.x).abs() < 1e-6 && (t[1] - d.y).abs() < 1e-6 && (t[2] - d.z).abs() < 1e-6);
+            assert!(
+                (t[0] - d.x).abs() < 1e-6 && (t[1] - d.y).abs() < 1e-6 && (t[2] - d.z).abs() < 1e-6
+            );
         }
     }
 
@@ -314,10 +435,16 @@ mod tests {
         let mut img = Image::new(3 * n, 4 * n, 3);
         for j in 0..n {
             for i in 0..n {
-                img.texel_mut(n + i, 3 * n + j).copy_from_slice(&cube.texel(Face::Nz, n - 1 - i, n - 1 - j));
+                img.texel_mut(n + i, 3 * n + j).copy_from_slice(&cube.texel(
+                    Face::Nz,
+                    n - 1 - i,
+                    n - 1 - j,
+                ));
             }
         }
-        let Environment::Cube(c) = classify_layout(Path::new("x.exr"), img).unwrap() else { panic!() };
+        let Environment::Cube(c) = classify_layout(Path::new("x.exr"), img).unwrap() else {
+            panic!()
+        };
         assert_eq!(c.texel(Face::Nz, 1, 2), cube.texel(Face::Nz, 1, 2));
     }
 
@@ -329,9 +456,18 @@ mod tests {
 
     #[test]
     fn natural_face_size_is_pow2_below_quarter_width() {
-        assert_eq!(Environment::Equirect(Image::new(1024, 512, 3)).natural_face_size(), 256);
-        assert_eq!(Environment::Equirect(Image::new(1000, 500, 3)).natural_face_size(), 128);
-        assert_eq!(Environment::Equirect(Image::new(2, 1, 3)).natural_face_size(), 1);
+        assert_eq!(
+            Environment::Equirect(Image::new(1024, 512, 3)).natural_face_size(),
+            256
+        );
+        assert_eq!(
+            Environment::Equirect(Image::new(1000, 500, 3)).natural_face_size(),
+            128
+        );
+        assert_eq!(
+            Environment::Equirect(Image::new(2, 1, 3)).natural_face_size(),
+            1
+        );
     }
 
     #[test]
@@ -339,11 +475,19 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let mips = CubeMips::build(labelled_cube(8), 2);
         for layout in [Layout::Faces, Layout::Ktx2] {
-            let files = encode_cube_outputs(dir.path(), &mips, layout, FloatDepth::F32, "cube").unwrap();
+            let files =
+                encode_cube_outputs(dir.path(), &mips, layout, FloatDepth::F32, "cube").unwrap();
             let paths: Vec<_> = files.iter().map(|f| f.0.clone()).collect();
-            assert_eq!(paths, cube_output_paths(dir.path(), mips.levels.len(), layout, "cube"));
+            assert_eq!(
+                paths,
+                cube_output_paths(dir.path(), mips.levels.len(), layout, "cube")
+            );
             io::write_many_atomic(&files).unwrap();
-            let target = if layout == Layout::Ktx2 { dir.path().join("cube.ktx2") } else { dir.path().to_path_buf() };
+            let target = if layout == Layout::Ktx2 {
+                dir.path().join("cube.ktx2")
+            } else {
+                dir.path().to_path_buf()
+            };
             assert_eq!(read_cube_chain(&target).unwrap(), mips);
         }
     }

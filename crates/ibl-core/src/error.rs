@@ -11,7 +11,10 @@ use std::path::{Path, PathBuf};
 pub enum Error {
     /// The input is malformed, out of range or inconsistent.
     #[error("{}: {reason}", path_or_param(.path))]
-    InvalidInput { path: Option<PathBuf>, reason: String },
+    InvalidInput {
+        path: Option<PathBuf>,
+        reason: String,
+    },
     /// The input has NaN or infinite texels (use `--sanitize` to set them to 0).
     #[error("{}: {count} NaN/Inf texel values (use --sanitize to set them to 0)", .path.display())]
     NonFinite { path: PathBuf, count: usize },
@@ -45,19 +48,31 @@ pub enum ErrorClass {
 impl Error {
     /// Bad data in a named file.
     pub fn invalid(path: impl AsRef<Path>, reason: impl Into<String>) -> Self {
-        Error::InvalidInput { path: Some(path.as_ref().to_path_buf()), reason: reason.into() }
+        Error::InvalidInput {
+            path: Some(path.as_ref().to_path_buf()),
+            reason: reason.into(),
+        }
     }
     /// A parameter out of range (no file involved).
     pub fn param(reason: impl Into<String>) -> Self {
-        Error::InvalidInput { path: None, reason: reason.into() }
+        Error::InvalidInput {
+            path: None,
+            reason: reason.into(),
+        }
     }
     /// A valid but unsupported file.
     pub fn unsupported(path: impl AsRef<Path>, what: impl Into<String>) -> Self {
-        Error::Unsupported { path: Some(path.as_ref().to_path_buf()), what: what.into() }
+        Error::Unsupported {
+            path: Some(path.as_ref().to_path_buf()),
+            what: what.into(),
+        }
     }
     /// An I/O failure on a path.
     pub fn io(path: impl AsRef<Path>, source: std::io::Error) -> Self {
-        Error::Io { path: path.as_ref().to_path_buf(), source }
+        Error::Io {
+            path: path.as_ref().to_path_buf(),
+            source,
+        }
     }
     /// Which exit-code class this error belongs to.
     pub fn class(&self) -> ErrorClass {

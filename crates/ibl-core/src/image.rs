@@ -19,7 +19,12 @@ impl Image {
     /// A zero-filled image. Panics only on a programming error (channels outside 1..=4).
     pub fn new(width: usize, height: usize, channels: usize) -> Self {
         assert!((1..=4).contains(&channels), "channels must be 1..=4");
-        Image { width, height, channels, data: vec![0.0; width * height * channels] }
+        Image {
+            width,
+            height,
+            channels,
+            data: vec![0.0; width * height * channels],
+        }
     }
 
     /// Wraps existing data, checking its length.
@@ -30,18 +35,28 @@ impl Image {
                 data.len()
             )));
         }
-        Ok(Image { width, height, channels, data })
+        Ok(Image {
+            width,
+            height,
+            channels,
+            data,
+        })
     }
 
     /// Refuses sizes that are empty or would not fit in memory, before anything is allocated.
     pub fn check_size(path: &Path, width: u64, height: u64) -> Result<()> {
         if width == 0 || height == 0 {
-            return Err(Error::invalid(path, format!("zero-size image ({width}x{height})")));
+            return Err(Error::invalid(
+                path,
+                format!("zero-size image ({width}x{height})"),
+            ));
         }
         if width.saturating_mul(height) > MAX_TEXELS {
             return Err(Error::invalid(
                 path,
-                format!("image of {width}x{height} texels is larger than the limit of {MAX_TEXELS}"),
+                format!(
+                    "image of {width}x{height} texels is larger than the limit of {MAX_TEXELS}"
+                ),
             ));
         }
         Ok(())
@@ -76,7 +91,11 @@ impl Image {
             return self.clone();
         }
         let mut out = Image::new(self.width, self.height, channels);
-        for (src, dst) in self.data.chunks_exact(self.channels).zip(out.data.chunks_exact_mut(channels)) {
+        for (src, dst) in self
+            .data
+            .chunks_exact(self.channels)
+            .zip(out.data.chunks_exact_mut(channels))
+        {
             let rgba = match self.channels {
                 1 => [src[0], src[0], src[0], 1.0],
                 2 => [src[0], src[1], 0.0, 1.0],
@@ -117,7 +136,11 @@ impl TexelReport {
             ));
         }
         if self.non_finite_zeroed > 0 {
-            w.push(format!("{}: set {} NaN/Inf texel values to 0 (--sanitize)", path.display(), self.non_finite_zeroed));
+            w.push(format!(
+                "{}: set {} NaN/Inf texel values to 0 (--sanitize)",
+                path.display(),
+                self.non_finite_zeroed
+            ));
         }
         w
     }
@@ -129,7 +152,10 @@ pub fn check_texels(image: &mut Image, path: &Path, sanitize: bool) -> Result<Te
     let mut report = TexelReport::default();
     let non_finite = image.data.iter().filter(|v| !v.is_finite()).count();
     if non_finite > 0 && !sanitize {
-        return Err(Error::NonFinite { path: path.to_path_buf(), count: non_finite });
+        return Err(Error::NonFinite {
+            path: path.to_path_buf(),
+            count: non_finite,
+        });
     }
     for v in &mut image.data {
         if !v.is_finite() {

@@ -5,6 +5,8 @@
 /// Panics only if a `Params` field has no default, which its own unit test catches.
 pub fn clap_defaults<P: clap::Args + clap::FromArgMatches>() -> P {
     let cmd = P::augment_args(clap::Command::new("defaults").no_binary_name(true));
-    let m = cmd.try_get_matches_from(Vec::<String>::new()).expect("every Params field has a default");
+    let m = cmd
+        .try_get_matches_from(Vec::<String>::new())
+        .expect("every Params field has a default");
     P::from_arg_matches(&m).expect("defaults parse")
 }

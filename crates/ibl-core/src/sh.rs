@@ -117,7 +117,12 @@ mod tests {
     fn bands_0_to_2_match_design_constants() {
         let mut rng = Pcg32::new(1, 1);
         for _ in 0..20 {
-            let d = Vec3::new(rng.next_f32() - 0.5, rng.next_f32() - 0.5, rng.next_f32() - 0.5).normalize();
+            let d = Vec3::new(
+                rng.next_f32() - 0.5,
+                rng.next_f32() - 0.5,
+                rng.next_f32() - 0.5,
+            )
+            .normalize();
             let (x, y, z) = (d.x, d.y, d.z);
             let want = [
                 0.282095,
@@ -133,7 +138,12 @@ mod tests {
             let mut got = [0.0; 9];
             eval_basis(d, 3, &mut got);
             for i in 0..9 {
-                assert!((got[i] - want[i]).abs() < 2e-6, "i={i}: {} vs {}", got[i], want[i]);
+                assert!(
+                    (got[i] - want[i]).abs() < 2e-6,
+                    "i={i}: {} vs {}",
+                    got[i],
+                    want[i]
+                );
             }
         }
     }
@@ -160,7 +170,11 @@ mod tests {
         for a in 0..n {
             for b in 0..n {
                 let want = if a == b { 1.0 } else { 0.0 };
-                assert!((gram[a * n + b] - want).abs() < 2e-3, "({a},{b}) {}", gram[a * n + b]);
+                assert!(
+                    (gram[a * n + b] - want).abs() < 2e-3,
+                    "({a},{b}) {}",
+                    gram[a * n + b]
+                );
             }
         }
     }

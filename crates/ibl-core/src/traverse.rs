@@ -18,7 +18,12 @@ where
 }
 
 /// As [`map_cube_texels`], with per-thread scratch state made by `init` (reused across rows).
-pub fn map_cube_texels_with<S, I, K>(n: usize, progress: &dyn Progress, init: I, kernel: K) -> Cubemap
+pub fn map_cube_texels_with<S, I, K>(
+    n: usize,
+    progress: &dyn Progress,
+    init: I,
+    kernel: K,
+) -> Cubemap
 where
     I: Fn() -> S + Sync,
     K: Fn(&mut S, Face, usize, usize) -> Rgb + Sync,
@@ -32,13 +37,14 @@ where
             rows.push((Face::from_index(fi), j, row));
         }
     }
-    rows.into_par_iter().for_each_init(&init, |state, (face, j, row)| {
-        for i in 0..n {
-            let c = kernel(state, face, i, j);
-            row[i * 3..i * 3 + 3].copy_from_slice(&c);
-        }
-        progress.inc(n as u64);
-    });
+    rows.into_par_iter()
+        .for_each_init(&init, |state, (face, j, row)| {
+            for i in 0..n {
+                let c = kernel(state, face, i, j);
+                row[i * 3..i * 3 + 3].copy_from_slice(&c);
+            }
+            progress.inc(n as u64);
+        });
     progress.finish();
     cube
 }
@@ -63,7 +69,9 @@ mod tests {
     #[test]
     fn map_visits_each_texel_once_in_place() {
         let n = 5;
-        let cube = map_cube_texels(n, &NoProgress, |f, i, j| [f as usize as f32, i as f32, j as f32]);
+        let cube = map_cube_texels(n, &NoProgress, |f, i, j| {
+            [f as usize as f32, i as f32, j as f32]
+        });
         for f in Face::ALL {
             for j in 0..n {
                 for i in 0..n {
@@ -76,8 +84,14 @@ mod tests {
     #[test]
     fn ordered_reduce_is_thread_count_independent() {
         let f = |r: usize| (r as f64 * 0.1).sin() * 1e-3 + 1e7;
-        let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
-        let two = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+        let one = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
+        let two = rayon::ThreadPoolBuilder::new()
+            .num_threads(2)
+            .build()
+            .unwrap();
         let a = one.install(|| ordered_row_reduce(1000, f, 0.0, |a, b| a + b));
         let b = two.install(|| ordered_row_reduce(1000, f, 0.0, |a, b| a + b));
         assert_eq!(a.to_bits(), b.to_bits());

@@ -16,7 +16,12 @@ pub struct Params {
     #[arg(long, value_name = "N")]
     pub size: Option<usize>,
     /// Turn the environment about +Y by this many degrees first.
-    #[arg(long, value_name = "DEG", default_value_t = 0.0, allow_negative_numbers = true)]
+    #[arg(
+        long,
+        value_name = "DEG",
+        default_value_t = 0.0,
+        allow_negative_numbers = true
+    )]
     pub rotate: f32,
     /// Output container: one EXR per face or one KTX2 file.
     #[arg(long, value_enum, default_value_t = Layout::Faces)]
@@ -48,7 +53,9 @@ impl Params {
     pub fn validate(&self) -> Result<()> {
         if let Some(n) = self.size {
             if n == 0 || n > MAX_FACE_SIZE {
-                return Err(Error::param(format!("--size {n} is out of range 1..={MAX_FACE_SIZE}")));
+                return Err(Error::param(format!(
+                    "--size {n} is out of range 1..={MAX_FACE_SIZE}"
+                )));
             }
         }
         if !self.rotate.is_finite() {
@@ -67,24 +74,61 @@ pub struct Baked {
 
 /// Resamples a loaded environment to a cube (or an equirect with `to_equirect`) and encodes
 /// the outputs for `out_dir` (or the output file for equirect).
-pub fn run(params: &Params, input: &LoadedEnvironment, out: &Path, progress: &dyn Progress) -> Result<Baked> {
+pub fn run(
+    params: &Params,
+    input: &LoadedEnvironment,
+    out: &Path,
+    progress: &dyn Progress,
+) -> Result<Baked> {
     params.validate()?;
-    let depth = if params.half { FloatDepth::F16 } else { FloatDepth::F32 };
+    let depth = if params.half {
+        FloatDepth::F16
+    } else {
+        FloatDepth::F32
+    };
     if params.to_equirect {
         let base = match &input.env {
             Environment::Cube(c) => c.clone(),
-            Environment::Equirect(_) => input.env.to_cube(input.env.natural_face_size(), Filter::Area, 0.0, progress),
+            Environment::Equirect(_) => {
+                input
+                    .env
+                    .to_cube(input.env.natural_face_size(), Filter::Area, 0.0, progress)
+            }
         };
         let w = params.size.map(|s| 2 * s).unwrap_or(4 * base.size);
         let img = equirect::cube_to_equirect(&base, w, w / 2, params.filter);
-        let path = if io::extension(out).is_empty() { out.join("equirect.exr") } else { out.to_path_buf() };
-        let bytes = io::encode_image(&path, &img, &WriteOptions { float: depth, png_tonemap: true, ..Default::default() })?;
-        return Ok(Baked { files: vec![(path, bytes)], face_size: base.size });
+        let path = if io::extension(out).is_empty() {
+            out.join("equirect.exr")
+        } else {
+            out.to_path_buf()
+        };
+        let bytes = io::encode_image(
+            &path,
+            &img,
+            &WriteOptions {
+                float: depth,
+                png_tonemap: true,
+                ..Default::default()
+            },
+        )?;
+        return Ok(Baked {
+            files: vec![(path, bytes)],
+            face_size: base.size,
+        });
     }
     let n = params.size.unwrap_or_else(|| input.env.natural_face_size());
     let cube = input.env.to_cube(n, params.filter, params.rotate, progress);
-    let files = envmap::encode_cube_outputs(out, &CubeMips { levels: vec![cube] }, params.layout, depth, "cube")?;
-    Ok(Baked { files, face_size: n })
+    let files = envmap::encode_cube_outputs(
+        out,
+        &CubeMips { levels: vec![cube] },
+        params.layout,
+        depth,
+        "cube",
+    )?;
+    Ok(Baked {
+        files,
+        face_size: n,
+    })
 }
 
 #[cfg(test)]
@@ -110,7 +154,10 @@ mod tests {
 
     #[test]
     fn out_of_range_size_is_refused() {
-        let p = Params { size: Some(0), ..Default::default() };
+        let p = Params {
+            size: Some(0),
+            ..Default::default()
+        };
         assert!(p.validate().is_err());
     }
 }

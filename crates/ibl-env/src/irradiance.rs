@@ -2,6 +2,7 @@
 //! coefficients of E/π, and an irradiance cubemap (E/π) from the SH or by brute-force
 //! cosine convolution.
 
+use glam::Vec3;
 use ibl_core::cube::{solid_angle_table, texel_direction, CubeMips, Cubemap, Face};
 use ibl_core::envmap::{self, Environment, Layout, LoadedEnvironment};
 use ibl_core::equirect::{pixel_direction, rotate_y, row_solid_angle};
@@ -10,7 +11,6 @@ use ibl_core::progress::Progress;
 use ibl_core::sh::{self, cosine_lobe_zonal, num_coeffs};
 use ibl_core::traverse::{map_cube_texels, ordered_row_reduce};
 use ibl_core::{Error, Image, Result};
-use glam::Vec3;
 use std::path::{Path, PathBuf};
 
 /// Largest band count accepted (l ≤ 15).
@@ -43,7 +43,12 @@ pub struct Params {
     #[arg(long, default_value = "sh.json", value_name = "NAME")]
     pub sh_file: String,
     /// Turn the environment about +Y by this many degrees first.
-    #[arg(long, value_name = "DEG", default_value_t = 0.0, allow_negative_numbers = true)]
+    #[arg(
+        long,
+        value_name = "DEG",
+        default_value_t = 0.0,
+        allow_negative_numbers = true
+    )]
     pub rotate: f32,
     /// Irradiance cube container: one EXR per face or one KTX2 file.
     #[arg(long, value_enum, default_value_t = Layout::Faces)]
@@ -65,14 +70,23 @@ impl Default for Params {
 impl Params {
     pub fn validate(&self) -> Result<()> {
         if self.bands == 0 || self.bands > MAX_BANDS {
-            return Err(Error::param(format!("--bands {} is out of range 1..={MAX_BANDS}", self.bands)));
+            return Err(Error::param(format!(
+                "--bands {} is out of range 1..={MAX_BANDS}",
+                self.bands
+            )));
         }
         if self.size == 0 || self.size > 4096 {
-            return Err(Error::param(format!("--size {} is out of range 1..=4096", self.size)));
+            return Err(Error::param(format!(
+                "--size {} is out of range 1..=4096",
+                self.size
+            )));
         }
         let ext = io::extension(Path::new(&self.sh_file));
         if ext != "json" && ext != "ron" {
-            return Err(Error::param(format!("--sh-file '{}' must end in .json or .ron", self.sh_file)));
+            return Err(Error::param(format!(
+                "--sh-file '{}' must end in .json or .ron",
+                self.sh_file
+            )));
         }
         if !self.rotate.is_finite() {
             return Err(Error::param("--rotate must be a finite number of degrees"));
@@ -117,14 +131,19 @@ pub fn project_equirect(img: &Image, bands: usize, rotate_deg: f32) -> Vec<[f64;
             if c == [0.0; 3] {
                 continue;
             }
-            sh::eval_basis(rotate_y(pixel_direction(i, j, w, h), rotate_deg), bands, &mut y);
+            sh::eval_basis(
+                rotate_y(pixel_direction(i, j, w, h), rotate_deg),
+                bands,
+                &mut y,
+            );
             for (a, yi) in acc.iter_mut().zip(&y) {
                 for k in 0..3 {
                     a[k] += c[k] as f64 * *yi as f64;
                 }
             }
         }
-        acc.iter_mut().for_each(|a| a.iter_mut().for_each(|v| *v *= sa));
+        acc.iter_mut()
+            .for_each(|a| a.iter_mut().for_each(|v| *v *= sa));
         acc
     };
     ordered_row_reduce(h, row, vec![[0.0f64; 3]; n], add_coeffs)
@@ -141,7 +160,11 @@ pub fn project_cube(cube: &Cubemap, bands: usize, rotate_deg: f32) -> Vec<[f64; 
         let mut y = vec![0.0f32; n];
         for i in 0..size {
             let c = cube.texel(face, i, j);
-            sh::eval_basis(rotate_y(texel_direction(face, i, j, size), rotate_deg), bands, &mut y);
+            sh::eval_basis(
+                rotate_y(texel_direction(face, i, j, size), rotate_deg),
+                bands,
+                &mut y,
+            );
             let s = sa[j * size + i] as f64;
             for (a, yi) in acc.iter_mut().zip(&y) {
                 for k in 0..3 {
@@ -176,7 +199,11 @@ pub fn project(env: &Environment, bands: usize, rotate_deg: f32) -> Vec<[f64; 3]
 pub fn irradiance_coefficients(radiance: &[[f64; 3]], bands: usize, window: bool) -> Vec<[f64; 3]> {
     let mut out = radiance.to_vec();
     for l in 0..bands {
-        let w = if window { lanczos_window(l, bands) } else { 1.0 };
+        let w = if window {
+            lanczos_window(l, bands)
+        } else {
+            1.0
+        };
         let f = cosine_lobe_zonal(l) / std::f64::consts::PI * w;
         for m in -(l as isize)..=(l as isize) {
             out[sh::index(l, m)].iter_mut().for_each(|v| *v *= f);
@@ -213,14 +240,22 @@ fn reduce_equirect(img: &Image, factor: usize) -> Image {
                     ws += sa;
                 }
             }
-            out.texel_mut(x, y).copy_from_slice(&acc.map(|v| (v / ws) as f32));
+            out.texel_mut(x, y)
+                .copy_from_slice(&acc.map(|v| (v / ws) as f32));
         }
     }
     out
 }
 
-fn weighted_texels(env: &Environment, exact_source_width: usize, rotate_deg: f32) -> WeightedTexels {
-    let mut t = WeightedTexels { dirs: Vec::new(), radiance_times_sa: Vec::new() };
+fn weighted_texels(
+    env: &Environment,
+    exact_source_width: usize,
+    rotate_deg: f32,
+) -> WeightedTexels {
+    let mut t = WeightedTexels {
+        dirs: Vec::new(),
+        radiance_times_sa: Vec::new(),
+    };
     let mut push = |d: Vec3, c: [f32; 3], sa: f64| {
         if c != [0.0; 3] {
             t.dirs.push(rotate_y(d, rotate_deg));
@@ -229,14 +264,25 @@ fn weighted_texels(env: &Environment, exact_source_width: usize, rotate_deg: f32
     };
     match env {
         Environment::Equirect(img) => {
-            let factor = if exact_source_width == 0 { 1 } else { (img.width / exact_source_width).max(1) };
+            let factor = img
+                .width
+                .checked_div(exact_source_width)
+                .unwrap_or(1)
+                .max(1);
             // Only exact divisors keep the reduction energy-exact.
-            let factor = (1..=factor).rev().find(|f| img.width % f == 0 && img.height % f == 0).unwrap_or(1);
+            let factor = (1..=factor)
+                .rev()
+                .find(|f| img.width % f == 0 && img.height % f == 0)
+                .unwrap_or(1);
             let src = reduce_equirect(img, factor);
             for j in 0..src.height {
                 let sa = row_solid_angle(j, src.width, src.height);
                 for i in 0..src.width {
-                    push(pixel_direction(i, j, src.width, src.height), src.rgb(i, j), sa);
+                    push(
+                        pixel_direction(i, j, src.width, src.height),
+                        src.rgb(i, j),
+                        sa,
+                    );
                 }
             }
         }
@@ -245,7 +291,11 @@ fn weighted_texels(env: &Environment, exact_source_width: usize, rotate_deg: f32
             for face in Face::ALL {
                 for j in 0..c.size {
                     for i in 0..c.size {
-                        push(texel_direction(face, i, j, c.size), c.texel(face, i, j), sa[j * c.size + i] as f64);
+                        push(
+                            texel_direction(face, i, j, c.size),
+                            c.texel(face, i, j),
+                            sa[j * c.size + i] as f64,
+                        );
                     }
                 }
             }
@@ -255,7 +305,13 @@ fn weighted_texels(env: &Environment, exact_source_width: usize, rotate_deg: f32
 }
 
 /// E(n)/π = (1/π) Σ L(ω) max(n·ω, 0) Ω over every source texel: the brute-force reference.
-pub fn convolve_cosine_exact(env: &Environment, size: usize, exact_source_width: usize, rotate_deg: f32, progress: &dyn Progress) -> Cubemap {
+pub fn convolve_cosine_exact(
+    env: &Environment,
+    size: usize,
+    exact_source_width: usize,
+    rotate_deg: f32,
+    progress: &dyn Progress,
+) -> Cubemap {
     let src = weighted_texels(env, exact_source_width, rotate_deg);
     let inv_pi = 1.0 / std::f64::consts::PI;
     map_cube_texels(size, progress, |face, i, j| {
@@ -281,7 +337,9 @@ pub fn convolve_cosine_exact(env: &Environment, size: usize, exact_source_width:
 /// The irradiance cube E/π evaluated from SH coefficients; negative values (ringing under
 /// strong suns) are clamped to 0 and counted.
 pub fn cube_from_sh(coeffs: &[[f32; 3]], size: usize, progress: &dyn Progress) -> (Cubemap, usize) {
-    let cube = map_cube_texels(size, progress, |face, i, j| sh::eval_rgb(coeffs, texel_direction(face, i, j, size)));
+    let cube = map_cube_texels(size, progress, |face, i, j| {
+        sh::eval_rgb(coeffs, texel_direction(face, i, j, size))
+    });
     let mut clamped = 0;
     let mut cube = cube;
     for face in &mut cube.faces {
@@ -304,22 +362,55 @@ pub struct Baked {
 }
 
 /// Projects, convolves and encodes `DIR/<sh_file>` and the irradiance cube.
-pub fn run(params: &Params, input: &LoadedEnvironment, out_dir: &Path, progress: &dyn Progress) -> Result<Baked> {
+pub fn run(
+    params: &Params,
+    input: &LoadedEnvironment,
+    out_dir: &Path,
+    progress: &dyn Progress,
+) -> Result<Baked> {
     params.validate()?;
     let radiance = project(&input.env, params.bands, params.rotate);
     let irr = irradiance_coefficients(&radiance, params.bands, params.window);
     let to_f32 = |v: &[[f64; 3]]| v.iter().map(|c| c.map(|x| x as f32)).collect::<Vec<_>>();
-    let coefficients = ShCoefficients { bands: params.bands, radiance: to_f32(&radiance), irradiance: to_f32(&irr), windowed: params.window };
+    let coefficients = ShCoefficients {
+        bands: params.bands,
+        radiance: to_f32(&radiance),
+        irradiance: to_f32(&irr),
+        windowed: params.window,
+    };
     let (cube, negative_clamped) = if params.exact {
-        (convolve_cosine_exact(&input.env, params.size, params.exact_source_width, params.rotate, progress), 0)
+        (
+            convolve_cosine_exact(
+                &input.env,
+                params.size,
+                params.exact_source_width,
+                params.rotate,
+                progress,
+            ),
+            0,
+        )
     } else {
         cube_from_sh(&coefficients.irradiance, params.size, progress)
     };
     let sh_path = out_dir.join(&params.sh_file);
     let mut files = vec![(sh_path.clone(), io::data::encode(&sh_path, &coefficients)?)];
-    let depth = if params.half { FloatDepth::F16 } else { FloatDepth::F32 };
-    files.extend(envmap::encode_cube_outputs(out_dir, &CubeMips { levels: vec![cube] }, params.layout, depth, "irradiance")?);
-    Ok(Baked { files, coefficients, negative_clamped })
+    let depth = if params.half {
+        FloatDepth::F16
+    } else {
+        FloatDepth::F32
+    };
+    files.extend(envmap::encode_cube_outputs(
+        out_dir,
+        &CubeMips { levels: vec![cube] },
+        params.layout,
+        depth,
+        "irradiance",
+    )?);
+    Ok(Baked {
+        files,
+        coefficients,
+        negative_clamped,
+    })
 }
 
 #[cfg(test)]
@@ -329,7 +420,9 @@ mod tests {
     use std::f64::consts::PI;
 
     fn load(name: &str) -> Environment {
-        let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/hdri").join(name);
+        let p = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../fixtures/hdri")
+            .join(name);
         ibl_core::envmap::load_environment(&p, false).unwrap().env
     }
 
@@ -350,12 +443,26 @@ mod tests {
         let irr = irradiance_coefficients(&rad, 3, false);
         let c: Vec<[f32; 3]> = irr.iter().map(|c| c.map(|x| x as f32)).collect();
         let (e, _) = cube_from_sh(&c, 4, &NoProgress);
-        assert!(e.faces.iter().all(|f| f.data.iter().all(|v| (v - 1.0).abs() < 1e-5)));
+        assert!(e
+            .faces
+            .iter()
+            .all(|f| f.data.iter().all(|v| (v - 1.0).abs() < 1e-5)));
         // The brute-force sum over an 8² cube discretises the horizon kink of max(n·ω, 0);
         // its error shrinks with the source resolution.
         for (src, tol) in [(8, 2e-3), (64, 5e-5)] {
-            let exact = convolve_cosine_exact(&Environment::Cube(Cubemap::constant(src, [1.0; 3])), 4, 0, 0.0, &NoProgress);
-            let worst = exact.faces.iter().flat_map(|f| f.data.iter()).map(|v| (v - 1.0).abs()).fold(0.0f32, f32::max);
+            let exact = convolve_cosine_exact(
+                &Environment::Cube(Cubemap::constant(src, [1.0; 3])),
+                4,
+                0,
+                0.0,
+                &NoProgress,
+            );
+            let worst = exact
+                .faces
+                .iter()
+                .flat_map(|f| f.data.iter())
+                .map(|v| (v - 1.0).abs())
+                .fold(0.0f32, f32::max);
             eprintln!("white furnace of the exact convolution from a {src}² cube: worst error {worst:.2e}");
             assert!(worst < tol, "{src}: {worst}");
         }
@@ -405,16 +512,29 @@ mod tests {
         let b = project_cube(&rotated, 3, 0.0);
         for i in 0..9 {
             let scale = a[0][1].abs();
-            assert!((a[i][1] - b[i][1]).abs() < 0.02 * scale, "coefficient {i}: {} vs {}", a[i][1], b[i][1]);
+            assert!(
+                (a[i][1] - b[i][1]).abs() < 0.02 * scale,
+                "coefficient {i}: {} vs {}",
+                a[i][1],
+                b[i][1]
+            );
         }
     }
 
     #[test]
     fn sh_cube_is_within_measured_distance_of_exact_on_fixtures() {
-        for name in ["city_512.exr", "studio_256.exr", "sunset_256.exr", "interior_256.exr"] {
+        for name in [
+            "city_512.exr",
+            "studio_256.exr",
+            "sunset_256.exr",
+            "interior_256.exr",
+        ] {
             let env = load(name);
             let rad = project(&env, 3, 0.0);
-            let irr: Vec<[f32; 3]> = irradiance_coefficients(&rad, 3, false).iter().map(|c| c.map(|x| x as f32)).collect();
+            let irr: Vec<[f32; 3]> = irradiance_coefficients(&rad, 3, false)
+                .iter()
+                .map(|c| c.map(|x| x as f32))
+                .collect();
             let (sh_cube, _) = cube_from_sh(&irr, 16, &NoProgress);
             let exact = convolve_cosine_exact(&env, 16, 0, 0.0, &NoProgress);
             let (mut num, mut den, mut worst) = (0.0f64, 0.0f64, 0.0f64);
@@ -426,7 +546,10 @@ mod tests {
                 }
             }
             let rel = num / den;
-            eprintln!("{name}: 3-band SH irradiance vs exact: relative MAE {:.4}, worst texel {:.3}", rel, worst);
+            eprintln!(
+                "{name}: 3-band SH irradiance vs exact: relative MAE {:.4}, worst texel {:.3}",
+                rel, worst
+            );
             // The cosine convolution is diagonal in SH, so the first 9 coefficients of the
             // exact irradiance must be the bake's coefficients (the exact cube is finer: 32²).
             let exact32 = convolve_cosine_exact(&env, 32, 0, 0.0, &NoProgress);
@@ -454,15 +577,24 @@ mod tests {
                 den += *x as f64;
             }
         }
-        eprintln!("exact irradiance, 256-wide reduced source vs native 512: relative MAE {:.2e}", num / den);
+        eprintln!(
+            "exact irradiance, 256-wide reduced source vs native 512: relative MAE {:.2e}",
+            num / den
+        );
         assert!(num / den < 1e-3);
     }
 
     #[test]
     fn projection_is_thread_count_independent() {
         let env = load("sunset_256.exr");
-        let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
-        let two = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+        let one = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
+        let two = rayon::ThreadPoolBuilder::new()
+            .num_threads(2)
+            .build()
+            .unwrap();
         let a = one.install(|| project(&env, 4, 0.0));
         let b = two.install(|| project(&env, 4, 0.0));
         assert_eq!(a, b);

@@ -29,10 +29,20 @@ fn main() {
         env.warnings().into_iter().for_each(|w| ctx.warn(w));
         let baked = run(&cli.params, &env, &cli.output, ctx.progress())?;
         if baked.negative_clamped > 0 {
-            ctx.warn(format!("SH ringing: clamped {} negative irradiance values to 0 (try --window or --exact)", baked.negative_clamped));
+            ctx.warn(format!(
+                "SH ringing: clamped {} negative irradiance values to 0 (try --window or --exact)",
+                baked.negative_clamped
+            ));
         }
         ibl_core::io::write_many_atomic(&baked.files)?;
-        let outputs = baked.files.iter().map(|f| f.0.display().to_string()).collect();
-        Ok::<_, ibl_core::Error>((outputs, serde_json::json!({ "coefficients": baked.coefficients, "negative_clamped": baked.negative_clamped })))
+        let outputs = baked
+            .files
+            .iter()
+            .map(|f| f.0.display().to_string())
+            .collect();
+        Ok::<_, ibl_core::Error>((
+            outputs,
+            serde_json::json!({ "coefficients": baked.coefficients, "negative_clamped": baked.negative_clamped }),
+        ))
     })
 }

@@ -25,7 +25,10 @@ pub fn decode(path: &Path, bytes: &[u8]) -> Result<Image> {
     let bad = |e: exr::error::Error| Error::invalid(path, format!("not a readable EXR file: {e}"));
     // Header first: refuse absurd sizes before the decoder allocates.
     let meta = exr::meta::MetaData::read_from_buffered(Cursor::new(bytes), false).map_err(bad)?;
-    let header = meta.headers.first().ok_or_else(|| Error::invalid(path, "EXR file has no layers"))?;
+    let header = meta
+        .headers
+        .first()
+        .ok_or_else(|| Error::invalid(path, "EXR file has no layers"))?;
     if header.deep {
         return Err(Error::unsupported(path, "deep EXR data"));
     }
@@ -42,7 +45,13 @@ pub fn decode(path: &Path, bytes: &[u8]) -> Result<Image> {
         .map_err(bad)?;
     let layer = image.layer_data;
     let (w, h) = (layer.size.0, layer.size.1);
-    let find = |r: &str| layer.channel_data.list.iter().position(|c| role(&c.name.to_string()) == r);
+    let find = |r: &str| {
+        layer
+            .channel_data
+            .list
+            .iter()
+            .position(|c| role(&c.name.to_string()) == r)
+    };
     let (ri, gi, bi, ai) = (find("R"), find("G"), find("B"), find("A"));
     let picked: Vec<usize> = match (ri, gi, bi) {
         (Some(r), Some(g), Some(b)) => {
@@ -52,19 +61,37 @@ pub fn decode(path: &Path, bytes: &[u8]) -> Result<Image> {
         }
         _ => {
             let grey = find("Y").or(ri).or(gi).or(bi);
-            match grey.or(if layer.channel_data.list.len() == 1 { Some(0) } else { None }) {
+            match grey.or(if layer.channel_data.list.len() == 1 {
+                Some(0)
+            } else {
+                None
+            }) {
                 Some(c) => vec![c],
                 None => {
-                    let names: Vec<String> = layer.channel_data.list.iter().map(|c| c.name.to_string()).collect();
-                    return Err(Error::unsupported(path, format!("EXR channels {names:?}: need R,G,B(,A) or a single channel")));
+                    let names: Vec<String> = layer
+                        .channel_data
+                        .list
+                        .iter()
+                        .map(|c| c.name.to_string())
+                        .collect();
+                    return Err(Error::unsupported(
+                        path,
+                        format!("EXR channels {names:?}: need R,G,B(,A) or a single channel"),
+                    ));
                 }
             }
         }
     };
-    let planes: Vec<Vec<f32>> = picked.iter().map(|&c| channel_values(&layer.channel_data.list[c].sample_data)).collect();
+    let planes: Vec<Vec<f32>> = picked
+        .iter()
+        .map(|&c| channel_values(&layer.channel_data.list[c].sample_data))
+        .collect();
     let n = w * h;
     if planes.iter().any(|p| p.len() != n) {
-        return Err(Error::invalid(path, "EXR channels are subsampled or truncated"));
+        return Err(Error::invalid(
+            path,
+            "EXR channels are subsampled or truncated",
+        ));
     }
     let channels = planes.len();
     let mut data = vec![0.0f32; n * channels];

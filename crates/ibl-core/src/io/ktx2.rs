@@ -8,7 +8,9 @@ use crate::error::{Error, Result};
 use crate::image::Image;
 use std::path::Path;
 
-const IDENTIFIER: [u8; 12] = [0xAB, 0x4B, 0x54, 0x58, 0x20, 0x32, 0x30, 0xBB, 0x0D, 0x0A, 0x1A, 0x0A];
+const IDENTIFIER: [u8; 12] = [
+    0xAB, 0x4B, 0x54, 0x58, 0x20, 0x32, 0x30, 0xBB, 0x0D, 0x0A, 0x1A, 0x0A,
+];
 const VK_FORMAT_R16G16B16A16_SFLOAT: u32 = 97;
 const VK_FORMAT_R32G32B32_SFLOAT: u32 = 106;
 const VK_FORMAT_R32G32B32A32_SFLOAT: u32 = 109;
@@ -67,7 +69,7 @@ pub fn encode_cube(mips: &CubeMips, depth: FloatDepth) -> Vec<u8> {
     let kvd_off = dfd_off + dfd.len();
     let mut data_start = kvd_off + kvd.len();
     let align = (bpc * 4) as usize; // lcm(texel size, 4)
-    // Level data is stored smallest level first.
+                                    // Level data is stored smallest level first.
     let level_bytes: Vec<Vec<u8>> = mips
         .levels
         .iter()
@@ -95,10 +97,25 @@ pub fn encode_cube(mips: &CubeMips, depth: FloatDepth) -> Vec<u8> {
     let mut out = Vec::with_capacity(data_start);
     out.extend(IDENTIFIER);
     let bpc_type_size = bpc;
-    for v in [vk_format, bpc_type_size, base, base, 0, 0, 6, levels as u32, 0] {
+    for v in [
+        vk_format,
+        bpc_type_size,
+        base,
+        base,
+        0,
+        0,
+        6,
+        levels as u32,
+        0,
+    ] {
         out.extend(v.to_le_bytes());
     }
-    for v in [dfd_off as u32, dfd.len() as u32, kvd_off as u32, kvd.len() as u32] {
+    for v in [
+        dfd_off as u32,
+        dfd.len() as u32,
+        kvd_off as u32,
+        kvd.len() as u32,
+    ] {
         out.extend(v.to_le_bytes());
     }
     out.extend(0u64.to_le_bytes());
@@ -119,10 +136,12 @@ pub fn encode_cube(mips: &CubeMips, depth: FloatDepth) -> Vec<u8> {
 }
 
 fn u32_at(b: &[u8], o: usize) -> Option<u32> {
-    b.get(o..o + 4).map(|s| u32::from_le_bytes(s.try_into().unwrap()))
+    b.get(o..o + 4)
+        .map(|s| u32::from_le_bytes(s.try_into().unwrap()))
 }
 fn u64_at(b: &[u8], o: usize) -> Option<u64> {
-    b.get(o..o + 8).map(|s| u64::from_le_bytes(s.try_into().unwrap()))
+    b.get(o..o + 8)
+        .map(|s| u64::from_le_bytes(s.try_into().unwrap()))
 }
 
 /// Decodes an uncompressed float KTX2 cubemap with all its levels.
@@ -132,7 +151,8 @@ pub fn decode_cube(path: &Path, b: &[u8]) -> Result<CubeMips> {
         return Err(bad("bad identifier or truncated header"));
     }
     let h = |k: usize| u32_at(b, 12 + 4 * k).unwrap();
-    let (vk_format, width, height, depth, layers, faces, levels, scheme) = (h(0), h(2), h(3), h(4), h(5), h(6), h(7), h(8));
+    let (vk_format, width, height, depth, layers, faces, levels, scheme) =
+        (h(0), h(2), h(3), h(4), h(5), h(6), h(7), h(8));
     if scheme != 0 {
         return Err(Error::unsupported(path, "supercompressed KTX2"));
     }
@@ -143,7 +163,12 @@ pub fn decode_cube(path: &Path, b: &[u8]) -> Result<CubeMips> {
         VK_FORMAT_R16G16B16A16_SFLOAT => (4usize, 2usize),
         VK_FORMAT_R32G32B32A32_SFLOAT => (4, 4),
         VK_FORMAT_R32G32B32_SFLOAT => (3, 4),
-        f => return Err(Error::unsupported(path, format!("KTX2 vkFormat {f} (need RGBA16F, RGBA32F or RGB32F)"))),
+        f => {
+            return Err(Error::unsupported(
+                path,
+                format!("KTX2 vkFormat {f} (need RGBA16F, RGBA32F or RGB32F)"),
+            ))
+        }
     };
     Image::check_size(path, width as u64, height as u64 * 6)?;
     let levels = levels.max(1) as usize;
@@ -153,20 +178,36 @@ pub fn decode_cube(path: &Path, b: &[u8]) -> Result<CubeMips> {
     let mut out = Vec::with_capacity(levels);
     for l in 0..levels {
         let o = HEADER_LEN + 24 * l;
-        let (off, len) = (u64_at(b, o).ok_or_else(|| bad("truncated level index"))?, u64_at(b, o + 8).ok_or_else(|| bad("truncated level index"))?);
+        let (off, len) = (
+            u64_at(b, o).ok_or_else(|| bad("truncated level index"))?,
+            u64_at(b, o + 8).ok_or_else(|| bad("truncated level index"))?,
+        );
         let size = ((width as usize) >> l).max(1);
         let expect = size * size * 6 * channels * bpc;
         if len as usize != expect {
-            return Err(bad(&format!("level {l} holds {len} bytes, expected {expect}")));
+            return Err(bad(&format!(
+                "level {l} holds {len} bytes, expected {expect}"
+            )));
         }
-        let data = b.get(off as usize..(off as usize).saturating_add(expect)).ok_or_else(|| bad(&format!("level {l} lies past the end of the file")))?;
+        let data = b
+            .get(off as usize..(off as usize).saturating_add(expect))
+            .ok_or_else(|| bad(&format!("level {l} lies past the end of the file")))?;
         let mut cube = Cubemap::new(size);
         for (fi, face) in cube.faces.iter_mut().enumerate() {
-            let fb = &data[fi * size * size * channels * bpc..(fi + 1) * size * size * channels * bpc];
-            for (t, px) in face.data.chunks_exact_mut(3).zip(fb.chunks_exact(channels * bpc)) {
+            let fb =
+                &data[fi * size * size * channels * bpc..(fi + 1) * size * size * channels * bpc];
+            for (t, px) in face
+                .data
+                .chunks_exact_mut(3)
+                .zip(fb.chunks_exact(channels * bpc))
+            {
                 for k in 0..3 {
                     let s = &px[k * bpc..(k + 1) * bpc];
-                    t[k] = if bpc == 2 { half::f16::from_le_bytes([s[0], s[1]]).to_f32() } else { f32::from_le_bytes(s.try_into().unwrap()) };
+                    t[k] = if bpc == 2 {
+                        half::f16::from_le_bytes([s[0], s[1]]).to_f32()
+                    } else {
+                        f32::from_le_bytes(s.try_into().unwrap())
+                    };
                 }
             }
         }

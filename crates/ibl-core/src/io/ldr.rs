@@ -29,10 +29,14 @@ pub fn linear_to_srgb(c: f32) -> f32 {
 
 pub fn decode(path: &Path, bytes: &[u8], color: ColorSpace) -> Result<Image> {
     let bad = |e: image::ImageError| Error::invalid(path, format!("not a readable image: {e}"));
-    let reader = image::ImageReader::new(Cursor::new(bytes)).with_guessed_format().map_err(|e| Error::io(path, e))?;
+    let reader = image::ImageReader::new(Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(|e| Error::io(path, e))?;
     let (w, h) = reader.into_dimensions().map_err(bad)?;
     Image::check_size(path, w as u64, h as u64)?;
-    let mut reader = image::ImageReader::new(Cursor::new(bytes)).with_guessed_format().map_err(|e| Error::io(path, e))?;
+    let mut reader = image::ImageReader::new(Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(|e| Error::io(path, e))?;
     reader.no_limits();
     let dynimg = reader.decode().map_err(bad)?;
     let channels = match dynimg.color().channel_count() {
@@ -42,9 +46,24 @@ pub fn decode(path: &Path, bytes: &[u8], color: ColorSpace) -> Result<Image> {
         _ => 4,
     };
     let data: Vec<f32> = match channels {
-        1 => dynimg.into_luma16().into_raw().into_iter().map(|v| v as f32 / 65535.0).collect(),
-        3 => dynimg.into_rgb16().into_raw().into_iter().map(|v| v as f32 / 65535.0).collect(),
-        _ => dynimg.into_rgba16().into_raw().into_iter().map(|v| v as f32 / 65535.0).collect(),
+        1 => dynimg
+            .into_luma16()
+            .into_raw()
+            .into_iter()
+            .map(|v| v as f32 / 65535.0)
+            .collect(),
+        3 => dynimg
+            .into_rgb16()
+            .into_raw()
+            .into_iter()
+            .map(|v| v as f32 / 65535.0)
+            .collect(),
+        _ => dynimg
+            .into_rgba16()
+            .into_raw()
+            .into_iter()
+            .map(|v| v as f32 / 65535.0)
+            .collect(),
     };
     let mut img = Image::from_data(w as usize, h as usize, channels, data)?;
     if color == ColorSpace::Srgb {
@@ -91,13 +110,24 @@ pub fn encode_png(path: &Path, img: &Image, opts: &WriteOptions) -> Result<Vec<u
         (2, 16) => image::ExtendedColorType::La16,
         (3, 16) => image::ExtendedColorType::Rgb16,
         (4, 16) => image::ExtendedColorType::Rgba16,
-        (_, b) => return Err(Error::unsupported(path, format!("PNG bit depth {b} (use 8 or 16)"))),
+        (_, b) => {
+            return Err(Error::unsupported(
+                path,
+                format!("PNG bit depth {b} (use 8 or 16)"),
+            ))
+        }
     };
     let raw: Vec<u8> = if opts.png_bits == 8 {
-        values.iter().map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8).collect()
+        values
+            .iter()
+            .map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
+            .collect()
     } else {
         // PNG stores 16-bit samples big-endian; the encoder takes native-endian bytes.
-        values.iter().flat_map(|v| ((v.clamp(0.0, 1.0) * 65535.0).round() as u16).to_ne_bytes()).collect()
+        values
+            .iter()
+            .flat_map(|v| ((v.clamp(0.0, 1.0) * 65535.0).round() as u16).to_ne_bytes())
+            .collect()
     };
     let mut out = Vec::new();
     use image::ImageEncoder;

@@ -45,13 +45,21 @@ pub struct WriteOptions {
 
 impl Default for WriteOptions {
     fn default() -> Self {
-        WriteOptions { float: FloatDepth::F32, png_bits: 16, png_tonemap: false, png_srgb: false }
+        WriteOptions {
+            float: FloatDepth::F32,
+            png_bits: 16,
+            png_tonemap: false,
+            png_srgb: false,
+        }
     }
 }
 
 /// Lower-case extension of a path, or "".
 pub fn extension(path: &Path) -> String {
-    path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase()
+    path.extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase()
 }
 
 /// Reads `.exr`, `.hdr`, `.png`, `.jpg`/`.jpeg` into a linear float image.
@@ -87,7 +95,10 @@ pub fn decode_image(path: &Path, bytes: &[u8], color: ColorSpace) -> Result<Imag
         "exr" => exr_io::decode(path, bytes),
         "hdr" | "pic" => rgbe::decode(path, bytes),
         "png" | "jpg" | "jpeg" => ldr::decode(path, bytes, color),
-        _ => Err(Error::unsupported(path, "not an EXR, HDR, PNG or JPEG image")),
+        _ => Err(Error::unsupported(
+            path,
+            "not an EXR, HDR, PNG or JPEG image",
+        )),
     }
 }
 
@@ -97,7 +108,10 @@ pub fn encode_image(path: &Path, img: &Image, opts: &WriteOptions) -> Result<Vec
         "exr" => exr_io::encode(path, img, opts.float),
         "hdr" => rgbe::encode(path, img),
         "png" => ldr::encode_png(path, img, opts),
-        other => Err(Error::unsupported(path, format!("cannot write '.{other}' images (use .exr, .hdr or .png)"))),
+        other => Err(Error::unsupported(
+            path,
+            format!("cannot write '.{other}' images (use .exr, .hdr or .png)"),
+        )),
     }
 }
 
@@ -136,8 +150,18 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("h.exr");
         let mut img = test_image(3);
-        img.data.iter_mut().for_each(|v| *v = half::f16::from_f32(*v).to_f32());
-        write_image(&p, &img, &WriteOptions { float: FloatDepth::F16, ..Default::default() }).unwrap();
+        img.data
+            .iter_mut()
+            .for_each(|v| *v = half::f16::from_f32(*v).to_f32());
+        write_image(
+            &p,
+            &img,
+            &WriteOptions {
+                float: FloatDepth::F16,
+                ..Default::default()
+            },
+        )
+        .unwrap();
         assert_eq!(read_image(&p, ColorSpace::Linear).unwrap(), img);
     }
 
@@ -146,7 +170,9 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("d.png");
         let mut img = test_image(4);
-        img.data.iter_mut().for_each(|v| *v = ((*v / 11.0).clamp(0.0, 1.0) * 65535.0).round() / 65535.0);
+        img.data
+            .iter_mut()
+            .for_each(|v| *v = ((*v / 11.0).clamp(0.0, 1.0) * 65535.0).round() / 65535.0);
         write_image(&p, &img, &WriteOptions::default()).unwrap();
         assert_eq!(read_image(&p, ColorSpace::Linear).unwrap(), img);
     }
@@ -177,10 +203,18 @@ mod tests {
         write_image(&p, &test_image(3), &WriteOptions::default()).unwrap();
         let bytes = std::fs::read(&p).unwrap();
         for cut in [0, 4, 20, bytes.len() / 2, bytes.len() - 1] {
-            assert!(decode_image(&p, &bytes[..cut], ColorSpace::Linear).is_err(), "cut {cut}");
+            assert!(
+                decode_image(&p, &bytes[..cut], ColorSpace::Linear).is_err(),
+                "cut {cut}"
+            );
         }
         for name in ["x.hdr", "x.png", "x.jpg", "x.exr", "x.bin"] {
-            assert!(decode_image(Path::new(name), b"garbage bytes that are no image", ColorSpace::Linear).is_err());
+            assert!(decode_image(
+                Path::new(name),
+                b"garbage bytes that are no image",
+                ColorSpace::Linear
+            )
+            .is_err());
         }
     }
 }

@@ -1,0 +1,251 @@
+//! End-to-end tests of the `irradiance` binary against independent references: an explicit
+//! f64 projection with the DESIGN.md constants, and a brute-force cosine convolution.
+// Index loops over coefficients and channels mirror the sums of the reference formulas.
+#![allow(clippy::needless_range_loop)]
+
+use glam::Vec3;
+use ibl_core::cube::{texel_direction, Face};
+use ibl_core::equirect::{pixel_direction, row_solid_angle};
+use ibl_core::io::{self, ColorSpace, WriteOptions};
+use ibl_core::Image;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_irradiance"))
+}
+
+fn fixture(rel: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fixtures")
+        .join(rel)
+}
+
+fn run(args: &[&str]) -> Output {
+    bin()
+        .args(args)
+        .arg("--quiet")
+        .output()
+        .expect("binary runs")
+}
+
+fn load_clamped(p: &Path) -> Image {
+    let mut img = io::read_image(p, ColorSpace::Linear).unwrap();
+    ibl_core::image::check_texels(&mut img, p, false).unwrap();
+    img
+}
+
+/// The 9 basis functions exactly as DESIGN.md prints them, in f64.
+fn y9(d: [f64; 3]) -> [f64; 9] {
+    let [x, y, z] = d;
+    [
+        0.282095,
+        0.488603 * y,
+        0.488603 * z,
+        0.488603 * x,
+        1.092548 * x * y,
+        1.092548 * y * z,
+        0.315392 * (3.0 * z * z - 1.0),
+        1.092548 * x * z,
+        0.546274 * (x * x - y * y),
+    ]
+}
+
+fn dir64(d: Vec3) -> [f64; 3] {
+    let d = [d.x as f64, d.y as f64, d.z as f64];
+    let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+    d.map(|v| v / n)
+}
+
+#[derive(serde::Deserialize)]
+struct ShFile {
+    bands: usize,
+    radiance: Vec<[f64; 3]>,
+    irradiance: Vec<[f64; 3]>,
+}
+
+#[test]
+fn coefficients_match_an_exact_projection_of_the_source_texels() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = fixture("hdri/city_512.exr");
+    let o = run(&[src.to_str().unwrap(), "-o", dir.path().to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let sh: ShFile =
+        serde_json::from_slice(&std::fs::read(dir.path().join("sh.json")).unwrap()).unwrap();
+    assert_eq!(
+        (sh.bands, sh.radiance.len(), sh.irradiance.len()),
+        (3, 9, 9)
+    );
+    let img = load_clamped(&src);
+    let mut want = [[0.0f64; 3]; 9];
+    for j in 0..img.height {
+        let sa = row_solid_angle(j, img.width, img.height);
+        for i in 0..img.width {
+            let y = y9(dir64(pixel_direction(i, j, img.width, img.height)));
+            let c = img.rgb(i, j);
+            for k in 0..9 {
+                for q in 0..3 {
+                    want[k][q] += c[q] as f64 * y[k] * sa;
+                }
+            }
+        }
+    }
+    let l00 = want[0][1];
+    let mut worst = 0.0f64;
+    for k in 0..9 {
+        for q in 0..3 {
+            worst = worst.max((sh.radiance[k][q] - want[k][q]).abs() / l00);
+        }
+    }
+    eprintln!("radiance SH vs independent f64 projection: worst difference {worst:.2e} of L00");
+    assert!(worst < 1e-4, "{worst}");
+    // E/π coefficients: Â0 = π, Â1 = 2π/3, Â2 = π/4, divided by π.
+    let scale = [
+        1.0,
+        2.0 / 3.0,
+        2.0 / 3.0,
+        2.0 / 3.0,
+        0.25,
+        0.25,
+        0.25,
+        0.25,
+        0.25,
+    ];
+    for k in 0..9 {
+        for q in 0..3 {
+            assert!((sh.irradiance[k][q] - scale[k] * sh.radiance[k][q]).abs() < 1e-5 * l00);
+        }
+    }
+}
+
+/// Brute-force E/π at direction n over every source pixel, f64.
+fn brute_force(img: &Image, n: [f64; 3]) -> [f64; 3] {
+    let mut acc = [0.0f64; 3];
+    for j in 0..img.height {
+        let sa = row_solid_angle(j, img.width, img.height);
+        for i in 0..img.width {
+            let d = dir64(pixel_direction(i, j, img.width, img.height));
+            let c = (d[0] * n[0] + d[1] * n[1] + d[2] * n[2]).max(0.0);
+            if c > 0.0 {
+                let l = img.rgb(i, j);
+                for q in 0..3 {
+                    acc[q] += l[q] as f64 * c * sa;
+                }
+            }
+        }
+    }
+    acc.map(|v| v / std::f64::consts::PI)
+}
+
+#[test]
+fn exact_cube_matches_brute_force_and_sh_cube_matches_its_coefficients() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = fixture("hdri/sunset_256.exr");
+    let exact_dir = dir.path().join("exact");
+    let sh_dir = dir.path().join("sh");
+    for (out, extra) in [(&exact_dir, Some("--exact")), (&sh_dir, None)] {
+        let mut args = vec![
+            src.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--size",
+            "8",
+        ];
+        args.extend(extra);
+        let o = run(&args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    let img = load_clamped(&src);
+    let sh: ShFile =
+        serde_json::from_slice(&std::fs::read(sh_dir.join("sh.json")).unwrap()).unwrap();
+    let (mut num, mut den, mut sh_worst) = (0.0f64, 0.0f64, 0.0f64);
+    for face in Face::ALL {
+        let exact = io::read_image(
+            &exact_dir.join(format!("{}.exr", face.name())),
+            ColorSpace::Linear,
+        )
+        .unwrap();
+        let from_sh = io::read_image(
+            &sh_dir.join(format!("{}.exr", face.name())),
+            ColorSpace::Linear,
+        )
+        .unwrap();
+        for (i, j) in [(0, 0), (7, 0), (3, 4), (0, 7), (7, 7)] {
+            let n = dir64(texel_direction(face, i, j, 8));
+            let want = brute_force(&img, n);
+            let got = exact.rgb(i, j);
+            for q in 0..3 {
+                num += (got[q] as f64 - want[q]).abs();
+                den += want[q];
+            }
+            let y = y9(n);
+            let eval: f64 = (0..9)
+                .map(|k| sh.irradiance[k][1] * y[k])
+                .sum::<f64>()
+                .max(0.0);
+            sh_worst =
+                sh_worst.max((from_sh.rgb(i, j)[1] as f64 - eval).abs() / sh.irradiance[0][1]);
+        }
+    }
+    eprintln!("--exact irradiance vs brute force: relative MAE {:.2e}; SH cube vs its coefficients: worst {sh_worst:.1e} of c00", num / den);
+    assert!(num / den < 0.005);
+    assert!(sh_worst < 1e-5);
+}
+
+#[test]
+fn ron_output_more_bands_and_window() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = run(&[
+        fixture("hdri/studio_256.hdr").to_str().unwrap(),
+        "-o",
+        dir.path().to_str().unwrap(),
+        "--bands",
+        "5",
+        "--window",
+        "--sh-file",
+        "coeffs.ron",
+        "--layout",
+        "ktx2",
+        "--size",
+        "4",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = std::fs::read_to_string(dir.path().join("coeffs.ron")).unwrap();
+    assert!(text.contains("bands: 5"), "{text}");
+    assert!(dir.path().join("irradiance.ktx2").exists());
+}
+
+#[test]
+fn bad_parameters_and_inputs_fail_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let src = fixture("hdri/studio_256.exr");
+    for (args, code, expect) in [
+        (vec!["--bands", "0"], 2, "--bands 0"),
+        (vec!["--bands", "40"], 2, "--bands 40"),
+        (vec!["--sh-file", "sh.txt"], 2, "sh.txt"),
+    ] {
+        let o = bin()
+            .arg(&src)
+            .arg("-o")
+            .arg(&out)
+            .args(&args)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(code), "{err}");
+        assert!(
+            err.contains(expect) && err.trim().lines().count() == 1,
+            "{err}"
+        );
+        assert!(!out.exists());
+    }
+    let mut img = Image::new(8, 4, 3);
+    img.data[0] = f32::NAN;
+    let nan = dir.path().join("nan.exr");
+    io::write_image(&nan, &img, &WriteOptions::default()).unwrap();
+    let o = bin().arg(&nan).arg("-o").arg(&out).output().unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("1 NaN/Inf"));
+    assert!(!out.exists());
+}
