@@ -342,3 +342,27 @@ fn damaged_fixture_negatives_are_clamped_with_a_warning() {
         assert!(img.data.iter().all(|v| v.is_finite() && *v >= 0.0));
     }
 }
+
+#[test]
+fn outputs_are_byte_identical_for_one_and_two_threads() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = fixture("hdri/city_512.exr");
+    let mut outs = Vec::new();
+    for threads in ["1", "2"] {
+        let out = dir.path().join(threads);
+        let o = run(&[
+            src.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--size",
+            "32",
+            "--rotate",
+            "12.5",
+            "--threads",
+            threads,
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        outs.push(Face::ALL.map(|f| std::fs::read(out.join(format!("{}.exr", f.name()))).unwrap()));
+    }
+    assert!(outs[0] == outs[1]);
+}

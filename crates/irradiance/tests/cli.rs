@@ -249,3 +249,41 @@ fn bad_parameters_and_inputs_fail_cleanly() {
     assert!(String::from_utf8_lossy(&o.stderr).contains("1 NaN/Inf"));
     assert!(!out.exists());
 }
+
+#[test]
+fn outputs_are_byte_identical_for_one_and_two_threads() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = fixture("hdri/city_512.exr");
+    let mut outs = Vec::new();
+    for threads in ["1", "2"] {
+        let out = dir.path().join(threads);
+        for exact in [false, true] {
+            let sub = out.join(if exact { "exact" } else { "sh" });
+            let mut args = vec![
+                src.to_str().unwrap(),
+                "-o",
+                sub.to_str().unwrap(),
+                "--size",
+                "8",
+                "--threads",
+                threads,
+            ];
+            if exact {
+                args.push("--exact");
+            }
+            let o = run(&args);
+            assert!(o.status.success());
+        }
+        let mut files: Vec<(String, Vec<u8>)> = Vec::new();
+        for sub in ["sh", "exact"] {
+            for name in ["sh.json", "px.exr", "nz.exr"] {
+                files.push((
+                    format!("{sub}/{name}"),
+                    std::fs::read(out.join(sub).join(name)).unwrap(),
+                ));
+            }
+        }
+        outs.push(files);
+    }
+    assert!(outs[0] == outs[1]);
+}

@@ -196,6 +196,34 @@ mod tests {
         assert_eq!(read_image(&p, ColorSpace::Linear).unwrap(), back);
     }
 
+    fn find(hay: &[u8], needle: &[u8]) -> usize {
+        hay.windows(needle.len())
+            .position(|w| w == needle)
+            .expect("present")
+    }
+
+    #[test]
+    fn huge_declared_sizes_are_refused_before_allocating() {
+        let dir = tempfile::tempdir().unwrap();
+        // EXR: the header's dataWindow box2i (xmin, ymin, xmax, ymax) patched to 200000².
+        let p = dir.path().join("big.exr");
+        write_image(&p, &test_image(3), &WriteOptions::default()).unwrap();
+        let mut b = std::fs::read(&p).unwrap();
+        let at = find(&b, b"dataWindow\0box2i\0") + "dataWindow\0box2i\0".len() + 4;
+        b[at + 8..at + 12].copy_from_slice(&199_999i32.to_le_bytes());
+        b[at + 12..at + 16].copy_from_slice(&199_999i32.to_le_bytes());
+        let err = decode_image(&p, &b, ColorSpace::Linear)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("larger than the limit"), "{err}");
+        // Radiance HDR: a header declaring 100000 × 100000 with no pixel data.
+        let hdr = b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 100000 +X 100000\n";
+        let err = decode_image(Path::new("big.hdr"), hdr, ColorSpace::Linear)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("limit"), "{err}");
+    }
+
     #[test]
     fn malformed_bytes_are_errors_not_panics() {
         let dir = tempfile::tempdir().unwrap();
