@@ -21,6 +21,12 @@ pub const fn index(l: usize, m: isize) -> usize {
 /// C_m = x C_{m−1} − y S_{m−1}, S_m = x S_{m−1} + y C_{m−1} (C_m = sin^mθ cos mφ), so no
 /// trigonometry is evaluated. Bands 0–2 reproduce the constants of DESIGN.md.
 pub fn eval_basis(d: Vec3, bands: usize, out: &mut [f32]) {
+    if bands <= 3 {
+        let all = eval_basis3(d);
+        let n = num_coeffs(bands);
+        out[..n].copy_from_slice(&all[..n]);
+        return;
+    }
     let (x, y, z) = (d.x as f64, d.y as f64, d.z as f64);
     debug_assert!(out.len() >= num_coeffs(bands));
     if bands == 0 {
@@ -62,6 +68,29 @@ pub fn eval_basis(d: Vec3, bands: usize, out: &mut [f32]) {
             }
         }
     }
+}
+
+/// The first three bands in closed form (the DESIGN.md polynomials with full-precision
+/// constants): the hot path of irradiance projection.
+#[inline]
+pub fn eval_basis3(d: Vec3) -> [f32; 9] {
+    const C0: f32 = 0.282_094_8; // 1/(2√π)
+    const C1: f32 = 0.488_602_5; // √3/(2√π)
+    const C2: f32 = 1.092_548_4; // √15/(2√π)
+    const C20: f32 = 0.315_391_57; // √5/(4√π)
+    const C22: f32 = 0.546_274_2; // √15/(4√π)
+    let (x, y, z) = (d.x, d.y, d.z);
+    [
+        C0,
+        C1 * y,
+        C1 * z,
+        C1 * x,
+        C2 * x * y,
+        C2 * y * z,
+        C20 * (3.0 * z * z - 1.0),
+        C2 * x * z,
+        C22 * (x * x - y * y),
+    ]
 }
 
 /// K_l^m = sqrt((2l+1)/(4π) · (l−m)!/(l+m)!).
@@ -144,6 +173,25 @@ mod tests {
                     got[i],
                     want[i]
                 );
+            }
+        }
+    }
+
+    #[test]
+    fn closed_form_bands_match_the_recurrence() {
+        let mut rng = Pcg32::new(3, 3);
+        for _ in 0..100 {
+            let d = Vec3::new(
+                rng.next_f32() - 0.5,
+                rng.next_f32() - 0.5,
+                rng.next_f32() - 0.5,
+            )
+            .normalize();
+            let mut general = [0.0f32; 16];
+            eval_basis(d, 4, &mut general);
+            let fast = eval_basis3(d);
+            for i in 0..9 {
+                assert!((general[i] - fast[i]).abs() < 1e-6, "{i}");
             }
         }
     }

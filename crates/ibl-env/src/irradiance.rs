@@ -150,29 +150,34 @@ pub fn project_equirect(img: &Image, bands: usize, rotate_deg: f32) -> Vec<[f64;
 }
 
 /// ∫ L Y_lm dω over a cube's texels with their exact solid angles (turned by `rotate_deg`).
+/// Each face row is summed in f32 (at most a few thousand terms) and rows in f64, in order.
 pub fn project_cube(cube: &Cubemap, bands: usize, rotate_deg: f32) -> Vec<[f64; 3]> {
     let n = num_coeffs(bands);
     let size = cube.size;
     let sa = solid_angle_table(size);
     let row = |r: usize| {
         let (face, j) = (Face::from_index(r / size), r % size);
-        let mut acc = vec![[0.0f64; 3]; n];
+        let mut acc = vec![[0.0f32; 3]; n];
         let mut y = vec![0.0f32; n];
-        for i in 0..size {
-            let c = cube.texel(face, i, j);
+        let texels = &cube.faces[face as usize].data[j * size * 3..(j + 1) * size * 3];
+        for (i, (c, s)) in texels
+            .chunks_exact(3)
+            .zip(&sa[j * size..(j + 1) * size])
+            .enumerate()
+        {
             sh::eval_basis(
                 rotate_y(texel_direction(face, i, j, size), rotate_deg),
                 bands,
                 &mut y,
             );
-            let s = sa[j * size + i] as f64;
+            let (r_, g_, b_) = (c[0] * s, c[1] * s, c[2] * s);
             for (a, yi) in acc.iter_mut().zip(&y) {
-                for k in 0..3 {
-                    a[k] += c[k] as f64 * *yi as f64 * s;
-                }
+                a[0] += r_ * yi;
+                a[1] += g_ * yi;
+                a[2] += b_ * yi;
             }
         }
-        acc
+        acc.iter().map(|a| a.map(|v| v as f64)).collect::<Vec<_>>()
     };
     ordered_row_reduce(6 * size, row, vec![[0.0f64; 3]; n], add_coeffs)
 }
