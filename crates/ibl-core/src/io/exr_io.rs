@@ -41,6 +41,9 @@ pub fn decode(path: &Path, bytes: &[u8]) -> Result<Image> {
         .all_channels()
         .first_valid_layer()
         .all_attributes()
+        // On this thread, so that a decoder panic unwinds to `io::guard` (a panic in the
+        // crate's worker threads aborts the process).
+        .non_parallel()
         .from_buffered(Cursor::new(bytes))
         .map_err(bad)?;
     let layer = image.layer_data;
@@ -59,6 +62,8 @@ pub fn decode(path: &Path, bytes: &[u8]) -> Result<Image> {
             v.extend(ai);
             v
         }
+        // Two-channel data (DFG-style tables) keeps both channels.
+        (Some(r), Some(g), None) => vec![r, g],
         _ => {
             let grey = find("Y").or(ri).or(gi).or(bi);
             match grey.or(if layer.channel_data.list.len() == 1 {

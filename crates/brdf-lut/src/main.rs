@@ -1,0 +1,95 @@
+//! `brdf-lut`: parse, call the `ibl_lut` bake, write atomically, report.
+
+use clap::{Args, Parser, Subcommand};
+use ibl_lut::{as_size_bias, dfg, fresnel_tail};
+use std::path::PathBuf;
+
+/// BRDF lookup tables at texel centres (DESIGN.md): the split-sum DFG table, the
+/// Ashikhmin-Shirley size/bias table, and the Fresnel-tail table of the SH-exponential
+/// probes. The output format follows the extension: .exr (float), .png (16-bit), .json/.ron.
+#[derive(Parser)]
+#[command(version, about)]
+struct Cli {
+    #[command(subcommand)]
+    table: Table,
+}
+
+#[derive(Subcommand)]
+enum Table {
+    /// Split-sum DFG: s = n·v, t = roughness; R = A, G = B (specular = F0·A + B),
+    /// and with --multiscatter B = E_ss = A + B.
+    Dfg(Bake<dfg::Params>),
+    /// Ashikhmin-Shirley size/bias (paper 004 §4.3.3): s = (2/π)atan(|b·v|/|t·v|),
+    /// t = √(n·v); R = size, G = bias.
+    AsSizeBias(Bake<as_size_bias::Params>),
+    /// Fresnel tail (paper 002 eq. 15): s = n·v, t = roughness; R = ∫f_DV(1−v·h)⁵(n·l)dl,
+    /// G = R / ∫f_DV(n·l)dl.
+    FresnelTail(Bake<fresnel_tail::Params>),
+}
+
+#[derive(Args)]
+struct Bake<P: Args> {
+    /// Output file (.exr, .png, .json or .ron), or a folder with --thesis-names.
+    #[arg(short, long)]
+    output: PathBuf,
+    #[command(flatten)]
+    params: P,
+    #[command(flatten)]
+    common: ibl_cli::CommonArgs,
+}
+
+/// Parses the command line; usage errors print one line (not clap's multi-line report) and
+/// exit with 2, --help and --version print as usual.
+fn parse() -> Cli {
+    Cli::try_parse().unwrap_or_else(|e| {
+        use clap::error::ErrorKind::*;
+        if matches!(
+            e.kind(),
+            DisplayHelp | DisplayVersion | DisplayHelpOnMissingArgumentOrSubcommand
+        ) {
+            e.exit();
+        }
+        // clap's first paragraph (message and, for missing arguments, their names) on one line.
+        let text = e.render().to_string();
+        let first: Vec<&str> = text
+            .lines()
+            .take_while(|l| !l.trim().is_empty())
+            .map(str::trim)
+            .collect();
+        let joined = first.join(" ");
+        let line = joined.trim_start_matches("error: ");
+        eprintln!("brdf-lut: error: {line}");
+        std::process::exit(2);
+    })
+}
+
+/// A bake waiting for the CLI context (thread pool, progress).
+type Job = Box<dyn FnOnce(&ibl_cli::Ctx) -> ibl_lut::Result<ibl_lut::Baked>>;
+
+fn main() {
+    let cli = parse();
+    let (common, run): (ibl_cli::CommonArgs, Job) = match cli.table {
+        Table::Dfg(b) => (
+            b.common,
+            Box::new(move |ctx| dfg::run(&b.params, &b.output, ctx.progress())),
+        ),
+        Table::AsSizeBias(b) => (
+            b.common,
+            Box::new(move |ctx| as_size_bias::run(&b.params, &b.output, ctx.progress())),
+        ),
+        Table::FresnelTail(b) => (
+            b.common,
+            Box::new(move |ctx| fresnel_tail::run(&b.params, &b.output, ctx.progress())),
+        ),
+    };
+    ibl_cli::run("brdf-lut", common.clone(), |ctx| {
+        let baked = run(ctx)?;
+        ibl_core::io::write_many_atomic(&baked.files)?;
+        let outputs = baked
+            .files
+            .iter()
+            .map(|f| f.0.display().to_string())
+            .collect();
+        Ok::<_, ibl_lut::Error>((outputs, baked.details))
+    })
+}

@@ -1,0 +1,58 @@
+//! `hv-lut`: parse, call `ibl_lut::hv`, write the LUT and its sidecar atomically, report.
+
+use clap::Parser;
+use ibl_lut::hv::{run, Params};
+use std::path::PathBuf;
+
+/// The Ashikhmin-Shirley half-vector LUT of paper 004 §4.3.2: texel (ξ1, ξ2) at texel
+/// centres → h; RGB = h·0.5+0.5 (tangent space), A = p_h(h)/p_h(n). A JSON sidecar next to
+/// the image records n_u, n_v and p_h(n). EXR float by default, PNG 8/16-bit by extension.
+#[derive(Parser)]
+#[command(version, about)]
+struct Cli {
+    /// Output image (.exr or .png), or a folder with --thesis-names.
+    #[arg(short, long)]
+    output: PathBuf,
+    #[command(flatten)]
+    params: Params,
+    #[command(flatten)]
+    common: ibl_cli::CommonArgs,
+}
+
+/// Usage errors print one line and exit with 2; --help and --version print as usual.
+fn parse() -> Cli {
+    Cli::try_parse().unwrap_or_else(|e| {
+        use clap::error::ErrorKind::*;
+        if matches!(
+            e.kind(),
+            DisplayHelp | DisplayVersion | DisplayHelpOnMissingArgumentOrSubcommand
+        ) {
+            e.exit();
+        }
+        // clap's first paragraph (message and, for missing arguments, their names) on one line.
+        let text = e.render().to_string();
+        let first: Vec<&str> = text
+            .lines()
+            .take_while(|l| !l.trim().is_empty())
+            .map(str::trim)
+            .collect();
+        let joined = first.join(" ");
+        let line = joined.trim_start_matches("error: ");
+        eprintln!("hv-lut: error: {line}");
+        std::process::exit(2);
+    })
+}
+
+fn main() {
+    let cli = parse();
+    ibl_cli::run("hv-lut", cli.common.clone(), |ctx| {
+        let baked = run(&cli.params, &cli.output, ctx.progress())?;
+        ibl_core::io::write_many_atomic(&baked.files)?;
+        let outputs = baked
+            .files
+            .iter()
+            .map(|f| f.0.display().to_string())
+            .collect();
+        Ok::<_, ibl_lut::Error>((outputs, baked.details))
+    })
+}
