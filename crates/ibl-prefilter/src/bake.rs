@@ -1,0 +1,729 @@
+//! The `prefilter` bake: `Params` (CLI flags and RON keys alike) and the pure `run` that turns
+//! a loaded environment into the encoded mip chain plus `prefilter.json`.
+
+use crate::error::{Error, Result};
+use crate::filter::filter_level;
+use crate::kernel::{reference_level, SourceTexels};
+use crate::pyramid::SourcePyramid;
+use crate::samples::SampleTable;
+use crate::tree::{tree_level, CellTree, TreeParams};
+use ibl_core::cube::{mip_sizes, texel_direction, Cubemap, Face};
+use ibl_core::envmap::{self, Environment, Layout, LoadedEnvironment};
+use ibl_core::equirect::Filter;
+use ibl_core::io::{self, FloatDepth};
+use ibl_core::progress::Progress;
+use ibl_core::{luminance, CubeMips};
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Accuracy presets, chosen from the benchmark (bench/prefilter.md).
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    PartialEq,
+    Eq,
+    Default,
+    serde::Serialize,
+    serde::Deserialize,
+    clap::ValueEnum,
+)]
+#[serde(rename_all = "kebab-case")]
+pub enum Quality {
+    /// Previews: about half the time of default; measured worst level 0.2% mean absolute
+    /// relative error (single texels up to 5%).
+    Draft,
+    /// Contract: within 1% mean absolute relative error of the brute-force reference at every
+    /// level; measured worst level 0.02%.
+    #[default]
+    Default,
+    /// Contract: within 0.3%; measured worst level 0.007%, about 2.5× the time of default.
+    High,
+}
+
+impl Quality {
+    pub fn name(self) -> &'static str {
+        match self {
+            Quality::Draft => "draft",
+            Quality::Default => "default",
+            Quality::High => "high",
+        }
+    }
+
+    /// Opening angle, leaf size and horizon split of the hierarchical sum.
+    pub fn tree_params(self) -> TreeParams {
+        match self {
+            Quality::Draft => TreeParams {
+                theta: 1.0,
+                kappa: 3.0,
+                horizon: 0.25,
+            },
+            Quality::Default => TreeParams {
+                theta: 0.7,
+                kappa: 4.0,
+                horizon: 0.12,
+            },
+            Quality::High => TreeParams {
+                theta: 0.4,
+                kappa: 6.0,
+                horizon: 0.06,
+            },
+        }
+    }
+
+    /// Hammersley points per texel of filtered importance sampling (`--method fis`).
+    pub fn fis_samples(self) -> u32 {
+        match self {
+            Quality::Draft => 64,
+            Quality::Default => 256,
+            Quality::High => 1024,
+        }
+    }
+}
+
+/// How the rough levels are computed.
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    PartialEq,
+    Eq,
+    Default,
+    serde::Serialize,
+    serde::Deserialize,
+    clap::ValueEnum,
+)]
+#[serde(rename_all = "kebab-case")]
+pub enum Method {
+    /// The exact kernel summed hierarchically over the source: far cells as points with
+    /// second-order moments, near ones at a leaf level (the default).
+    #[default]
+    Tree,
+    /// Filtered importance sampling (Křivánek & Colbert 2008; Lagarde & de Rousiers 2014):
+    /// `--samples` Hammersley samples per texel read from box-filtered mips. Faster per
+    /// sample, but biased in the GGX tail (see bench/prefilter.md); kept for comparison.
+    Fis,
+}
+
+impl Method {
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Tree => "tree",
+            Method::Fis => "filtered-importance-sampling",
+        }
+    }
+}
+
+/// Mip bias added to the solid-angle lod of every FIS sample. Lagarde & de Rousiers use 1;
+/// against the brute-force reference 0 measured best at most levels and sample counts
+/// (studio, sunset, interior fixtures at 32², 32–1024 samples, biases 0, 0.5, 1).
+pub const LOD_BIAS: f32 = 0.0;
+
+/// Parameters of the bake: CLI flags and RON keys alike.
+#[derive(Clone, Debug, PartialEq, clap::Args, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Params {
+    /// Face size of level 0 in texels; level l is size/2^l.
+    #[arg(long, value_name = "N", default_value_t = 256)]
+    pub size: usize,
+    /// Number of levels N (default: down to 8×8 faces); level l has roughness l/(N−1).
+    #[arg(long, value_name = "N")]
+    pub levels: Option<usize>,
+    /// Accuracy preset (chosen from the benchmark against the brute-force reference).
+    #[arg(long, value_enum, default_value_t = Quality::Default)]
+    pub quality: Quality,
+    /// Algorithm for the rough levels: hierarchical exact kernel, or filtered importance sampling.
+    #[arg(long, value_enum, default_value_t = Method::Tree)]
+    pub method: Method,
+    /// Hammersley samples per texel with --method fis (default from --quality).
+    #[arg(long, value_name = "S")]
+    pub samples: Option<u32>,
+    /// Stop the chain at the last level with roughness ≤ R (spacing of the full chain kept).
+    #[arg(long, value_name = "R")]
+    pub max_roughness: Option<f32>,
+    /// Output container: one EXR per face and level, or one KTX2 file.
+    #[arg(long, value_enum, default_value_t = Layout::Faces)]
+    pub layout: Layout,
+    /// Write 16-bit half floats instead of 32-bit.
+    #[arg(long)]
+    pub half: bool,
+    /// Brute-force reference: the exact kernel summed over every source texel (slow).
+    #[arg(long)]
+    pub reference: bool,
+    /// Turn the environment about +Y by this many degrees first.
+    #[arg(
+        long,
+        value_name = "DEG",
+        default_value_t = 0.0,
+        allow_negative_numbers = true
+    )]
+    pub rotate: f32,
+    /// Set NaN/Inf input texels to 0 instead of refusing the input.
+    #[arg(long)]
+    pub sanitize: bool,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        ibl_core::params::clap_defaults()
+    }
+}
+
+/// Largest level-0 face accepted.
+pub const MAX_SIZE: usize = 4096;
+/// Largest sample count accepted per texel.
+pub const MAX_SAMPLES: u32 = 1 << 16;
+/// The source is at most this many times the output size (see [`source_face_size`]): finer
+/// would change the levels by far less than their error while the tree's memory grows 4× per
+/// step (about 200 MB for a 512² source).
+pub const MAX_SOURCE_FACTOR: usize = 2;
+
+/// Levels a chain from `size` can hold (halving down to 1×1).
+pub fn max_levels(size: usize) -> usize {
+    mip_sizes(size, 1).len()
+}
+
+impl Params {
+    pub fn validate(&self) -> Result<()> {
+        if self.size == 0 || self.size > MAX_SIZE {
+            return Err(Error::Param(format!(
+                "--size {} is out of range 1..={MAX_SIZE}",
+                self.size
+            )));
+        }
+        if let Some(n) = self.levels {
+            let m = max_levels(self.size);
+            if n == 0 || n > m {
+                return Err(Error::Param(format!(
+                    "--levels {n} is out of range 1..={m} for --size {}",
+                    self.size
+                )));
+            }
+        }
+        if let Some(s) = self.samples {
+            if s == 0 || s > MAX_SAMPLES {
+                return Err(Error::Param(format!(
+                    "--samples {s} is out of range 1..={MAX_SAMPLES}"
+                )));
+            }
+            if self.method != Method::Fis {
+                return Err(Error::Param("--samples applies to --method fis (the default tree method is tuned by --quality)".into()));
+            }
+        }
+        if let Some(r) = self.max_roughness {
+            if !(0.0..=1.0).contains(&r) {
+                return Err(Error::Param(format!(
+                    "--max-roughness {r} is out of range 0..=1"
+                )));
+            }
+        }
+        if !self.rotate.is_finite() {
+            return Err(Error::Param(
+                "--rotate must be a finite number of degrees".into(),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Levels of the full chain N.
+    pub fn chain_levels(&self) -> usize {
+        self.levels.unwrap_or_else(|| mip_sizes(self.size, 8).len())
+    }
+
+    /// Levels actually baked: all N, or those with r ≤ --max-roughness.
+    pub fn baked_levels(&self) -> usize {
+        let n = self.chain_levels();
+        match self.max_roughness {
+            Some(r) if n > 1 => (0..n)
+                .take_while(|&l| roughness_of_level(l, n) <= r + 1e-6)
+                .count()
+                .max(1),
+            _ => n,
+        }
+    }
+
+    /// Hammersley points per texel with --method fis.
+    pub fn fis_samples(&self) -> u32 {
+        self.samples.unwrap_or_else(|| self.quality.fis_samples())
+    }
+}
+
+/// r = l/(N−1) (Cocco et al. 2024, eq. 3); a one-level chain is the mirror.
+pub fn roughness_of_level(l: usize, n: usize) -> f32 {
+    if n <= 1 {
+        0.0
+    } else {
+        l as f32 / (n - 1) as f32
+    }
+}
+
+/// Face size of the source the levels are filtered from: the output size times the largest
+/// power of two (at most [`MAX_SOURCE_FACTOR`]) that the input's own resolution supports, so
+/// detail finer than level 0 still reaches the rough levels and level 0 is an exact box
+/// reduction of it.
+pub fn source_face_size(natural: usize, size: usize) -> usize {
+    let mut s = size;
+    while s * 2 <= natural && s * 2 <= size * MAX_SOURCE_FACTOR {
+        s *= 2;
+    }
+    s
+}
+
+/// Error of a level against a brute-force reference, on luminance.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct ErrorStats {
+    /// Mean of |x − ref| / ref.
+    pub mean_abs_rel: f64,
+    /// sqrt(mean of ((x − ref) / ref)²).
+    pub rms_rel: f64,
+    /// Largest |x − ref| / ref.
+    pub max_abs_rel: f64,
+    /// Texels compared.
+    pub texels: usize,
+}
+
+impl ErrorStats {
+    /// Statistics of paired (value, reference) luminances; references below `floor` times the
+    /// mean reference are skipped (relative error is meaningless on black).
+    pub fn from_pairs(pairs: impl IntoIterator<Item = (f64, f64)>) -> Self {
+        let pairs: Vec<(f64, f64)> = pairs.into_iter().collect();
+        let mean_ref = pairs.iter().map(|p| p.1).sum::<f64>() / pairs.len().max(1) as f64;
+        let floor = 1e-6 * mean_ref.max(1e-30);
+        let (mut sa, mut s2, mut mx, mut n) = (0.0f64, 0.0f64, 0.0f64, 0usize);
+        for (x, r) in pairs {
+            if r <= floor {
+                continue;
+            }
+            let e = (x - r) / r;
+            sa += e.abs();
+            s2 += e * e;
+            mx = mx.max(e.abs());
+            n += 1;
+        }
+        let d = n.max(1) as f64;
+        ErrorStats {
+            mean_abs_rel: sa / d,
+            rms_rel: (s2 / d).sqrt(),
+            max_abs_rel: mx,
+            texels: n,
+        }
+    }
+
+    /// Compares two cubes of the same size texel by texel.
+    pub fn between(x: &Cubemap, reference: &Cubemap) -> Self {
+        assert_eq!(x.size, reference.size, "cubes of different sizes");
+        let pairs = (0..6).flat_map(|f| {
+            x.faces[f]
+                .data
+                .chunks_exact(3)
+                .zip(reference.faces[f].data.chunks_exact(3))
+                .map(|(a, b)| {
+                    (
+                        luminance([a[0], a[1], a[2]]) as f64,
+                        luminance([b[0], b[1], b[2]]) as f64,
+                    )
+                })
+        });
+        Self::from_pairs(pairs)
+    }
+}
+
+/// What `prefilter.json` records.
+#[derive(Clone, Debug, Serialize)]
+pub struct Report {
+    pub tool: &'static str,
+    pub version: &'static str,
+    /// Face size of level 0.
+    pub size: usize,
+    /// Levels written.
+    pub levels: usize,
+    /// Levels N of the full chain (level l has roughness l/(N−1)).
+    pub chain_levels: usize,
+    /// "tree", "filtered-importance-sampling" or "reference" (brute force over every source
+    /// texel).
+    pub method: &'static str,
+    /// The preset, or "custom" with --samples.
+    pub quality: String,
+    /// The kernel every level approximates.
+    pub kernel: &'static str,
+    /// Face size of the cube the levels are filtered from: the input resampled (area filter)
+    /// at up to [`MAX_SOURCE_FACTOR`]× --size when its resolution allows.
+    pub source_size: usize,
+    /// Knobs of the tree method, or of FIS (samples per texel, mip bias).
+    pub tree: Option<TreeParams>,
+    pub fis_samples: Option<u32>,
+    pub fis_lod_bias: Option<f32>,
+    pub rotate: f32,
+    /// --max-roughness, if given, and what it did.
+    pub max_roughness: Option<f32>,
+    pub note: Option<String>,
+    pub level: Vec<LevelReport>,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct LevelReport {
+    pub level: usize,
+    pub size: usize,
+    pub roughness: f32,
+    pub alpha: f32,
+    /// Kernel evaluations (tree cells or FIS samples) per texel, averaged over the level.
+    pub evaluations_per_texel: f64,
+    /// Error of this level's luminance against the exact kernel summed by brute force over
+    /// every source texel, at a fixed set of probe texels (none for the mirror level and for
+    /// --reference, which is that brute force everywhere).
+    pub estimated_error: Option<EstimatedError>,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct EstimatedError {
+    pub mean_abs_rel: f64,
+    pub rms_rel: f64,
+    pub max_abs_rel: f64,
+    pub probe_texels: usize,
+}
+
+/// A baked chain before encoding, with timings and work (not part of the report, which must
+/// be identical from run to run).
+pub struct Chain {
+    pub mips: CubeMips,
+    pub report: Report,
+    /// Seconds per level (0 for the mirror level).
+    pub level_seconds: Vec<f64>,
+    /// Kernel evaluations per level (Σ over texels of cells or samples; 0 for the mirror).
+    pub level_work: Vec<u64>,
+    /// Seconds spent on the input resample (area filter to the source size).
+    pub resample_seconds: f64,
+    /// Seconds spent building the source structures (tree or mips, brute-force texel table).
+    pub source_seconds: f64,
+    /// Seconds spent on the error estimates.
+    pub estimate_seconds: f64,
+    /// Things the user should know (e.g. level 0 upsampled from a smaller input).
+    pub warnings: Vec<String>,
+}
+
+/// What [`run`] produced, before anything is written.
+pub struct Baked {
+    /// Encoded files (the chain and `prefilter.json`), ready for [`io::write_many_atomic`].
+    pub files: Vec<(PathBuf, Vec<u8>)>,
+    pub chain: Chain,
+}
+
+/// Name of the sidecar report.
+pub const REPORT_NAME: &str = "prefilter.json";
+
+/// Bakes the chain and encodes the outputs for `out_dir` (nothing is written).
+pub fn run(
+    params: &Params,
+    input: &LoadedEnvironment,
+    out_dir: &Path,
+    progress: &dyn Progress,
+) -> Result<Baked> {
+    let chain = bake_chain(params, &input.env, progress)?;
+    let depth = if params.half {
+        FloatDepth::F16
+    } else {
+        FloatDepth::F32
+    };
+    let mut files =
+        envmap::encode_cube_outputs(out_dir, &chain.mips, params.layout, depth, "prefilter")?;
+    let json = out_dir.join(REPORT_NAME);
+    let bytes = io::data::encode(&json, &chain.report)?;
+    files.push((json, bytes));
+    Ok(Baked { files, chain })
+}
+
+/// Paths [`run`] writes for `params` (for planning and cleaning).
+pub fn output_paths(params: &Params, out_dir: &Path) -> Vec<PathBuf> {
+    let mut p =
+        envmap::cube_output_paths(out_dir, params.baked_levels(), params.layout, "prefilter");
+    p.push(out_dir.join(REPORT_NAME));
+    p
+}
+
+/// What the rough levels are computed from.
+enum Engine {
+    Tree(CellTree, TreeParams),
+    Fis(SourcePyramid, u32),
+    Reference,
+}
+
+/// Bakes the chain in memory.
+pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -> Result<Chain> {
+    params.validate()?;
+    let t0 = Instant::now();
+    let size = params.size;
+    let n_chain = params.chain_levels();
+    let n_baked = params.baked_levels();
+    let natural = env.natural_face_size();
+    let src_size = source_face_size(natural, size);
+    let mut warnings = Vec::new();
+    if natural < size {
+        warnings.push(format!("the input holds about {natural}² texels per cube face, less than --size {size}: level 0 is upsampled"));
+    }
+    let source = env.to_cube(src_size, Filter::Area, params.rotate, progress);
+    let resample_seconds = t0.elapsed().as_secs_f64();
+    let t1 = Instant::now();
+    // Level 0 is the mirror: the source box-reduced to --size (src_size = size·2^k).
+    let mut level0 = source.clone();
+    while level0.size > size {
+        level0 = level0.downsample();
+    }
+    let texels = SourceTexels::new(&source);
+    let engine = if params.reference {
+        Engine::Reference
+    } else {
+        match params.method {
+            Method::Tree => Engine::Tree(CellTree::new(&source), params.quality.tree_params()),
+            Method::Fis => Engine::Fis(
+                SourcePyramid::new(&CubeMips::build(source.clone(), 1)),
+                params.fis_samples(),
+            ),
+        }
+    };
+    let source_seconds = t1.elapsed().as_secs_f64();
+
+    let mut levels = vec![level0];
+    let mut reports = vec![LevelReport {
+        level: 0,
+        size,
+        roughness: 0.0,
+        alpha: 0.0,
+        evaluations_per_texel: 0.0,
+        estimated_error: None,
+    }];
+    let (mut level_seconds, mut level_work) = (vec![0.0], vec![0u64]);
+    let mut estimate_seconds = 0.0;
+    for l in 1..n_baked {
+        let t = Instant::now();
+        let n = (size >> l).max(1);
+        let r = roughness_of_level(l, n_chain);
+        let (cube, work) = match &engine {
+            Engine::Reference => (
+                reference_level(&source, &texels, n, r, progress),
+                (6 * n * n * texels.len()) as u64,
+            ),
+            Engine::Tree(tree, p) => {
+                let (cube, w) = tree_level(tree, n, r, p, progress);
+                (cube, w.cell_evaluations)
+            }
+            Engine::Fis(pyr, count) => {
+                let table = SampleTable::build(r, *count, pyr.size(), LOD_BIAS, pyr.max_lod());
+                (
+                    filter_level(pyr, &table, n, progress),
+                    (6 * n * n * table.len()) as u64,
+                )
+            }
+        };
+        level_seconds.push(t.elapsed().as_secs_f64());
+        level_work.push(work);
+        let te = Instant::now();
+        let estimated_error = (!params.reference).then(|| estimate_error(&cube, &texels, r));
+        estimate_seconds += te.elapsed().as_secs_f64();
+        reports.push(LevelReport {
+            level: l,
+            size: n,
+            roughness: r,
+            alpha: r * r,
+            evaluations_per_texel: work as f64 / (6 * n * n) as f64,
+            estimated_error,
+        });
+        levels.push(cube);
+    }
+    let note = (n_baked < n_chain).then(|| {
+        format!(
+            "--max-roughness {} stopped the chain at level {} (roughness {}) of {} levels; roughness spacing 1/{} of the full chain kept",
+            params.max_roughness.unwrap_or(1.0),
+            n_baked - 1,
+            roughness_of_level(n_baked - 1, n_chain),
+            n_chain,
+            n_chain - 1
+        )
+    });
+    let (method, quality) = if params.reference {
+        ("reference", "reference".to_string())
+    } else if params.method == Method::Fis && params.samples.is_some() {
+        (params.method.name(), "custom".to_string())
+    } else {
+        (params.method.name(), params.quality.name().to_string())
+    };
+    let report = Report {
+        tool: "prefilter",
+        version: ibl_core::TOOL_VERSION,
+        size,
+        levels: n_baked,
+        chain_levels: n_chain,
+        method,
+        quality,
+        kernel: "D_GGX(n·h, α)·max(n·l, 0), h = normalize(n + l), n = v, α = r², r = l/(N−1), normalised to unit sum",
+        source_size: src_size,
+        tree: matches!(engine, Engine::Tree(..)).then(|| params.quality.tree_params()),
+        fis_samples: matches!(engine, Engine::Fis(..)).then(|| params.fis_samples()),
+        fis_lod_bias: matches!(engine, Engine::Fis(..)).then_some(LOD_BIAS),
+        rotate: params.rotate,
+        max_roughness: params.max_roughness,
+        note,
+        level: reports,
+    };
+    Ok(Chain {
+        mips: CubeMips { levels },
+        report,
+        level_seconds,
+        level_work,
+        resample_seconds,
+        source_seconds,
+        estimate_seconds,
+        warnings,
+    })
+}
+
+/// Probe texels of an n×n level: a g×g grid on each face (fewer on tiny faces).
+pub fn probe_texels(n: usize, g: usize) -> Vec<(Face, usize, usize)> {
+    let mut v = Vec::new();
+    for face in Face::ALL {
+        let mut seen = Vec::new();
+        for b in 0..g {
+            for a in 0..g {
+                let ij = (((2 * a + 1) * n) / (2 * g), ((2 * b + 1) * n) / (2 * g));
+                if !seen.contains(&ij) {
+                    seen.push(ij);
+                    v.push((face, ij.0, ij.1));
+                }
+            }
+        }
+    }
+    v
+}
+
+/// Brute-force kernel evaluations spent on the estimate of one level (at most 4×4 probes per
+/// face; fewer on large sources).
+const ESTIMATE_BUDGET: usize = 10_000_000;
+
+/// Estimated error of a level: its probe texels against the exact kernel summed by brute force
+/// over every source texel.
+pub fn estimate_error(level: &Cubemap, texels: &SourceTexels, roughness: f32) -> EstimatedError {
+    use rayon::prelude::*;
+    let per_face = (ESTIMATE_BUDGET / (6 * texels.len().max(1))).max(1);
+    let g = ((per_face as f64).sqrt() as usize).clamp(1, 4);
+    let probes = probe_texels(level.size, g);
+    let alpha = roughness * roughness;
+    let pairs: Vec<(f64, f64)> = probes
+        .par_iter()
+        .map(|&(f, i, j)| {
+            let r = texels.convolve(texel_direction(f, i, j, level.size), alpha);
+            (luminance(level.texel(f, i, j)) as f64, luminance(r) as f64)
+        })
+        .collect();
+    let s = ErrorStats::from_pairs(pairs);
+    EstimatedError {
+        mean_abs_rel: s.mean_abs_rel,
+        rms_rel: s.rms_rel,
+        max_abs_rel: s.max_abs_rel,
+        probe_texels: s.texels,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_agree_between_clap_serde_and_default() {
+        let from_ron: Params = ron::from_str("()").unwrap();
+        assert_eq!(from_ron, Params::default());
+        assert_eq!(Params::default().size, 256);
+        assert_eq!(Params::default().quality, Quality::Default);
+        assert_eq!(Params::default().chain_levels(), 6);
+        let p: Params =
+            ron::from_str("(size: 64, levels: Some(4), quality: high, layout: ktx2)").unwrap();
+        assert_eq!(
+            (p.size, p.levels, p.quality, p.layout),
+            (64, Some(4), Quality::High, Layout::Ktx2)
+        );
+    }
+
+    #[test]
+    fn unknown_keys_and_out_of_range_values_are_refused() {
+        assert!(ron::from_str::<Params>("(sise: 4)").is_err());
+        for p in [
+            Params {
+                size: 0,
+                ..Default::default()
+            },
+            Params {
+                size: 32,
+                levels: Some(7),
+                ..Default::default()
+            },
+            Params {
+                levels: Some(0),
+                ..Default::default()
+            },
+            Params {
+                samples: Some(0),
+                ..Default::default()
+            },
+            Params {
+                max_roughness: Some(1.5),
+                ..Default::default()
+            },
+            Params {
+                max_roughness: Some(f32::NAN),
+                ..Default::default()
+            },
+            Params {
+                rotate: f32::INFINITY,
+                ..Default::default()
+            },
+        ] {
+            assert!(p.validate().is_err(), "{p:?}");
+        }
+        assert!(Params {
+            size: 32,
+            levels: Some(6),
+            ..Default::default()
+        }
+        .validate()
+        .is_ok());
+    }
+
+    #[test]
+    fn max_roughness_keeps_the_spacing_of_the_full_chain() {
+        let p = Params {
+            size: 64,
+            levels: Some(5),
+            max_roughness: Some(0.6),
+            ..Default::default()
+        };
+        // r = 0, 0.25, 0.5, 0.75, 1 → keeps 0..=2.
+        assert_eq!(p.baked_levels(), 3);
+        let p = Params {
+            max_roughness: Some(0.5),
+            ..p
+        };
+        assert_eq!(p.baked_levels(), 3, "r = 0.5 exactly is kept");
+        let p = Params {
+            max_roughness: Some(0.0),
+            ..p
+        };
+        assert_eq!(p.baked_levels(), 1);
+    }
+
+    #[test]
+    fn source_is_a_power_of_two_multiple_of_the_output_up_to_the_input() {
+        assert_eq!(source_face_size(256, 256), 256);
+        assert_eq!(source_face_size(64, 32), 64);
+        assert_eq!(source_face_size(1024, 32), 64);
+        assert_eq!(source_face_size(16, 32), 32);
+        assert_eq!(source_face_size(100, 24), 48);
+    }
+
+    #[test]
+    fn probes_are_distinct_and_inside() {
+        for n in [1usize, 2, 3, 8, 64] {
+            let p = probe_texels(n, 4);
+            assert!(p.iter().all(|&(_, i, j)| i < n && j < n));
+            assert_eq!(probe_texels(n, 4).len(), 6 * n.min(4) * n.min(4), "n {n}");
+        }
+    }
+}

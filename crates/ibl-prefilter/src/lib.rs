@@ -1,0 +1,23 @@
+//! GGX prefiltered specular mip chains (the radiance term of the split sum): level l of N holds
+//! the environment convolved with K(l) ∝ D_GGX(n·h, α)·max(n·l, 0), h = normalize(n + l),
+//! roughness r = l/(N−1), α = r², n = v = r (Karis 2013; Cocco et al. 2024 §3 eqs. 2–3).
+//!
+//! [`bake`] holds the `Params` and the pure `run`; [`tree`] the default method (the exact
+//! kernel summed hierarchically over the source); [`samples`], [`pyramid`] and [`filter`] the
+//! filtered importance sampling of Křivánek & Colbert 2008 / Lagarde & de Rousiers 2014 (per
+//! level sample tables, seamless trilinear source reads, the per-texel loop), kept as
+//! `--method fis`; [`kernel`] the exact kernel and the brute-force reference.
+
+// Index loops read closer to the papers' sums than iterator chains in the numeric kernels.
+#![allow(clippy::needless_range_loop)]
+
+pub mod bake;
+pub mod error;
+pub mod filter;
+pub mod kernel;
+pub mod pyramid;
+pub mod samples;
+pub mod tree;
+
+pub use bake::{run, Method, Params, Quality};
+pub use error::Error;

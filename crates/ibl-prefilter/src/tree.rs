@@ -1,0 +1,979 @@
+//! Hierarchical evaluation of the exact kernel: the source as a quadtree of cells per cube face
+//! (each a union of source texels, keeping its energy, solid angle and the first and second
+//! moments of its texel directions), cut per tile of output texels by an opening-angle
+//! criterion (Barnes & Hut 1986, "A hierarchical O(N log N) force-calculation algorithm"), and
+//! the exact kernel summed over the cut with a second-order expansion per cell.
+//!
+//! Why not only filtered importance sampling: FIS reads box-blurred mips where its samples are
+//! sparse, which is the kernel's long GGX tail (mass beyond θ_h is α²/(tan²θ_h + α²)); a bright
+//! light seen through that tail lands on a few blurred samples, and texels lit mostly by it are
+//! off by tens of percent on studio-like HDRIs even at 1024 samples (bench/prefilter.md). Here
+//! the tail is summed with the exact kernel over cells whose size is a fixed fraction θ of their
+//! distance: because the kernel depends on l only through c = n·l, a cell is placed at the mean
+//! of c over its energy (first-order term zero, so a point light is exact at any distance) and
+//! corrected by f''·Var(c)/2; cells across the horizon of max(n·l, 0) are split finer and
+//! integrated with the kink.
+//!
+//! The normalisation Σ K Ω comes from the same cells (with solid-angle moments), so a constant
+//! environment is reproduced to rounding, and the finest cells are the source texels placed at
+//! their centres exactly as the brute-force reference places them: with θ → 0 the sum *is* the
+//! reference.
+
+use glam::Vec3;
+use ibl_core::cube::{texel_direction, Cubemap, Face};
+use ibl_core::progress::Progress;
+use ibl_core::traverse::map_cube_texels_with;
+use ibl_core::{luminance, Rgb};
+use std::f32::consts::FRAC_PI_2;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// Accuracy knobs of the hierarchical sum.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct TreeParams {
+    /// Opening angle: a cell is summed as one point when its diameter is at most `theta`
+    /// times its angular distance to the output tile.
+    pub theta: f32,
+    /// Finest cells: their mean angle is at most 2α/`kappa` (the lobe's half width in l is
+    /// ~1.3α), or the source texels when those are coarser.
+    pub kappa: f32,
+    /// Cells straddling the horizon of a tile (where max(n·l, 0) has its kink) are split down
+    /// to a diameter of `horizon`/r radians: the share of the kernel near its horizon grows
+    /// with the roughness r (it is the whole cosine lobe at r = 1).
+    pub horizon: f32,
+}
+
+impl TreeParams {
+    /// Diameter straddling cells are split to at roughness r.
+    pub fn horizon_at(&self, roughness: f32) -> f32 {
+        self.horizon / roughness.max(1e-3)
+    }
+}
+
+/// Second moments in the order xx, yy, zz, xy, xz, yz.
+type Sym3 = [f32; 6];
+
+/// One level of the quadtree: cells of an s×s cube, face-major, row-major.
+///
+/// The kernel depends on l only through c = n·l: f(c) = max(c, 0)/t(c)². A cell is summed as
+/// Σ_i w_i f(n·l_i) ≈ W [f(c̄) + ½ f''(c̄) Var(c)] with c̄ = n·m̄ and Var(c) = nᵀ C n from the
+/// cell's weighted mean m̄ of texel directions and their covariance C: exact to second order,
+/// the first-order term zero by construction. Cells that may straddle the horizon model c as
+/// uniform on [c̄ − √(3Var), c̄ + √(3Var)] and integrate the Taylor polynomial over c > 0. The
+/// numerator weights texels by luminance (where the energy sits), the normalisation by solid
+/// angle.
+struct CellLevel {
+    size: usize,
+    /// Unit axis and half-angle of a cone holding the whole cell.
+    axis: Vec<Vec3>,
+    radius: Vec<f32>,
+    /// Radiance × solid angle summed over the cell, and the solid angle.
+    energy: Vec<Rgb>,
+    omega: Vec<f32>,
+    /// Moments; empty on the finest level, whose cells are points at their texel centres
+    /// (exactly as the brute-force reference places them), mean = axis, 1 − |m̄|² = 0, C = 0.
+    moments: Vec<Moments>,
+}
+
+/// Mean direction (inside the unit ball), 1 − |m̄|² (kept in f64 until stored: it is what
+/// makes 1 − n·m̄ exact for narrow lobes), and covariance, under luminance (`lum`) and solid
+/// angle (`area`) weights.
+#[derive(Clone, Copy)]
+struct Moments {
+    lum: (Vec3, f32, Sym3),
+    area: (Vec3, f32, Sym3),
+}
+
+/// Build-time sums of a cell in f64: energy, and for each weight (luminance × Ω, Ω) its total,
+/// first and second moments of the texel directions.
+#[derive(Clone, Copy, Default)]
+struct Sums {
+    e: [f64; 3],
+    w: [f64; 2],
+    m: [[f64; 3]; 2],
+    s: [[f64; 6]; 2],
+}
+
+impl Sums {
+    fn add_point(&mut self, d: Vec3, c: Rgb, omega: f64) {
+        let lum = luminance(c) as f64 * omega;
+        for k in 0..3 {
+            self.e[k] += c[k] as f64 * omega;
+        }
+        let (x, y, z) = (d.x as f64, d.y as f64, d.z as f64);
+        for (k, w) in [lum, omega].into_iter().enumerate() {
+            self.w[k] += w;
+            self.m[k][0] += w * x;
+            self.m[k][1] += w * y;
+            self.m[k][2] += w * z;
+            let s = &mut self.s[k];
+            s[0] += w * x * x;
+            s[1] += w * y * y;
+            s[2] += w * z * z;
+            s[3] += w * x * y;
+            s[4] += w * x * z;
+            s[5] += w * y * z;
+        }
+    }
+
+    fn add(&mut self, o: &Sums) {
+        for k in 0..3 {
+            self.e[k] += o.e[k];
+        }
+        for k in 0..2 {
+            self.w[k] += o.w[k];
+            for a in 0..3 {
+                self.m[k][a] += o.m[k][a];
+            }
+            for a in 0..6 {
+                self.s[k][a] += o.s[k][a];
+            }
+        }
+    }
+
+    /// Mean, 1 − |mean|² and covariance under weight `k`.
+    fn moments(&self, k: usize) -> (Vec3, f32, Sym3) {
+        let w = self.w[k];
+        let m = self.m[k].map(|v| v / w);
+        let s = self.s[k].map(|v| v / w);
+        let q = (1.0 - (m[0] * m[0] + m[1] * m[1] + m[2] * m[2])).max(0.0);
+        let c = [
+            s[0] - m[0] * m[0],
+            s[1] - m[1] * m[1],
+            s[2] - m[2] * m[2],
+            s[3] - m[0] * m[1],
+            s[4] - m[0] * m[2],
+            s[5] - m[1] * m[2],
+        ];
+        (
+            Vec3::new(m[0] as f32, m[1] as f32, m[2] as f32),
+            q as f32,
+            c.map(|v| v as f32),
+        )
+    }
+}
+
+/// The source as a quadtree of cells, finest level = the source texels.
+pub struct CellTree {
+    /// Coarsest (roots) first.
+    levels: Vec<CellLevel>,
+}
+
+/// acos(x) to within 6.8e-5 rad (Abramowitz & Stegun 1964, eq. 4.4.45), for the cut's cone
+/// tests; callers pad by [`FAST_ACOS_ERROR`] so bounds stay bounds.
+#[inline]
+fn fast_acos(x: f32) -> f32 {
+    let a = x.abs().min(1.0);
+    let p =
+        (1.0 - a).sqrt() * (1.570_728_8 + a * (-0.212_114_4 + a * (0.074_261 + a * -0.018_729_3)));
+    if x >= 0.0 {
+        p
+    } else {
+        std::f32::consts::PI - p
+    }
+}
+
+/// Bound on the error of [`fast_acos`] plus f32 rounding.
+const FAST_ACOS_ERROR: f32 = 1e-4;
+
+/// Largest angle from unit `centre` to the corners of the face rectangle [s0,s1]×[t0,t1] (the
+/// farthest point of a convex spherical quad from a point inside it is a corner).
+fn cone_radius(face: Face, centre: Vec3, s0: f32, s1: f32, t0: f32, t1: f32) -> f32 {
+    let mut r = 0.0f32;
+    for (s, t) in [(s0, t0), (s1, t0), (s0, t1), (s1, t1)] {
+        let c = face.direction(s, t).normalize();
+        r = r.max(centre.dot(c).clamp(-1.0, 1.0).acos());
+    }
+    // Rounding of acos near 1 is ~1e-4 rad at worst; pad so the bound stays a bound.
+    r + 1e-4
+}
+
+impl CellTree {
+    pub fn new(cube: &Cubemap) -> Self {
+        use rayon::prelude::*;
+        let n = cube.size;
+        // Finest level: the source texels as points. Their cone radius is only used to skip
+        // texels behind every output direction, so a cheap bound does: radial projection onto
+        // the sphere is 1-Lipschitz outside it, so centre-to-corner chords are ≤ √2/n and the
+        // angle ≤ 2·asin(chord/2) ≤ 1.12·chord.
+        let sa = ibl_core::cube::solid_angle_table(n);
+        let texel_radius = 1.12 * std::f32::consts::SQRT_2 / n as f32 + 1e-4;
+        let rows: Vec<(Vec3, Rgb, f32)> = (0..6 * n * n)
+            .into_par_iter()
+            .map(|k| {
+                let (f, rest) = (k / (n * n), k % (n * n));
+                let (j, i) = (rest / n, rest % n);
+                let face = Face::from_index(f);
+                let om = sa[j * n + i];
+                let c = cube.texel(face, i, j);
+                (
+                    texel_direction(face, i, j, n),
+                    [c[0] * om, c[1] * om, c[2] * om],
+                    om,
+                )
+            })
+            .collect();
+        let finest = CellLevel {
+            size: n,
+            axis: rows.iter().map(|r| r.0).collect(),
+            radius: vec![texel_radius; rows.len()],
+            energy: rows.iter().map(|r| r.1).collect(),
+            omega: rows.iter().map(|r| r.2).collect(),
+            moments: Vec::new(),
+        };
+        let mut levels = vec![finest];
+        // Coarser levels while the size halves exactly.
+        let mut sums: Vec<Sums> = Vec::new();
+        let mut s = n;
+        while s % 2 == 0 {
+            let h = s / 2;
+            let parent: Vec<Sums> = (0..6 * h * h)
+                .into_par_iter()
+                .map(|p| {
+                    let (f, rest) = (p / (h * h), p % (h * h));
+                    let (j, i) = (rest / h, rest % h);
+                    let mut acc = Sums::default();
+                    for (dj, di) in [(0, 0), (0, 1), (1, 0), (1, 1)] {
+                        let (ci, cj) = (2 * i + di, 2 * j + dj);
+                        if s == n {
+                            let face = Face::from_index(f);
+                            acc.add_point(
+                                texel_direction(face, ci, cj, n),
+                                cube.texel(face, ci, cj),
+                                sa[cj * n + ci] as f64,
+                            );
+                        } else {
+                            acc.add(&sums[(f * s + cj) * s + ci]);
+                        }
+                    }
+                    acc
+                })
+                .collect();
+            levels.push(Self::level_from_sums(h, &parent));
+            sums = parent;
+            s = h;
+        }
+        levels.reverse();
+        CellTree { levels }
+    }
+
+    fn level_from_sums(s: usize, sums: &[Sums]) -> CellLevel {
+        use rayon::prelude::*;
+        let step = 2.0 / s as f32;
+        let cells: Vec<(Vec3, f32, Rgb, f32, Moments)> = sums
+            .par_iter()
+            .enumerate()
+            .map(|(k, c)| {
+                let (f, rest) = (k / (s * s), k % (s * s));
+                let (j, i) = (rest / s, rest % s);
+                let area = c.moments(1);
+                let lum = if c.w[0] > 0.0 { c.moments(0) } else { area };
+                let axis = area.0.normalize();
+                let (s0, t0) = (i as f32 * step - 1.0, j as f32 * step - 1.0);
+                let radius = cone_radius(Face::from_index(f), axis, s0, s0 + step, t0, t0 + step);
+                (
+                    axis,
+                    radius,
+                    c.e.map(|v| v as f32),
+                    c.w[1] as f32,
+                    Moments { lum, area },
+                )
+            })
+            .collect();
+        CellLevel {
+            size: s,
+            axis: cells.iter().map(|c| c.0).collect(),
+            radius: cells.iter().map(|c| c.1).collect(),
+            energy: cells.iter().map(|c| c.2).collect(),
+            omega: cells.iter().map(|c| c.3).collect(),
+            moments: cells.iter().map(|c| c.4).collect(),
+        }
+    }
+
+    /// Face size of the finest level (the source).
+    pub fn size(&self) -> usize {
+        self.levels.last().unwrap().size
+    }
+
+    /// Index of the level whose cells are the leaves for roughness α: the coarsest with a
+    /// mean cell angle at most 2α/κ, or the source texels.
+    fn leaf_level(&self, alpha: f32, kappa: f32) -> usize {
+        let target = 2.0 * alpha / kappa;
+        let angle = |s: usize| (4.0 * std::f32::consts::PI / 6.0).sqrt() / s as f32;
+        self.levels
+            .iter()
+            .position(|l| angle(l.size) <= target)
+            .unwrap_or(self.levels.len() - 1)
+    }
+
+    /// Cells to sum for every output direction within `tile_radius` of `tile_centre`.
+    fn cut(
+        &self,
+        tile_centre: Vec3,
+        tile_radius: f32,
+        spec: &CutSpec,
+        out: &mut CutList,
+        stack: &mut Vec<(usize, usize)>,
+    ) {
+        let CutSpec {
+            leaf,
+            theta,
+            horizon,
+        } = *spec;
+        out.clear();
+        stack.clear();
+        let finest = self.levels.len() - 1;
+        stack.extend((0..self.levels[0].axis.len()).rev().map(|c| (0, c)));
+        while let Some((li, c)) = stack.pop() {
+            let lv = &self.levels[li];
+            let rc = lv.radius[c];
+            let ang = fast_acos(tile_centre.dot(lv.axis[c]));
+            let dmin = ang - tile_radius - rc - FAST_ACOS_ERROR;
+            if dmin >= FRAC_PI_2 {
+                // Every pair is ≥ 90° apart: n·l ≤ 0, the kernel is exactly zero.
+                continue;
+            }
+            // Far cells are points once small next to their distance, near ones at the leaf
+            // level; cells across the horizon are split further (below the leaf level too) as
+            // the kink of max(n·l, 0) is not smooth.
+            let straddles = ang + tile_radius + rc + FAST_ACOS_ERROR > FRAC_PI_2;
+            let small = li >= leaf || 2.0 * rc <= theta * dmin;
+            if li == finest || (small && (!straddles || 2.0 * rc <= horizon)) {
+                out.push(lv, c, straddles);
+                continue;
+            }
+            let (s, child) = (lv.size, &self.levels[li + 1]);
+            let (f, rest) = (c / (s * s), c % (s * s));
+            let (j, i) = (rest / s, rest % s);
+            let cs = child.size;
+            for (dj, di) in [(1, 1), (1, 0), (0, 1), (0, 0)] {
+                stack.push((li + 1, (f * cs + 2 * j + dj) * cs + 2 * i + di));
+            }
+        }
+        out.finish();
+    }
+}
+
+/// What decides a level's cuts: the leaf level, the opening angle and the horizon split.
+#[derive(Clone, Copy)]
+struct CutSpec {
+    leaf: usize,
+    theta: f32,
+    horizon: f32,
+}
+
+/// Cells of a cut as structure-of-arrays for the summation loop: for the numerator and the
+/// normalisation each, mean (x, y, z), 1 − |mean|², covariance (6); then energy and Ω.
+#[derive(Default)]
+struct CellBlock {
+    /// [mx, my, mz, mq, mc0..mc5, gx, gy, gz, gq, gc0..gc5, er, eg, eb, om]
+    cols: [Vec<f32>; COLS],
+}
+
+const COLS: usize = 24;
+/// Lanes of the summation loop (one AVX register, two SSE ones).
+const LANES: usize = 8;
+
+impl CellBlock {
+    fn push(&mut self, lv: &CellLevel, c: usize) {
+        let (lum, area) = match lv.moments.get(c) {
+            Some(m) => (m.lum, m.area),
+            None => ((lv.axis[c], 0.0, [0.0; 6]), (lv.axis[c], 0.0, [0.0; 6])),
+        };
+        let e = lv.energy[c];
+        let mut row = [0.0f32; COLS];
+        for (k, (m, q, cov)) in [lum, area].into_iter().enumerate() {
+            let o = k * 10;
+            row[o..o + 4].copy_from_slice(&[m.x, m.y, m.z, q]);
+            row[o + 4..o + 10].copy_from_slice(&cov);
+        }
+        row[20..24].copy_from_slice(&[e[0], e[1], e[2], lv.omega[c]]);
+        for (col, v) in self.cols.iter_mut().zip(row) {
+            col.push(v);
+        }
+    }
+
+    /// Pads to a whole number of lanes with empty cells (zero energy and solid angle).
+    fn pad(&mut self) {
+        while self.cols[0].len() % LANES != 0 {
+            for (k, col) in self.cols.iter_mut().enumerate() {
+                // A unit mean (+z) keeps the arithmetic finite; the weights multiply zeros.
+                col.push(if k == 2 || k == 12 { 1.0 } else { 0.0 });
+            }
+        }
+    }
+}
+
+/// The cells summed for one tile: those wholly above the horizon of every texel of the tile,
+/// and those that may straddle it (summed with the kink-aware cell model).
+#[derive(Default)]
+pub struct CutList {
+    smooth: CellBlock,
+    horizon: CellBlock,
+}
+
+/// The cell sum of the kernel (see [`CellLevel`]) for one weight: mean at chord² `d2` + `q`
+/// from n, variance `var` of n·l over the cell. f(c) = max(c, 0)/t² with
+/// t = α² + (1−α²)(1−c)/2 is the kernel without α²/π (which cancels in the ratio).
+#[inline(always)]
+fn cell_weight<const HORIZON: bool>(d2: f32, q: f32, var: f32, a2: f32, b: f32) -> f32 {
+    let s2 = 0.25 * (d2 + q);
+    let c = 1.0 - 2.0 * s2;
+    let u = 1.0 / (a2 + b * s2);
+    let uu = u * u;
+    // f'' = u³(2b + 1.5 b² c u).
+    let f2 = uu * u * (2.0 * b + 1.5 * b * b * c * u);
+    let var = if var > 0.0 { var } else { 0.0 };
+    if !HORIZON {
+        // The whole cell is above the horizon: f(c̄) + f''(c̄)·var/2. Selects rather than
+        // f32::max (whose NaN rule blocks vectorisation).
+        let w = c * uu + 0.5 * f2 * var;
+        return if c > 0.0 { w } else { 0.0 };
+    }
+    // n·l over the cell modelled as uniform on [c̄ − w, c̄ + w] (variance w²/3), the Taylor
+    // polynomial of f integrated over its part above the horizon: with the cell wholly above,
+    // this is f + f''·var/2 again; across, it follows the kink of max(n·l, 0). A point cell
+    // (w → 0) gets a tiny w, which gives f(c̄) for c̄ > 0 and 0 below.
+    let f = c * uu;
+    let f1 = uu * (1.0 + b * c * u);
+    let w = (3.0 * var).sqrt();
+    let w = if w > 1e-12 { w } else { 1e-12 };
+    let x0 = if -c > -w { -c } else { -w };
+    let (x1, x0s) = (w, x0 * x0);
+    let integral =
+        f * (x1 - x0) + 0.5 * f1 * (x1 * x1 - x0s) + (f2 * (1.0 / 6.0)) * (x1 * x1 * x1 - x0s * x0);
+    let spread = integral * (0.5 / w);
+    if c + w > 0.0 {
+        spread
+    } else {
+        0.0
+    }
+}
+
+/// Cell weights of one block for one weight kind (`o` = 0: numerator, 10: normalisation),
+/// one straight loop the compiler vectorises.
+#[inline(always)]
+fn weights<const HORIZON: bool>(block: &CellBlock, o: usize, n: Vec3, a2: f32, out: &mut [f32]) {
+    let b = 1.0 - a2;
+    let nn = [
+        n.x * n.x,
+        n.y * n.y,
+        n.z * n.z,
+        2.0 * n.x * n.y,
+        2.0 * n.x * n.z,
+        2.0 * n.y * n.z,
+    ];
+    let c = &block.cols;
+    let len = out.len();
+    let (mx, my, mz, mq) = (
+        &c[o][..len],
+        &c[o + 1][..len],
+        &c[o + 2][..len],
+        &c[o + 3][..len],
+    );
+    let (c0, c1, c2, c3, c4, c5) = (
+        &c[o + 4][..len],
+        &c[o + 5][..len],
+        &c[o + 6][..len],
+        &c[o + 7][..len],
+        &c[o + 8][..len],
+        &c[o + 9][..len],
+    );
+    for k in 0..len {
+        let (dx, dy, dz) = (n.x - mx[k], n.y - my[k], n.z - mz[k]);
+        let var = nn[0] * c0[k]
+            + nn[1] * c1[k]
+            + nn[2] * c2[k]
+            + nn[3] * c3[k]
+            + nn[4] * c4[k]
+            + nn[5] * c5[k];
+        out[k] = cell_weight::<HORIZON>(dx * dx + dy * dy + dz * dz, mq[k], var, a2, b);
+    }
+}
+
+/// Σ over a block of (W_num·E_rgb, W_den·Ω), in 8 f32 lanes flushed to f64 every 64 cells.
+#[inline(always)]
+fn accumulate<const HORIZON: bool>(
+    block: &CellBlock,
+    n: Vec3,
+    a2: f32,
+    scratch: &mut Vec<f32>,
+    acc: &mut [f64; 4],
+) {
+    const L: usize = LANES;
+    let len = block.cols[0].len();
+    debug_assert!(len % L == 0);
+    scratch.resize(2 * len, 0.0);
+    let (wm, wg) = scratch.split_at_mut(len);
+    weights::<HORIZON>(block, 0, n, a2, wm);
+    weights::<HORIZON>(block, 10, n, a2, wg);
+    let (er, eg, eb, om) = (
+        &block.cols[20][..len],
+        &block.cols[21][..len],
+        &block.cols[22][..len],
+        &block.cols[23][..len],
+    );
+    let mut lanes = [[0.0f32; L]; 4];
+    let mut i = 0;
+    while i < len {
+        for k in 0..L {
+            let j = i + k;
+            lanes[0][k] += wm[j] * er[j];
+            lanes[1][k] += wm[j] * eg[j];
+            lanes[2][k] += wm[j] * eb[j];
+            lanes[3][k] += wg[j] * om[j];
+        }
+        i += L;
+        if i % 64 == 0 || i == len {
+            for c in 0..4 {
+                acc[c] += lanes[c].iter().map(|v| *v as f64).sum::<f64>();
+                lanes[c] = [0.0; L];
+            }
+        }
+    }
+}
+
+/// Both blocks of a cut. Compiled twice on x86-64: for AVX2 (8 lanes in one register) and for
+/// the SSE2 baseline. Neither allows fused multiply-add, so both give the same bits.
+#[inline(always)]
+fn accumulate_cut(cut: &CutList, n: Vec3, a2: f32, scratch: &mut Vec<f32>) -> [f64; 4] {
+    let mut acc = [0.0f64; 4];
+    accumulate::<false>(&cut.smooth, n, a2, scratch, &mut acc);
+    accumulate::<true>(&cut.horizon, n, a2, scratch, &mut acc);
+    acc
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn accumulate_cut_avx2(cut: &CutList, n: Vec3, a2: f32, scratch: &mut Vec<f32>) -> [f64; 4] {
+    accumulate_cut(cut, n, a2, scratch)
+}
+
+impl CutList {
+    fn clear(&mut self) {
+        self.smooth
+            .cols
+            .iter_mut()
+            .chain(self.horizon.cols.iter_mut())
+            .for_each(Vec::clear);
+    }
+
+    fn push(&mut self, lv: &CellLevel, c: usize, straddles: bool) {
+        if straddles {
+            self.horizon.push(lv, c)
+        } else {
+            self.smooth.push(lv, c)
+        }
+    }
+
+    fn finish(&mut self) {
+        self.smooth.pad();
+        self.horizon.pad();
+    }
+
+    /// Cells summed (padding included).
+    pub fn len(&self) -> usize {
+        self.smooth.cols[0].len() + self.horizon.cols[0].len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Σ_cells W_num E / Σ_cells W_den Ω with each W the cell sum of the kernel (see
+    /// [`CellLevel`]); the normalisation comes from the same cells, so a constant environment
+    /// comes back exactly.
+    pub fn convolve(&self, n: Vec3, alpha: f32, scratch: &mut Vec<f32>) -> Rgb {
+        let a2 = alpha * alpha;
+        #[cfg(target_arch = "x86_64")]
+        let acc = if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has just been checked for AVX2.
+            unsafe { accumulate_cut_avx2(self, n, a2, scratch) }
+        } else {
+            accumulate_cut(self, n, a2, scratch)
+        };
+        #[cfg(not(target_arch = "x86_64"))]
+        let acc = accumulate_cut(self, n, a2, scratch);
+        if acc[3] <= 0.0 {
+            return [0.0; 3];
+        }
+        [
+            (acc[0] / acc[3]) as f32,
+            (acc[1] / acc[3]) as f32,
+            (acc[2] / acc[3]) as f32,
+        ]
+    }
+}
+
+/// Output texels per tile edge: tiles share one cut, so they must stay small next to the
+/// distances the opening criterion sees; coarse levels use smaller tiles.
+fn tile_size(n: usize) -> usize {
+    if n >= 64 {
+        8
+    } else {
+        4.min(n)
+    }
+}
+
+/// Per-thread state: the cuts of the tile row the thread is in, and its tallies.
+struct TileRow {
+    key: Option<(Face, usize)>,
+    cuts: Vec<CutList>,
+    stack: Vec<(usize, usize)>,
+    scratch: Vec<f32>,
+    work: u64,
+}
+
+/// What a level cost.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct TreeWork {
+    /// Σ over output texels of the cells summed for it.
+    pub cell_evaluations: u64,
+    /// Cuts built (one per tile and tile row visit).
+    pub cuts: u64,
+}
+
+/// One level of the chain by the hierarchical sum: an n×n cube at roughness r > 0.
+pub fn tree_level(
+    tree: &CellTree,
+    n: usize,
+    roughness: f32,
+    p: &TreeParams,
+    progress: &dyn Progress,
+) -> (Cubemap, TreeWork) {
+    let alpha = roughness * roughness;
+    let spec = CutSpec {
+        leaf: tree.leaf_level(alpha, p.kappa),
+        theta: p.theta,
+        horizon: p.horizon_at(roughness),
+    };
+    let t = tile_size(n);
+    let tiles = n.div_ceil(t);
+    let (work, cuts) = (AtomicU64::new(0), AtomicU64::new(0));
+    let coord = |k: usize| (2.0 * k.min(n) as f32 / n as f32) - 1.0;
+    let cube = map_cube_texels_with(
+        n,
+        progress,
+        || TileRow {
+            key: None,
+            cuts: Vec::new(),
+            stack: Vec::new(),
+            scratch: Vec::new(),
+            work: 0,
+        },
+        |row, face, i, j| {
+            let ty = j / t;
+            if row.key != Some((face, ty)) {
+                row.cuts.resize_with(tiles, CutList::default);
+                for tx in 0..tiles {
+                    let (s0, s1, t0, t1) = (
+                        coord(tx * t),
+                        coord(tx * t + t),
+                        coord(ty * t),
+                        coord(ty * t + t),
+                    );
+                    let centre = face.direction(0.5 * (s0 + s1), 0.5 * (t0 + t1)).normalize();
+                    let radius = cone_radius(face, centre, s0, s1, t0, t1);
+                    let (cuts, stack) = (&mut row.cuts, &mut row.stack);
+                    tree.cut(centre, radius, &spec, &mut cuts[tx], stack);
+                }
+                cuts.fetch_add(tiles as u64, Ordering::Relaxed);
+                row.key = Some((face, ty));
+            }
+            let cut = &row.cuts[i / t];
+            row.work += cut.len() as u64;
+            if i + 1 == n {
+                work.fetch_add(std::mem::take(&mut row.work), Ordering::Relaxed);
+            }
+            cut.convolve(texel_direction(face, i, j, n), alpha, &mut row.scratch)
+        },
+    );
+    (
+        cube,
+        TreeWork {
+            cell_evaluations: work.into_inner(),
+            cuts: cuts.into_inner(),
+        },
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::kernel::SourceTexels;
+    use ibl_core::progress::NoProgress;
+    use ibl_core::sampling::Pcg32;
+
+    const TIGHT: TreeParams = TreeParams {
+        theta: 0.0,
+        kappa: 1e9,
+        horizon: 0.0,
+    };
+
+    fn random_cube(n: usize, seed: u64) -> Cubemap {
+        let mut rng = Pcg32::new(seed, 9);
+        let mut c = Cubemap::new(n);
+        for f in &mut c.faces {
+            f.data.iter_mut().for_each(|v| *v = rng.next_f32() * 4.0);
+        }
+        c
+    }
+
+    #[test]
+    fn fast_acos_is_within_its_bound() {
+        let mut worst = 0.0f64;
+        for k in 0..=200_000 {
+            let x = -1.0 + 2.0 * k as f64 / 200_000.0;
+            worst = worst.max((fast_acos(x as f32) as f64 - x.acos()).abs());
+        }
+        eprintln!("fast_acos: worst error {worst:.2e} rad");
+        assert!(worst < FAST_ACOS_ERROR as f64, "{worst}");
+    }
+
+    /// The per-cell model on its own: one cell's numerator against the exact sum over its
+    /// texels. Far cells sit exactly at the opening criterion of the default preset
+    /// (distance from the cell = diameter/0.7): the second-order model against the centroid
+    /// alone. Cells across the horizon: the kink model against the plain second-order one.
+    #[test]
+    fn cell_model_matches_the_sum_over_its_texels() {
+        let n = 32;
+        let cube = random_cube(n, 7);
+        let tree = CellTree::new(&cube);
+        let li = tree.levels.iter().position(|l| l.size == 4).unwrap();
+        let lv = &tree.levels[li];
+        let k = n / lv.size;
+        let mut rng = Pcg32::new(8, 8);
+        let mut scratch = Vec::new();
+        // (second order, centroid only) far; (kink, plain) at the horizon.
+        let (mut far, mut horizon) = (Vec::new(), Vec::new());
+        for c in 0..lv.axis.len() {
+            let (f, rest) = (c / (lv.size * lv.size), c % (lv.size * lv.size));
+            let (cj, ci) = (rest / lv.size, rest % lv.size);
+            let face = Face::from_index(f);
+            let texels: Vec<(Vec3, f32)> = (0..k * k)
+                .map(|t| {
+                    let (i, j) = (ci * k + t % k, cj * k + t / k);
+                    let om = ibl_core::cube::texel_solid_angle(i, j, n) as f32;
+                    (
+                        texel_direction(face, i, j, n),
+                        cube.texel(face, i, j)[0] * om,
+                    )
+                })
+                .collect();
+            for _ in 0..20 {
+                let alpha = 0.1 + 0.9 * rng.next_f32();
+                let a2 = alpha * alpha;
+                let v = Vec3::new(
+                    rng.next_f32() - 0.5,
+                    rng.next_f32() - 0.5,
+                    rng.next_f32() - 0.5,
+                );
+                let axis = lv.axis[c];
+                let perp = (v - axis * v.dot(axis)).normalize();
+                let (rc, diameter) = (lv.radius[c], 2.0 * lv.radius[c]);
+                let far_angle = rc + diameter / 0.7;
+                let kink_angle = FRAC_PI_2 + (rng.next_f32() - 0.5) * rc;
+                for (kind, angle) in [(0, far_angle), (1, kink_angle)] {
+                    if angle >= FRAC_PI_2 + rc && kind == 0 {
+                        continue;
+                    }
+                    let nd = axis * angle.cos() + perp * angle.sin();
+                    let exact: f64 = texels
+                        .iter()
+                        .map(|(l, e)| {
+                            let s2 = 0.25 * (nd - *l).length_squared() as f64;
+                            let t = a2 as f64 + (1.0 - a2 as f64) * s2;
+                            (1.0 - 2.0 * s2).max(0.0) / (t * t) * *e as f64
+                        })
+                        .sum();
+                    let model = |straddles: bool, drop_covariance: bool, scratch: &mut Vec<f32>| {
+                        let mut cut = CutList::default();
+                        cut.push(lv, c, straddles);
+                        cut.finish();
+                        if drop_covariance {
+                            let block = if straddles {
+                                &mut cut.horizon
+                            } else {
+                                &mut cut.smooth
+                            };
+                            block.cols[4..10]
+                                .iter_mut()
+                                .for_each(|col| col.iter_mut().for_each(|v| *v = 0.0));
+                        }
+                        accumulate_cut(&cut, nd, a2, scratch)[0]
+                    };
+                    if kind == 0 {
+                        let e2 = (model(false, false, &mut scratch) - exact).abs() / exact;
+                        let e1 = (model(false, true, &mut scratch) - exact).abs() / exact;
+                        far.push((e2, e1));
+                    } else {
+                        // Near the horizon the sum is small: measure against the cell's energy
+                        // times the kernel's value scale there.
+                        let scale = texels.iter().map(|(_, e)| *e as f64).sum::<f64>()
+                            / (a2 as f64 + 0.5 * (1.0 - a2 as f64)).powi(2);
+                        let ek = (model(true, false, &mut scratch) - exact).abs() / scale;
+                        let ep = (model(false, false, &mut scratch) - exact).abs() / scale;
+                        horizon.push((ek, ep));
+                    }
+                }
+            }
+        }
+        let stats = |v: &[(f64, f64)], pick: fn(&(f64, f64)) -> f64| {
+            (
+                v.iter().map(pick).sum::<f64>() / v.len() as f64,
+                v.iter().map(pick).fold(0.0, f64::max),
+            )
+        };
+        let (far2, far1) = (stats(&far, |p| p.0), stats(&far, |p| p.1));
+        let (hk, hp) = (stats(&horizon, |p| p.0), stats(&horizon, |p| p.1));
+        eprintln!(
+            "cell model at the default opening angle ({} cases): second order mean {:.2e} worst {:.2e}, centroid only mean {:.2e} worst {:.2e}",
+            far.len(),
+            far2.0,
+            far2.1,
+            far1.0,
+            far1.1
+        );
+        eprintln!("cells across the horizon ({} cases, error / cell energy·f(0)): kink model mean {:.2e} worst {:.2e}, plain second order mean {:.2e} worst {:.2e}", horizon.len(), hk.0, hk.1, hp.0, hp.1);
+        assert!(far2.0 < 0.5 * far1.0 && far2.0 < 0.03, "{far2:?} {far1:?}");
+        assert!(hk.0 < 0.5 * hp.0, "{hk:?} {hp:?}");
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn avx2_and_baseline_sums_are_bit_identical() {
+        if !std::arch::is_x86_feature_detected!("avx2") {
+            eprintln!("no AVX2 here: nothing to compare");
+            return;
+        }
+        let cube = random_cube(16, 4);
+        let tree = CellTree::new(&cube);
+        let p = TreeParams {
+            theta: 0.7,
+            kappa: 4.0,
+            horizon: 0.12,
+        };
+        let spec = CutSpec {
+            leaf: tree.leaf_level(0.25, p.kappa),
+            theta: p.theta,
+            horizon: p.horizon_at(0.5),
+        };
+        let (mut cut, mut stack, mut scratch) = (CutList::default(), Vec::new(), Vec::new());
+        let centre = Vec3::new(0.3, 0.5, -0.8).normalize();
+        tree.cut(centre, 0.2, &spec, &mut cut, &mut stack);
+        assert!(!cut.smooth.cols[0].is_empty() && !cut.horizon.cols[0].is_empty());
+        let mut rng = Pcg32::new(6, 6);
+        for _ in 0..200 {
+            let n = (centre
+                + 0.1
+                    * Vec3::new(
+                        rng.next_f32() - 0.5,
+                        rng.next_f32() - 0.5,
+                        rng.next_f32() - 0.5,
+                    ))
+            .normalize();
+            let a = accumulate_cut(&cut, n, 0.0625, &mut scratch);
+            // SAFETY: AVX2 checked above.
+            let b = unsafe { accumulate_cut_avx2(&cut, n, 0.0625, &mut scratch) };
+            assert_eq!(a.map(f64::to_bits), b.map(f64::to_bits));
+        }
+    }
+
+    #[test]
+    fn tree_sums_match_the_source_at_every_level() {
+        let cube = random_cube(12, 1);
+        let tree = CellTree::new(&cube);
+        assert_eq!(
+            tree.levels.iter().map(|l| l.size).collect::<Vec<_>>(),
+            vec![3, 6, 12]
+        );
+        let total = |lv: &CellLevel| lv.energy.iter().map(|e| e[1] as f64).sum::<f64>();
+        let om = |lv: &CellLevel| lv.omega.iter().map(|o| *o as f64).sum::<f64>();
+        for lv in &tree.levels {
+            assert!((total(lv) - total(&tree.levels[2])).abs() < 1e-4 * total(lv));
+            assert!((om(lv) - 4.0 * std::f64::consts::PI).abs() < 1e-4);
+        }
+    }
+
+    #[test]
+    fn cones_hold_their_cells() {
+        // Every source texel centre lies within its ancestors' cones.
+        let cube = random_cube(16, 2);
+        let tree = CellTree::new(&cube);
+        for (li, lv) in tree.levels.iter().enumerate() {
+            let s = lv.size;
+            let k = 16 / s;
+            for face in Face::ALL {
+                for j in 0..16 {
+                    for i in 0..16 {
+                        let d = texel_direction(face, i, j, 16);
+                        let c = (face as usize * s + j / k) * s + i / k;
+                        let ang = lv.axis[c].dot(d).clamp(-1.0, 1.0).acos();
+                        assert!(ang <= lv.radius[c], "level {li}: {ang} > {}", lv.radius[c]);
+                        if let Some(m) = lv.moments.get(c) {
+                            let angm = m.lum.0.normalize().dot(lv.axis[c]).clamp(-1.0, 1.0).acos();
+                            assert!(angm <= lv.radius[c], "energy centroid outside the cone");
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn fully_refined_cut_is_the_brute_force_reference() {
+        // θ = 0 and leaves at the source texels: the cut is every texel above the horizon,
+        // and the sum must equal the brute force to rounding.
+        let cube = random_cube(8, 3);
+        let tree = CellTree::new(&cube);
+        let texels = SourceTexels::new(&cube);
+        let mut worst = 0.0f32;
+        for r in [0.3f32, 0.7, 1.0] {
+            let (out, _) = tree_level(&tree, 4, r, &TIGHT, &NoProgress);
+            for face in Face::ALL {
+                for j in 0..4 {
+                    for i in 0..4 {
+                        let a = out.texel(face, i, j);
+                        let b = texels.convolve(texel_direction(face, i, j, 4), r * r);
+                        for k in 0..3 {
+                            worst = worst.max((a[k] - b[k]).abs() / b[k]);
+                        }
+                    }
+                }
+            }
+        }
+        eprintln!("fully refined tree vs brute force: worst relative difference {worst:.2e}");
+        assert!(worst < 2e-5, "{worst}");
+    }
+
+    #[test]
+    fn point_light_is_exact_at_any_distance() {
+        // A single bright texel in black: every cell holding it has its centroid on it, so the
+        // hierarchical sum of the numerator is exact whatever the opening angle.
+        let n = 16;
+        let mut cube = Cubemap::new(n);
+        cube.faces[Face::Pz as usize]
+            .texel_mut(5, 9)
+            .copy_from_slice(&[1e5, 1e5, 1e5]);
+        let tree = CellTree::new(&cube);
+        let texels = SourceTexels::new(&cube);
+        let p = TreeParams {
+            theta: 0.5,
+            kappa: 4.0,
+            horizon: 0.5,
+        };
+        let (out, _) = tree_level(&tree, 8, 0.5, &p, &NoProgress);
+        let mut worst = 0.0f32;
+        for face in Face::ALL {
+            for j in 0..8 {
+                for i in 0..8 {
+                    let b = texels.convolve(texel_direction(face, i, j, 8), 0.25)[0];
+                    if b > 1e-3 {
+                        worst = worst.max((out.texel(face, i, j)[0] - b).abs() / b);
+                    }
+                }
+            }
+        }
+        eprintln!("point light, θ = 0.5: worst relative error {worst:.2e} (normalisation only)");
+        assert!(worst < 1e-3, "{worst}");
+    }
+}

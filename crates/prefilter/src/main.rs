@@ -1,0 +1,56 @@
+//! `prefilter`: parse, call `ibl_prefilter::run`, write atomically, report.
+
+use clap::Parser;
+use ibl_core::envmap::load_environment;
+use ibl_prefilter::bake::{run, Params};
+use std::path::PathBuf;
+
+/// GGX prefiltered specular mip chain (split-sum radiance term): level l of N holds the
+/// environment convolved with the GGX lobe of roughness l/(N−1). Writes DIR/m{l}_{face}.exr
+/// (or DIR/prefilter.ktx2 with --layout ktx2) and DIR/prefilter.json.
+#[derive(Parser)]
+#[command(version, about)]
+struct Cli {
+    /// Input environment: .exr/.hdr equirect or cross, a folder of faces, or a .ktx2 cube.
+    input: PathBuf,
+    /// Output folder.
+    #[arg(short, long, value_name = "DIR")]
+    output: PathBuf,
+    #[command(flatten)]
+    params: Params,
+    #[command(flatten)]
+    common: ibl_cli::CommonArgs,
+}
+
+fn main() {
+    let cli = Cli::parse();
+    ibl_cli::run("prefilter", cli.common.clone(), |ctx| {
+        cli.params.validate()?;
+        let env = load_environment(&cli.input, cli.params.sanitize)?;
+        env.warnings().into_iter().for_each(|w| ctx.warn(w));
+        let baked = run(&cli.params, &env, &cli.output, ctx.progress())?;
+        ibl_core::io::write_many_atomic(&baked.files)?;
+        baked
+            .chain
+            .warnings
+            .iter()
+            .for_each(|w| ctx.warn(w.clone()));
+        let report = &baked.chain.report;
+        if let Some(note) = &report.note {
+            ctx.info(note);
+        }
+        let outputs = baked
+            .files
+            .iter()
+            .map(|f| f.0.display().to_string())
+            .collect();
+        let details = serde_json::json!({
+            "report": report,
+            "resample_seconds": baked.chain.resample_seconds,
+            "source_seconds": baked.chain.source_seconds,
+            "estimate_seconds": baked.chain.estimate_seconds,
+            "level_seconds": baked.chain.level_seconds,
+        });
+        Ok::<_, ibl_prefilter::Error>((outputs, details))
+    })
+}

@@ -1,0 +1,297 @@
+//! End-to-end tests of the `prefilter` binary: outputs, report, layouts, options and bad
+//! inputs (non-zero exit, one-line error, nothing written).
+
+use ibl_core::image::Image;
+use ibl_core::io::{self, ColorSpace, WriteOptions};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_prefilter"))
+}
+
+fn fixture(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fixtures")
+        .join(name)
+}
+
+fn run(args: &[&str]) -> Output {
+    bin().args(args).output().expect("binary runs")
+}
+
+fn report(dir: &Path) -> serde_json::Value {
+    serde_json::from_slice(&std::fs::read(dir.join("prefilter.json")).unwrap()).unwrap()
+}
+
+const FACES: [&str; 6] = ["px", "nx", "py", "ny", "pz", "nz"];
+
+fn files_in(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(dir)
+        .map(|r| {
+            r.map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+                .collect()
+        })
+        .unwrap_or_default();
+    v.sort();
+    v
+}
+
+#[test]
+fn faces_layout_writes_every_level_and_the_report() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("chain");
+    let o = run(&[
+        fixture("hdri/sunset_256.exr").to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--size",
+        "32",
+        "-q",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // Default levels: down to 8×8 faces → 32, 16, 8.
+    for (l, n) in [(0, 32usize), (1, 16), (2, 8)] {
+        for f in FACES {
+            let img =
+                io::read_image(&out.join(format!("m{l}_{f}.exr")), ColorSpace::Linear).unwrap();
+            assert_eq!((img.width, img.height), (n, n), "m{l}_{f}");
+            assert!(img.data.iter().all(|v| v.is_finite() && *v >= 0.0));
+        }
+    }
+    assert_eq!(files_in(&out).len(), 3 * 6 + 1, "{:?}", files_in(&out));
+    let r = report(&out);
+    assert_eq!(r["size"], 32);
+    assert_eq!(r["levels"], 3);
+    assert_eq!(r["chain_levels"], 3);
+    assert_eq!(r["method"], "tree");
+    assert_eq!(r["quality"], "default");
+    let levels = r["level"].as_array().unwrap();
+    let rough: Vec<f64> = levels
+        .iter()
+        .map(|l| l["roughness"].as_f64().unwrap())
+        .collect();
+    assert_eq!(rough, vec![0.0, 0.5, 1.0]);
+    assert!(levels[0]["estimated_error"].is_null());
+    for l in &levels[1..] {
+        let e = l["estimated_error"]["mean_abs_rel"].as_f64().unwrap();
+        eprintln!(
+            "level {} estimated mean abs relative error {:.4}%",
+            l["level"],
+            100.0 * e
+        );
+        assert!(e < 0.01);
+    }
+}
+
+#[test]
+fn ktx2_layout_reads_back_equal_to_the_faces() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (a, b) = (tmp.path().join("faces"), tmp.path().join("ktx"));
+    let input = fixture("hdri/studio_256.exr");
+    for (dir, extra) in [(&a, vec![]), (&b, vec!["--layout", "ktx2"])] {
+        let mut args = vec![
+            input.to_str().unwrap(),
+            "-o",
+            dir.to_str().unwrap(),
+            "--size",
+            "16",
+            "--levels",
+            "4",
+            "-q",
+        ];
+        args.extend(extra);
+        let o = run(&args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    assert_eq!(
+        files_in(&b),
+        vec!["prefilter.json".to_string(), "prefilter.ktx2".to_string()]
+    );
+    let ktx = ibl_core::envmap::read_cube_chain(&b.join("prefilter.ktx2")).unwrap();
+    let faces = ibl_core::envmap::read_cube_chain(&a).unwrap();
+    assert_eq!(
+        ktx.levels.iter().map(|c| c.size).collect::<Vec<_>>(),
+        vec![16, 8, 4, 2]
+    );
+    assert_eq!(ktx, faces);
+}
+
+#[test]
+fn max_roughness_stops_the_chain_and_says_so() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("o");
+    let o = run(&[
+        fixture("hdri/interior_256.exr").to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--size",
+        "32",
+        "--levels",
+        "5",
+        "--max-roughness",
+        "0.6",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(stderr.contains("--max-roughness"), "{stderr}");
+    // r = 0, 0.25, 0.5 kept; 0.75 and 1 dropped.
+    assert!(out.join("m2_px.exr").exists() && !out.join("m3_px.exr").exists());
+    let r = report(&out);
+    assert_eq!(r["levels"], 3);
+    assert_eq!(r["chain_levels"], 5);
+    assert_eq!(r["level"][2]["roughness"].as_f64().unwrap(), 0.5);
+    assert!(
+        r["note"].as_str().unwrap().contains("level 2"),
+        "{}",
+        r["note"]
+    );
+}
+
+#[test]
+fn half_json_reference_and_folder_input() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("h");
+    let o = run(&[
+        fixture("hdri/city_512.exr").to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--size",
+        "8",
+        "--levels",
+        "3",
+        "--half",
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(summary["tool"], "prefilter");
+    assert_eq!(summary["outputs"].as_array().unwrap().len(), 3 * 6 + 1);
+    // The written chain is a face folder: it is a valid input (its level 0 is read).
+    let again = tmp.path().join("again");
+    let o = run(&[
+        out.to_str().unwrap(),
+        "-o",
+        again.to_str().unwrap(),
+        "--size",
+        "8",
+        "--levels",
+        "2",
+        "--reference",
+        "-q",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r = report(&again);
+    assert_eq!(r["method"], "reference");
+    assert_eq!(r["source_size"], 8);
+}
+
+#[test]
+fn same_input_gives_identical_bytes_for_any_thread_count() {
+    let tmp = tempfile::tempdir().unwrap();
+    let input = fixture("hdri/sunset_256.exr");
+    let mut outputs = Vec::new();
+    for threads in ["1", "2"] {
+        let out = tmp.path().join(threads);
+        let o = run(&[
+            input.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--size",
+            "16",
+            "--levels",
+            "3",
+            "--threads",
+            threads,
+            "-q",
+        ]);
+        assert!(o.status.success());
+        outputs.push(
+            files_in(&out)
+                .iter()
+                .map(|f| std::fs::read(out.join(f)).unwrap())
+                .collect::<Vec<_>>(),
+        );
+    }
+    assert!(outputs[0] == outputs[1]);
+}
+
+/// A bad run: non-zero exit with `code`, one line on stderr naming the problem, nothing written.
+fn assert_fails_cleanly(args: &[&str], out: &Path, code: i32, needle: &str) {
+    let o = run(args);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    eprintln!("{args:?} → exit {:?}: {}", o.status.code(), stderr.trim());
+    assert_eq!(o.status.code(), Some(code), "{stderr}");
+    assert_eq!(stderr.trim().lines().count(), 1, "{stderr}");
+    assert!(stderr.contains(needle), "{stderr}");
+    assert!(!stderr.contains("panicked"));
+    assert!(files_in(out).is_empty(), "wrote {:?}", files_in(out));
+}
+
+#[test]
+fn bad_inputs_fail_with_one_line_and_write_nothing() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    let o = out.to_str().unwrap();
+    // Truncated EXR.
+    let bytes = std::fs::read(fixture("hdri/sunset_256.exr")).unwrap();
+    let truncated = tmp.path().join("truncated.exr");
+    std::fs::write(&truncated, &bytes[..bytes.len() / 2]).unwrap();
+    assert_fails_cleanly(
+        &[truncated.to_str().unwrap(), "-o", o, "--size", "8"],
+        &out,
+        2,
+        "truncated.exr",
+    );
+    // NaN texels without --sanitize (and with it, the bake runs).
+    let mut img = Image::new(16, 8, 3);
+    img.data
+        .iter_mut()
+        .enumerate()
+        .for_each(|(k, v)| *v = (k % 7) as f32 * 0.1);
+    img.data[40] = f32::NAN;
+    let nan = tmp.path().join("nan.exr");
+    io::write_image(&nan, &img, &WriteOptions::default()).unwrap();
+    assert_fails_cleanly(
+        &[nan.to_str().unwrap(), "-o", o, "--size", "4"],
+        &out,
+        2,
+        "NaN",
+    );
+    let ok = tmp.path().join("sanitized");
+    let r = run(&[
+        nan.to_str().unwrap(),
+        "-o",
+        ok.to_str().unwrap(),
+        "--size",
+        "4",
+        "--sanitize",
+        "-q",
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    // Missing file.
+    let missing = tmp.path().join("missing.exr");
+    assert_fails_cleanly(
+        &[missing.to_str().unwrap(), "-o", o],
+        &out,
+        4,
+        "missing.exr",
+    );
+    // Parameters out of range.
+    let input = fixture("hdri/sunset_256.exr");
+    let i = input.to_str().unwrap();
+    assert_fails_cleanly(&[i, "-o", o, "--size", "0"], &out, 2, "--size");
+    assert_fails_cleanly(
+        &[i, "-o", o, "--size", "16", "--levels", "9"],
+        &out,
+        2,
+        "--levels",
+    );
+    assert_fails_cleanly(
+        &[i, "-o", o, "--max-roughness", "2"],
+        &out,
+        2,
+        "--max-roughness",
+    );
+    assert_fails_cleanly(&[i, "-o", o, "--samples", "64"], &out, 2, "--samples");
+}
