@@ -1,0 +1,238 @@
+//! End-to-end tests of the `shexp-fit` binary on generated environments and a fixture.
+
+use ibl_core::io::{write_image, WriteOptions};
+use ibl_core::Image;
+use ibl_shexp::Coeffs;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+const BIN: &str = env!("CARGO_BIN_EXE_shexp-fit");
+
+/// A 64×32 equirect: a sky gradient, a warm sun and a dark ground.
+fn write_env(path: &Path, nan: bool) {
+    let (w, h) = (64, 32);
+    let mut img = Image::new(w, h, 3);
+    let sun = glam::Vec3::new(0.5, 0.6, 0.3).normalize();
+    for j in 0..h {
+        for i in 0..w {
+            let d = ibl_core::equirect::pixel_direction(i, j, w, h);
+            let s = (40.0 * (d.dot(sun) - 1.0)).exp() * 50.0;
+            let sky = if d.y > 0.0 { 0.5 + d.y } else { 0.05 };
+            img.texel_mut(i, j)
+                .copy_from_slice(&[sky + s, sky + 0.8 * s, sky * 1.2 + 0.5 * s]);
+        }
+    }
+    if nan {
+        img.texel_mut(3, 3)[1] = f32::NAN;
+    }
+    write_image(path, &img, &WriteOptions::default()).unwrap();
+}
+
+fn run(args: &[&str]) -> Output {
+    Command::new(BIN).args(args).output().expect("binary runs")
+}
+
+fn small() -> Vec<&'static str> {
+    vec![
+        "--normals",
+        "16",
+        "--views",
+        "16",
+        "--samples",
+        "64",
+        "--quiet",
+    ]
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).to_string()
+}
+
+#[test]
+fn fits_and_writes_coefficients_and_shaders() {
+    let dir = tempfile::tempdir().unwrap();
+    let env = dir.path().join("env.exr");
+    write_env(&env, false);
+    let out = dir.path().join("probe.json");
+    let mut args = vec![
+        env.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--emit-shader",
+    ];
+    args.extend(small());
+    let o = run(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let c: Coeffs = ibl_core::io::data::read(&out).unwrap();
+    c.validate(&out).unwrap();
+    assert_eq!((c.p_order, c.q_order, c.p.len(), c.q.len()), (4, 2, 25, 8));
+    assert_eq!(c.alphas, vec![0.2, 0.4667, 0.7333, 1.0]);
+    assert_eq!(c.rows, 16 * 16 * 4);
+    assert!(c.residual.is_finite() && c.residual > 0.0 && c.condition_number >= 1.0);
+    // The raw JSON has the documented keys.
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    for k in ["p_order", "q_order", "alphas", "p", "q", "residual"] {
+        assert!(v.get(k).is_some(), "missing {k}");
+    }
+    let glsl = std::fs::read_to_string(out.with_extension("glsl")).unwrap();
+    let hlsl = std::fs::read_to_string(out.with_extension("hlsl")).unwrap();
+    assert!(glsl.contains("vec3 shexp_e0(") && hlsl.contains("float3 shexp_e0("));
+    // The probe reconstructs E0 of this environment: compare eq. 11 with an exact summation
+    // facing the sky (log error, the quantity the fit minimises).
+    let cube = ibl_core::envmap::load_environment(&env, false)
+        .unwrap()
+        .env
+        .to_cube(
+            16,
+            ibl_core::equirect::Filter::Area,
+            0.0,
+            &ibl_core::progress::NoProgress,
+        );
+    let truth = ibl_shexp::truth::TexelSet::from_cube(&cube);
+    let mut rms = 0.0f64;
+    let mut k = 0;
+    for i in 0..64 {
+        let n = ibl_shexp::basis::fibonacci_sphere(i, 64);
+        let v = (n + glam::Vec3::new(0.2, 0.1, -0.3)).normalize();
+        if n.dot(v) < 0.2 {
+            continue;
+        }
+        let e = c.e0(n, v, 0.5);
+        let t = truth.e0(n, v, 0.5);
+        rms += ((e[0] as f64) / t[0]).ln().powi(2);
+        k += 1;
+    }
+    let rms = (rms / k as f64).sqrt();
+    eprintln!(
+        "log RMS of eq. 11 against exact E0 on {k} samples: {rms:.3} (fit residual {:.3})",
+        c.residual
+    );
+    assert!(rms < 2.0 * c.residual + 0.05, "{rms}");
+}
+
+#[test]
+fn output_is_identical_for_any_thread_count_and_ron_by_extension() {
+    let dir = tempfile::tempdir().unwrap();
+    let env = dir.path().join("env.exr");
+    write_env(&env, false);
+    let outs: Vec<PathBuf> = ["1", "2"]
+        .iter()
+        .map(|t| dir.path().join(format!("c{t}.json")))
+        .collect();
+    for (t, out) in ["1", "2"].iter().zip(&outs) {
+        let mut args = vec![
+            env.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--threads",
+            t,
+        ];
+        args.extend(small());
+        assert!(run(&args).status.success());
+    }
+    assert_eq!(
+        std::fs::read(&outs[0]).unwrap(),
+        std::fs::read(&outs[1]).unwrap()
+    );
+    let ron = dir.path().join("c.ron");
+    let mut args = vec![env.to_str().unwrap(), "-o", ron.to_str().unwrap()];
+    args.extend(small());
+    assert!(run(&args).status.success());
+    let a: Coeffs = ibl_core::io::data::read(&ron).unwrap();
+    let b: Coeffs = ibl_core::io::data::read(&outs[0]).unwrap();
+    assert_eq!(a.p, b.p);
+}
+
+#[test]
+fn fixture_fit_reports_json_summary() {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/hdri/sunset_256.exr");
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("sunset.json");
+    let o = run(&[
+        root.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--normals",
+        "16",
+        "--views",
+        "16",
+        "--samples",
+        "64",
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["details"]["rows"], 1024);
+    assert!(v["details"]["timings"]["estimate"].as_f64().unwrap() >= 0.0);
+    eprintln!(
+        "sunset_256 fit: residual {}, κ {}",
+        v["details"]["residual"], v["details"]["condition_number"]
+    );
+}
+
+/// Bad inputs: one line on stderr, non-zero exit, nothing written.
+#[test]
+fn bad_inputs_fail_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let env = dir.path().join("env.exr");
+    write_env(&env, false);
+    let nan = dir.path().join("nan.exr");
+    write_env(&nan, true);
+    let out = dir.path().join("never.json");
+    let missing = dir.path().join("missing.exr");
+    let (e, n, m, o) = (
+        env.to_str().unwrap(),
+        nan.to_str().unwrap(),
+        missing.to_str().unwrap(),
+        out.to_str().unwrap(),
+    );
+    let cases: Vec<(Vec<&str>, i32, &str)> = vec![
+        (vec![m, "-o", o], 4, "missing.exr"),
+        (vec![n, "-o", o], 2, "NaN"),
+        (vec![e, "-o", o, "--p-order", "0"], 2, "p-order"),
+        (vec![e, "-o", o, "--alphas", ""], 2, "alphas"),
+        (vec![e, "-o", o, "--alphas", "0.5,1.5"], 2, "alphas"),
+        (
+            vec![
+                e,
+                "-o",
+                o,
+                "--normals",
+                "2",
+                "--views",
+                "2",
+                "--alphas",
+                "0.5",
+            ],
+            2,
+            "unknowns",
+        ),
+        (vec![e, "-o", o, "--samples", "zero"], 2, "samples"),
+    ];
+    for (args, code, needle) in cases {
+        let r = run(&args);
+        let err = stderr(&r);
+        eprintln!("{args:?} → {:?}: {}", r.status.code(), err.trim());
+        assert_eq!(r.status.code(), Some(code), "{args:?}: {err}");
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+        assert!(err.contains(needle), "{err}");
+        assert!(!out.exists());
+    }
+    // --sanitize accepts the NaN environment.
+    let r = run(&[
+        n,
+        "-o",
+        o,
+        "--sanitize",
+        "--normals",
+        "8",
+        "--views",
+        "8",
+        "--samples",
+        "32",
+        "--quiet",
+    ]);
+    assert!(r.status.success(), "{}", stderr(&r));
+    assert!(out.exists());
+}
