@@ -4,6 +4,7 @@
 use super::{ColorSpace, WriteOptions};
 use crate::error::{Error, Result};
 use crate::image::Image;
+use rayon::prelude::*;
 use std::io::Cursor;
 use std::path::Path;
 
@@ -32,6 +33,19 @@ pub fn decode(path: &Path, bytes: &[u8], color: ColorSpace) -> Result<Image> {
     let reader = image::ImageReader::new(Cursor::new(bytes))
         .with_guessed_format()
         .map_err(|e| Error::io(path, e))?;
+    // Only PNG and JPEG: the sniffing would also hand EXR or HDR bytes to the `image` crate's
+    // decoders, which clamp to [0, 1] here and decode EXR on worker threads (where a panic
+    // aborts the process instead of reaching `io::guard`).
+    match reader.format() {
+        Some(image::ImageFormat::Png | image::ImageFormat::Jpeg) => {}
+        other => {
+            let what = other.map_or("unknown data".to_string(), |f| format!("{f:?} data"));
+            return Err(Error::unsupported(
+                path,
+                format!("{what}: not a PNG or JPEG image"),
+            ));
+        }
+    }
     let (w, h) = reader.into_dimensions().map_err(bad)?;
     Image::check_size(path, w as u64, h as u64)?;
     let mut reader = image::ImageReader::new(Cursor::new(bytes))
@@ -85,21 +99,29 @@ fn tonemap(rgb: [f32; 3]) -> [f32; 3] {
 
 pub fn encode_png(path: &Path, img: &Image, opts: &WriteOptions) -> Result<Vec<u8>> {
     let ch = img.channels;
-    let mut values: Vec<f32> = Vec::with_capacity(img.data.len());
-    for px in img.data.chunks_exact(ch) {
-        let mut px = px.to_vec();
-        if opts.png_tonemap && ch >= 3 {
-            let t = tonemap([px[0], px[1], px[2]]);
-            px[..3].copy_from_slice(&t);
-        }
-        if opts.png_srgb || opts.png_tonemap {
-            let colour = if ch == 4 || ch == 2 { ch - 1 } else { ch };
-            for v in &mut px[..colour] {
-                *v = linear_to_srgb(v.clamp(0.0, 1.0));
-            }
-        }
-        values.extend(px);
-    }
+    // Data maps are quantised as they are; colour goes through tone mapping and/or sRGB.
+    let transform = opts.png_tonemap || opts.png_srgb;
+    let colour = if ch == 4 || ch == 2 { ch - 1 } else { ch };
+    let mut values: Vec<f32>;
+    let values: &[f32] = if !transform {
+        &img.data
+    } else {
+        values = img.data.clone();
+        values
+            .par_chunks_mut(ch * img.width.max(1))
+            .for_each(|row| {
+                for px in row.chunks_exact_mut(ch) {
+                    if opts.png_tonemap && ch >= 3 {
+                        let t = tonemap([px[0], px[1], px[2]]);
+                        px[..3].copy_from_slice(&t);
+                    }
+                    for v in &mut px[..colour] {
+                        *v = linear_to_srgb(v.clamp(0.0, 1.0));
+                    }
+                }
+            });
+        &values
+    };
     let (w, h) = (img.width as u32, img.height as u32);
     let color = match (ch, opts.png_bits) {
         (1, 8) => image::ExtendedColorType::L8,
@@ -119,21 +141,30 @@ pub fn encode_png(path: &Path, img: &Image, opts: &WriteOptions) -> Result<Vec<u
     };
     let raw: Vec<u8> = if opts.png_bits == 8 {
         values
-            .iter()
+            .par_iter()
             .map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
             .collect()
     } else {
         // PNG stores 16-bit samples big-endian; the encoder takes native-endian bytes.
-        values
-            .iter()
-            .flat_map(|v| ((v.clamp(0.0, 1.0) * 65535.0).round() as u16).to_ne_bytes())
-            .collect()
+        let mut raw = vec![0u8; values.len() * 2];
+        raw.par_chunks_mut(2)
+            .zip(values.par_iter())
+            .for_each(|(b, v)| {
+                b.copy_from_slice(&((v.clamp(0.0, 1.0) * 65535.0).round() as u16).to_ne_bytes())
+            });
+        raw
     };
     let mut out = Vec::new();
     use image::ImageEncoder;
-    image::codecs::png::PngEncoder::new(&mut out)
-        .write_image(&raw, w, h, color)
-        .map_err(|e| Error::invalid(path, format!("PNG encoding failed: {e}")))?;
+    // Fast deflate: maps are re-encoded on every bake, and the default level costs 2-3x the
+    // time for files a few percent smaller.
+    image::codecs::png::PngEncoder::new_with_quality(
+        &mut out,
+        image::codecs::png::CompressionType::Fast,
+        image::codecs::png::FilterType::Adaptive,
+    )
+    .write_image(&raw, w, h, color)
+    .map_err(|e| Error::invalid(path, format!("PNG encoding failed: {e}")))?;
     Ok(out)
 }
 

@@ -1,0 +1,603 @@
+//! Batch conversion of material folders (thesis 004 §5.2: `material/normal.*` →
+//! `material/quaternion.png`), in parallel, skipping what is up to date, one failure per
+//! bad file rather than per batch. The pipeline runner calls [`run`] in-process.
+//!
+//! Up-to-date rule: next to each output `NAME` a sidecar `.NAME.opts` (JSON) records the
+//! tool version, a blake3 hash of the options that change the output's bytes (and the options
+//! themselves, for people), the input's length and modification time and the output's length.
+//! An output is skipped only when the sidecar matches all of them and the output is not
+//! older than its input; anything else (no sidecar, other options, a replaced input, an
+//! output edited or truncated by someone else) converts again. The sidecar is written after
+//! the output, so an interrupted conversion is redone.
+
+use crate::normal;
+use crate::quat_map::{self, CheckReport, ConvertStats, Params};
+use crate::{MaterialError, Result};
+use ibl_core::error::ErrorClass;
+use ibl_core::io;
+use ibl_core::progress::{NoProgress, Progress};
+use ibl_core::Error;
+use rayon::prelude::*;
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+use std::time::SystemTime;
+
+/// Checks the batch fields of the parameters (and the per-file ones for the output format).
+pub fn validate(params: &Params) -> ibl_core::Result<()> {
+    let plain = |s: &str| !s.is_empty() && !s.contains(['/', '\\']) && s != "." && s != "..";
+    if !plain(&params.input_name) {
+        return Err(Error::param(format!(
+            "--input-name '{}' must be a file name pattern",
+            params.input_name
+        )));
+    }
+    if !plain(&params.output_name) || params.output_name.contains(['*', '?']) {
+        return Err(Error::param(format!(
+            "--output-name '{}' must be a plain file name",
+            params.output_name
+        )));
+    }
+    if glob_match(&params.input_name, &params.output_name) {
+        return Err(Error::param(format!(
+            "--output-name '{}' matches --input-name '{}'",
+            params.output_name, params.input_name
+        )));
+    }
+    params.validate_output(Path::new(&params.output_name))
+}
+
+/// Case-insensitive match of a file name against a pattern with `*` and `?`.
+pub fn glob_match(pattern: &str, name: &str) -> bool {
+    let p: Vec<char> = pattern.to_lowercase().chars().collect();
+    let n: Vec<char> = name.to_lowercase().chars().collect();
+    let (mut pi, mut ni) = (0, 0);
+    let mut star: Option<(usize, usize)> = None;
+    while ni < n.len() {
+        if pi < p.len() && (p[pi] == '?' || p[pi] == n[ni]) {
+            pi += 1;
+            ni += 1;
+        } else if pi < p.len() && p[pi] == '*' {
+            star = Some((pi, ni));
+            pi += 1;
+        } else if let Some((sp, sn)) = star {
+            pi = sp + 1;
+            ni = sn + 1;
+            star = Some((sp, sn + 1));
+        } else {
+            return false;
+        }
+    }
+    p[pi..].iter().all(|&c| c == '*')
+}
+
+/// What the planner decided for one material folder.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub enum Action {
+    Convert,
+    /// Up to date.
+    Skip,
+    /// Cannot be converted (e.g. two files match the input name).
+    Fail(String),
+}
+
+/// One material folder's conversion.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Job {
+    pub input: PathBuf,
+    pub output: PathBuf,
+    pub action: Action,
+    /// Why it converts (no output, options changed, ...), for `plan` listings.
+    pub reason: String,
+}
+
+/// The sidecar written next to each output.
+#[derive(Clone, Debug, PartialEq, Serialize, serde::Deserialize)]
+pub struct Sidecar {
+    pub tool: String,
+    pub version: String,
+    pub options_hash: String,
+    pub options: serde_json::Value,
+    pub input_name: String,
+    pub input_len: u64,
+    pub input_modified_ns: u128,
+    pub output_len: u64,
+}
+
+/// `.NAME.opts` beside `output`.
+pub fn sidecar_path(output: &Path) -> PathBuf {
+    let name = output
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    output.with_file_name(format!(".{name}.opts"))
+}
+
+fn options_hash(key: &serde_json::Value) -> String {
+    blake3::hash(key.to_string().as_bytes())
+        .to_hex()
+        .to_string()
+}
+
+fn modified_ns(m: &std::fs::Metadata) -> u128 {
+    m.modified()
+        .ok()
+        .and_then(|t| t.duration_since(SystemTime::UNIX_EPOCH).ok())
+        .map(|d| d.as_nanos())
+        .unwrap_or(0)
+}
+
+/// Why `output` must be (re)made, or None when it is up to date.
+fn stale_reason(input: &Path, output: &Path, key: &serde_json::Value) -> Option<String> {
+    let Ok(out_meta) = std::fs::metadata(output) else {
+        return Some("no output".into());
+    };
+    let Ok(in_meta) = std::fs::metadata(input) else {
+        return Some("input unreadable".into());
+    };
+    let Ok(text) = std::fs::read_to_string(sidecar_path(output)) else {
+        return Some("no sidecar".into());
+    };
+    let Ok(side) = serde_json::from_str::<Sidecar>(&text) else {
+        return Some("unreadable sidecar".into());
+    };
+    if side.version != ibl_core::TOOL_VERSION {
+        return Some(format!("made by version {}", side.version));
+    }
+    if side.options_hash != options_hash(key) {
+        return Some("options changed".into());
+    }
+    let in_name = input
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    if side.input_name != in_name
+        || side.input_len != in_meta.len()
+        || side.input_modified_ns != modified_ns(&in_meta)
+    {
+        return Some("input changed".into());
+    }
+    if side.output_len != out_meta.len() {
+        return Some("output changed since it was made".into());
+    }
+    if modified_ns(&out_meta) < modified_ns(&in_meta) {
+        return Some("output older than input".into());
+    }
+    None
+}
+
+/// Sorted entries of a folder: (sub-folders, files). Hidden entries are left out and
+/// symbolic links to folders are not followed (no cycles).
+fn list(dir: &Path) -> std::io::Result<(Vec<PathBuf>, Vec<PathBuf>)> {
+    let mut dirs = Vec::new();
+    let mut files = Vec::new();
+    for e in std::fs::read_dir(dir)? {
+        let e = e?;
+        let name = e.file_name();
+        if name.to_string_lossy().starts_with('.') {
+            continue;
+        }
+        let ft = e.file_type()?;
+        if ft.is_dir() {
+            dirs.push(e.path());
+        } else if ft.is_file() || (ft.is_symlink() && e.path().is_file()) {
+            files.push(e.path());
+        }
+    }
+    dirs.sort();
+    files.sort();
+    Ok((dirs, files))
+}
+
+/// Walks `root` and decides, for every folder holding a file that matches the input name,
+/// whether to convert, skip or fail it. Jobs come in path order.
+pub fn plan(params: &Params, root: &Path) -> Result<Vec<Job>> {
+    validate(params)?;
+    if !root.is_dir() {
+        return Err(Error::invalid(
+            root,
+            "not a folder (--batch takes the folder of material folders)",
+        )
+        .into());
+    }
+    let key = params.output_key();
+    let mut jobs = Vec::new();
+    let mut stack = vec![root.to_path_buf()];
+    while let Some(dir) = stack.pop() {
+        let (dirs, files) = match list(&dir) {
+            Ok(l) => l,
+            Err(e) if dir == root => return Err(Error::io(root, e).into()),
+            Err(e) => {
+                jobs.push(Job {
+                    input: dir.clone(),
+                    output: dir.join(&params.output_name),
+                    action: Action::Fail(format!("cannot list folder: {e}")),
+                    reason: String::new(),
+                });
+                continue;
+            }
+        };
+        stack.extend(dirs.into_iter().rev());
+        let output = dir.join(&params.output_name);
+        let inputs: Vec<&PathBuf> = files
+            .iter()
+            .filter(|f| {
+                f.file_name()
+                    .is_some_and(|n| glob_match(&params.input_name, &n.to_string_lossy()))
+            })
+            .filter(|f| **f != output)
+            .collect();
+        match inputs.as_slice() {
+            [] => {}
+            [input] => {
+                let (action, reason) = match (params.force, stale_reason(input, &output, &key)) {
+                    (true, _) => (Action::Convert, "forced".to_string()),
+                    (false, Some(r)) => (Action::Convert, r),
+                    (false, None) => (Action::Skip, "up to date".to_string()),
+                };
+                jobs.push(Job {
+                    input: input.to_path_buf(),
+                    output,
+                    action,
+                    reason,
+                });
+            }
+            many => {
+                let names: Vec<String> = many
+                    .iter()
+                    .filter_map(|p| p.file_name())
+                    .map(|n| n.to_string_lossy().into_owned())
+                    .collect();
+                jobs.push(Job {
+                    input: dir.clone(),
+                    output,
+                    action: Action::Fail(format!(
+                        "{} files match '{}': {}",
+                        many.len(),
+                        params.input_name,
+                        names.join(", ")
+                    )),
+                    reason: String::new(),
+                });
+            }
+        }
+    }
+    jobs.sort_by(|a, b| a.input.cmp(&b.input));
+    Ok(jobs)
+}
+
+/// A converted material.
+#[derive(Clone, Debug, Serialize)]
+pub struct Converted {
+    pub input: PathBuf,
+    pub output: PathBuf,
+    pub stats: ConvertStats,
+    pub check: Option<CheckReport>,
+    pub warnings: Vec<String>,
+}
+
+/// A material that could not be converted.
+#[derive(Clone, Debug, Serialize)]
+pub struct Failed {
+    pub input: PathBuf,
+    /// The one-line error, naming the file.
+    pub error: String,
+    #[serde(skip)]
+    pub class: ErrorClass,
+}
+
+/// What a batch did.
+#[derive(Clone, Debug, Serialize)]
+pub struct BatchReport {
+    pub root: PathBuf,
+    pub converted: Vec<Converted>,
+    pub skipped: Vec<PathBuf>,
+    pub failed: Vec<Failed>,
+}
+
+impl BatchReport {
+    pub fn total(&self) -> usize {
+        self.converted.len() + self.skipped.len() + self.failed.len()
+    }
+
+    pub fn summary(&self) -> String {
+        format!(
+            "{}: {} converted, {} skipped (up to date), {} failed",
+            self.root.display(),
+            self.converted.len(),
+            self.skipped.len(),
+            self.failed.len()
+        )
+    }
+
+    /// The error to exit with when anything failed (class of the first failure).
+    pub fn error(&self) -> Option<MaterialError> {
+        let first = self.failed.first()?;
+        Some(MaterialError::BatchFailed {
+            root: self.root.clone(),
+            total: self.total(),
+            converted: self.converted.len(),
+            skipped: self.skipped.len(),
+            failed: self.failed.len(),
+            first: first.error.clone(),
+            class: first.class,
+        })
+    }
+}
+
+/// Converts one material: read, convert, encode, write the output then its sidecar.
+fn convert_one(
+    params: &Params,
+    key: &serde_json::Value,
+    input: &Path,
+    output: &Path,
+) -> Result<Converted> {
+    let normal = normal::load(input)?;
+    let baked = quat_map::run(params, &normal, output, &NoProgress)?;
+    drop(normal);
+    let output_len = baked.files[0].1.len() as u64;
+    io::write_many_atomic(&baked.files)?;
+    // The input's metadata after reading it: a file replaced meanwhile is caught next time.
+    let in_meta = std::fs::metadata(input).map_err(|e| Error::io(input, e))?;
+    let side = Sidecar {
+        tool: "quat-map".into(),
+        version: ibl_core::TOOL_VERSION.into(),
+        options_hash: options_hash(key),
+        options: key.clone(),
+        input_name: input
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default(),
+        input_len: in_meta.len(),
+        input_modified_ns: modified_ns(&in_meta),
+        output_len,
+    };
+    io::data::write(&sidecar_path(output), &side)?;
+    let mut warnings = baked.stats.warnings(input);
+    if let Some(c) = &baked.check {
+        if !c.within_bounds() {
+            warnings.push(format!(
+                "{}: check outside the quantisation bound: {}",
+                output.display(),
+                c.summary()
+            ));
+        }
+    }
+    Ok(Converted {
+        input: input.to_path_buf(),
+        output: output.to_path_buf(),
+        stats: baked.stats,
+        check: baked.check,
+        warnings,
+    })
+}
+
+/// Plans and runs a batch over `root`: converts in parallel, reports converted / skipped /
+/// failed. A failing file never stops the others; the caller turns
+/// [`BatchReport::error`] into a non-zero exit.
+pub fn run(params: &Params, root: &Path, progress: &dyn Progress) -> Result<BatchReport> {
+    let jobs = plan(params, root)?;
+    let key = params.output_key();
+    let todo = jobs.iter().filter(|j| j.action == Action::Convert).count();
+    progress.start("materials", todo as u64);
+    enum Outcome {
+        Done(Box<Converted>),
+        Skipped(PathBuf),
+        Failed(Failed),
+    }
+    let outcomes: Vec<Outcome> = jobs
+        .par_iter()
+        .with_max_len(1)
+        .map(|job| match &job.action {
+            Action::Skip => Outcome::Skipped(job.output.clone()),
+            Action::Fail(why) => Outcome::Failed(Failed {
+                input: job.input.clone(),
+                error: format!("{}: {why}", job.input.display()),
+                class: ErrorClass::InvalidInput,
+            }),
+            Action::Convert => {
+                let r = convert_one(params, &key, &job.input, &job.output);
+                progress.inc(1);
+                match r {
+                    Ok(c) => Outcome::Done(Box::new(c)),
+                    Err(e) => {
+                        let mut msg = ibl_core_error_chain(&e);
+                        let shown = job.input.display().to_string();
+                        if !msg.contains(&shown) {
+                            msg = format!("{shown}: {msg}");
+                        }
+                        Outcome::Failed(Failed {
+                            input: job.input.clone(),
+                            error: msg,
+                            class: e.class(),
+                        })
+                    }
+                }
+            }
+        })
+        .collect();
+    progress.finish();
+    let mut report = BatchReport {
+        root: root.to_path_buf(),
+        converted: Vec::new(),
+        skipped: Vec::new(),
+        failed: Vec::new(),
+    };
+    for o in outcomes {
+        match o {
+            Outcome::Done(c) => report.converted.push(*c),
+            Outcome::Skipped(p) => report.skipped.push(p),
+            Outcome::Failed(f) => report.failed.push(f),
+        }
+    }
+    Ok(report)
+}
+
+/// "outer: cause" on one line (as the binaries print errors).
+fn ibl_core_error_chain(e: &dyn std::error::Error) -> String {
+    let mut s = e.to_string();
+    let mut src = e.source();
+    while let Some(c) = src {
+        let t = c.to_string();
+        if !s.contains(&t) {
+            s.push_str(": ");
+            s.push_str(&t);
+        }
+        src = c.source();
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::fs;
+
+    #[test]
+    fn glob_matches_like_a_shell() {
+        assert!(glob_match("normal.*", "normal.png"));
+        assert!(glob_match("normal.*", "Normal.PNG"));
+        assert!(!glob_match("normal.*", "normals.png"));
+        assert!(glob_match("*_n.png", "brick_wall_n.png"));
+        assert!(glob_match("n?rmal.*", "nOrmal.exr"));
+        assert!(glob_match("*", "x"));
+        assert!(!glob_match("a*b", "acbd"));
+        assert!(glob_match("a*b*c", "aXbYbZc"));
+    }
+
+    #[test]
+    fn batch_fields_are_validated() {
+        let p: Params =
+            ron::from_str("(output_name: \"q.exr\", y_down: true, half: true)").unwrap();
+        assert!(validate(&p).is_ok() && p.y_down);
+        assert!(validate(&Params {
+            output_name: "a/b.png".into(),
+            ..Default::default()
+        })
+        .is_err());
+        assert!(validate(&Params {
+            output_name: "normal.png".into(),
+            ..Default::default()
+        })
+        .is_err());
+        assert!(validate(&Params {
+            output_name: "q.tga".into(),
+            ..Default::default()
+        })
+        .is_err());
+        assert!(validate(&Params {
+            input_name: "".into(),
+            ..Default::default()
+        })
+        .is_err());
+    }
+
+    fn write_normal(path: &Path, n: usize, tilt: f32) {
+        let mut img = ibl_core::Image::new(n, n, 3);
+        for (k, px) in img.data.chunks_mut(3).enumerate() {
+            let x = tilt * ((k % n) as f32 / n as f32 - 0.5);
+            let len = (x * x + 1.0).sqrt();
+            px.copy_from_slice(&[x / len * 0.5 + 0.5, 0.5, 1.0 / len * 0.5 + 0.5]);
+        }
+        io::write_image(
+            path,
+            &img,
+            &io::WriteOptions {
+                png_bits: 8,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+    }
+
+    #[test]
+    fn plan_convert_skip_and_change_detection() {
+        let dir = tempfile::tempdir().unwrap();
+        let root = dir.path();
+        for m in ["a", "b", "nested/c"] {
+            fs::create_dir_all(root.join(m)).unwrap();
+            write_normal(&root.join(m).join("normal.png"), 8, 1.0);
+        }
+        fs::create_dir_all(root.join("empty")).unwrap();
+        fs::create_dir_all(root.join(".hidden")).unwrap();
+        write_normal(&root.join(".hidden/normal.png"), 4, 1.0);
+        let p = Params::default();
+        let r = run(&p, root, &NoProgress).unwrap();
+        assert_eq!(
+            (r.converted.len(), r.skipped.len(), r.failed.len()),
+            (3, 0, 0),
+            "{r:?}"
+        );
+        assert!(root.join("nested/c/quaternion.png").is_file());
+        assert!(root.join("nested/c/.quaternion.png.opts").is_file());
+        // Second run: everything up to date.
+        let r = run(&p, root, &NoProgress).unwrap();
+        assert_eq!((r.converted.len(), r.skipped.len()), (0, 3));
+        // Other options convert again; forcing converts again.
+        let p8 = Params {
+            bits: 8,
+            ..Default::default()
+        };
+        let jobs = plan(&p8, root).unwrap();
+        assert!(
+            jobs.iter()
+                .all(|j| j.action == Action::Convert && j.reason == "options changed"),
+            "{jobs:?}"
+        );
+        // `check` changes nothing in the output: still up to date.
+        let pc = Params {
+            check: true,
+            ..Default::default()
+        };
+        assert!(plan(&pc, root)
+            .unwrap()
+            .iter()
+            .all(|j| j.action == Action::Skip));
+        let forced = plan(
+            &Params {
+                force: true,
+                ..Default::default()
+            },
+            root,
+        )
+        .unwrap();
+        assert!(forced.iter().all(|j| j.action == Action::Convert));
+        // A replaced input (different bytes) converts; a damaged output converts.
+        write_normal(&root.join("a/normal.png"), 8, 2.0);
+        fs::write(root.join("b/quaternion.png"), b"oops").unwrap();
+        let jobs = plan(&p, root).unwrap();
+        let reasons: Vec<&str> = jobs.iter().map(|j| j.reason.as_str()).collect();
+        assert_eq!(
+            reasons,
+            [
+                "input changed",
+                "output changed since it was made",
+                "up to date"
+            ]
+        );
+        // Two candidate inputs in one folder: that folder fails, the rest runs.
+        write_normal(&root.join("nested/c/normal.exr"), 4, 1.0);
+        let r = run(&p, root, &NoProgress).unwrap();
+        assert_eq!(
+            (r.converted.len(), r.skipped.len(), r.failed.len()),
+            (2, 0, 1)
+        );
+        assert!(
+            r.failed[0].error.contains("2 files match"),
+            "{}",
+            r.failed[0].error
+        );
+        let e = r.error().unwrap();
+        eprintln!("{e}");
+        assert!(e.to_string().contains("1 of 3 material(s) failed"));
+    }
+
+    #[test]
+    fn a_missing_root_is_an_error() {
+        assert!(run(
+            &Params::default(),
+            Path::new("/nonexistent/materials"),
+            &NoProgress
+        )
+        .is_err());
+    }
+}

@@ -1,0 +1,114 @@
+//! `quat-map`: parse, call `ibl_material::quat_map` for one file or `ibl_material::batch` for a
+//! folder of materials, write, report.
+
+use clap::Parser;
+use ibl_material::{batch, normal, quat_map, MaterialError};
+use std::path::PathBuf;
+
+/// Normal map → quaternion map (thesis 004 §3.4): per texel the shortest rotation q = a + b·i + c·j
+/// taking +z to the normal, stored as RGB = q·0.5 + 0.5 (16-bit PNG by default, or EXR).
+/// A shader rebuilds the whole perturbed frame from it: t' = (a²+b²−c², 2bc, 2ac),
+/// b' = (2bc, a²−b²+c², −2ab), n' = (−2ac, 2ab, a²−b²−c²).
+///
+/// With --batch DIR every folder under DIR holding normal.* gets quaternion.png beside it;
+/// outputs that are newer than their input and made with the same options are skipped
+/// (recorded in a hidden sidecar .quaternion.png.opts).
+#[derive(Parser)]
+#[command(version, about)]
+struct Cli {
+    /// Input normal map (.png 8/16-bit, .jpg, .exr), read as linear data.
+    #[arg(required_unless_present = "batch", conflicts_with = "batch")]
+    input: Option<PathBuf>,
+    /// Output quaternion map (.png or .exr).
+    #[arg(
+        short,
+        long,
+        required_unless_present = "batch",
+        conflicts_with = "batch"
+    )]
+    output: Option<PathBuf>,
+    /// Convert every material folder under DIR (material/normal.* → material/quaternion.png).
+    #[arg(long, value_name = "DIR")]
+    batch: Option<PathBuf>,
+    #[command(flatten)]
+    params: quat_map::Params,
+    #[command(flatten)]
+    common: ibl_cli::CommonArgs,
+}
+
+fn main() {
+    let cli = Cli::parse();
+    ibl_cli::run(
+        "quat-map",
+        cli.common.clone(),
+        |ctx| -> Result<_, MaterialError> {
+            let params = &cli.params;
+            if let Some(root) = &cli.batch {
+                let report = batch::run(params, root, ctx.progress())?;
+                for c in &report.converted {
+                    c.warnings.iter().for_each(|w| ctx.warn(w.clone()));
+                    if let Some(check) = &c.check {
+                        ctx.info(format!("{}: {}", c.output.display(), check.summary()));
+                    }
+                }
+                for f in &report.failed {
+                    eprintln!("quat-map: failed: {}", f.error);
+                }
+                ctx.info(report.summary());
+                if let Some(e) = report.error() {
+                    if ctx.common.json {
+                        println!(
+                            "{}",
+                            serde_json::to_string_pretty(&report).unwrap_or_default()
+                        );
+                    }
+                    return Err(e);
+                }
+                let outputs = report
+                    .converted
+                    .iter()
+                    .map(|c| c.output.display().to_string())
+                    .collect();
+                return Ok((outputs, serde_json::to_value(&report).unwrap_or_default()));
+            }
+            if !params.batch_fields_are_default() {
+                return Err(ibl_core::Error::param(
+                    "--input-name, --output-name and --force apply to --batch only",
+                )
+                .into());
+            }
+            let (Some(input), Some(output)) = (&cli.input, &cli.output) else {
+                return Err(ibl_core::Error::param("give NORMAL -o OUT, or --batch DIR").into());
+            };
+            params.validate_output(output)?;
+            let normal = normal::load(input)?;
+            let baked = quat_map::run(params, &normal, output, ctx.progress())?;
+            baked
+                .stats
+                .warnings(input)
+                .into_iter()
+                .for_each(|w| ctx.warn(w));
+            ibl_core::io::write_many_atomic(&baked.files)?;
+            if let Some(check) = &baked.check {
+                if check.within_bounds() {
+                    ctx.info(check.summary());
+                } else {
+                    ctx.warn(format!(
+                        "{}: outside the quantisation bound: {}",
+                        output.display(),
+                        check.summary()
+                    ));
+                }
+            }
+            let outputs = baked
+                .files
+                .iter()
+                .map(|f| f.0.display().to_string())
+                .collect();
+            Ok((
+                outputs,
+                serde_json::json!({ "stats": baked.stats, "check": baked.check }),
+            ))
+        },
+    )
+}

@@ -1,0 +1,341 @@
+//! End-to-end: the real `quat-map` binary on the fixtures and on generated material folders.
+
+use ibl_core::io::{read_image, ColorSpace};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+const BIN: &str = env!("CARGO_BIN_EXE_quat-map");
+
+fn fixture(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fixtures/normals")
+        .join(name)
+}
+
+fn run(args: &[&str]) -> Output {
+    Command::new(BIN).args(args).output().expect("binary runs")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn png_bit_depth(p: &Path) -> u8 {
+    std::fs::read(p).unwrap()[24]
+}
+
+/// The thesis's n' = (−2ac, 2ab, a²−b²−c²) and the erratum-corrected b', computed here
+/// independently of the library from the decoded texels.
+fn frame(q: [f64; 3]) -> [[f64; 3]; 3] {
+    let [a, b, c] = q;
+    [
+        [a * a + b * b - c * c, 2.0 * b * c, 2.0 * a * c],
+        [2.0 * b * c, a * a - b * b + c * c, -2.0 * a * b],
+        [-2.0 * a * c, 2.0 * a * b, a * a - b * b - c * c],
+    ]
+}
+
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// (max angle between n' and the input normal, max Gram error, min det) over all texels.
+fn measure(input: &Path, output: &Path, y_down: bool) -> (f64, f64, f64) {
+    let n_img = read_image(input, ColorSpace::Linear).unwrap();
+    let q_img = read_image(output, ColorSpace::Linear).unwrap();
+    assert_eq!((n_img.width, n_img.height), (q_img.width, q_img.height));
+    let (mut max_angle, mut max_gram, mut min_det) = (0.0f64, 0.0f64, f64::MAX);
+    for (t, s) in n_img
+        .data
+        .chunks(n_img.channels)
+        .zip(q_img.data.chunks(q_img.channels))
+    {
+        let mut n = [0, 1, 2].map(|k| 2.0 * t[k] as f64 - 1.0);
+        if y_down {
+            n[1] = -n[1];
+        }
+        let len = dot(n, n).sqrt();
+        if len < 0.01 {
+            continue;
+        }
+        let q = [0, 1, 2].map(|k| 2.0 * s[k] as f64 - 1.0);
+        let f = frame(q);
+        let np = f[2];
+        let cos = dot(np, n) / (dot(np, np).sqrt() * len);
+        let cr = [
+            np[1] * n[2] - np[2] * n[1],
+            np[2] * n[0] - np[0] * n[2],
+            np[0] * n[1] - np[1] * n[0],
+        ];
+        let sin = dot(cr, cr).sqrt() / (dot(np, np).sqrt() * len);
+        max_angle = max_angle.max(sin.atan2(cos));
+        for i in 0..3 {
+            for j in 0..3 {
+                let want = if i == j { 1.0 } else { 0.0 };
+                max_gram = max_gram.max((dot(f[i], f[j]) - want).abs());
+            }
+        }
+        let c = [
+            f[0][1] * f[1][2] - f[0][2] * f[1][1],
+            f[0][2] * f[1][0] - f[0][0] * f[1][2],
+            f[0][0] * f[1][1] - f[0][1] * f[1][0],
+        ];
+        min_det = min_det.min(dot(c, f[2]));
+    }
+    (max_angle, max_gram, min_det)
+}
+
+#[test]
+fn converts_fixtures_within_the_bit_depth_bound() {
+    let dir = tempfile::tempdir().unwrap();
+    for (bits, bound) in [(16u8, 5.286e-5), (8, 1.3585e-2)] {
+        for name in ["0000.png", "0003_256.png", "0008_128.png"] {
+            let out = dir.path().join(format!("{name}.{bits}.png"));
+            let o = run(&[
+                fixture(name).to_str().unwrap(),
+                "-o",
+                out.to_str().unwrap(),
+                "--bits",
+                &bits.to_string(),
+                "--quiet",
+            ]);
+            assert!(o.status.success(), "{}", stderr(&o));
+            assert_eq!(png_bit_depth(&out), bits);
+            let (angle, gram, det) = measure(&fixture(name), &out, false);
+            eprintln!("{name} {bits}-bit: n' max error {angle:.3e} rad (bound {bound:.3e}), Gram error {gram:.3e}, min det {det:.6}");
+            assert!(angle <= bound + 1e-6, "{angle}");
+            // Gram error of the raw |q|²·R frame: (1 + √3·eps)⁴ − 1.
+            let eps = 1.0 / ((1u32 << bits) - 1) as f64;
+            assert!(
+                gram <= (1.0 + 3f64.sqrt() * eps).powi(4) - 1.0 + 1e-6,
+                "{gram}"
+            );
+            assert!(det > 0.9);
+        }
+    }
+}
+
+#[test]
+fn check_json_exr_and_y_down() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("q.exr");
+    let o = run(&[
+        fixture("0008_128.png").to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--check",
+        "--json",
+        "--half",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let check = &j["details"]["check"];
+    let (err, bound) = (
+        check["max_angle_error_rad"].as_f64().unwrap(),
+        check["angle_bound_rad"].as_f64().unwrap(),
+    );
+    eprintln!("--check on half EXR: {err:.3e} rad, bound {bound:.3e}");
+    assert!(err <= bound && check["left_handed"] == 0);
+    assert_eq!(j["details"]["stats"]["texels"], 128 * 128);
+    let (angle, _, _) = measure(&fixture("0008_128.png"), &out, false);
+    assert!(
+        (angle - err).abs() < 1e-6,
+        "independent {angle} vs --check {err}"
+    );
+    // --y-down: measured against the flipped normal it is as accurate.
+    let down = dir.path().join("d.png");
+    let o = run(&[
+        fixture("0008_128.png").to_str().unwrap(),
+        "-o",
+        down.to_str().unwrap(),
+        "--y-down",
+        "-q",
+    ]);
+    assert!(o.status.success());
+    let (angle, _, _) = measure(&fixture("0008_128.png"), &down, true);
+    assert!(angle <= 5.3e-5, "{angle}");
+}
+
+#[test]
+fn bad_inputs_fail_with_one_line_and_the_right_code() {
+    let dir = tempfile::tempdir().unwrap();
+    let truncated = dir.path().join("broken.png");
+    let bytes = std::fs::read(fixture("0008_128.png")).unwrap();
+    std::fs::write(&truncated, &bytes[..bytes.len() / 3]).unwrap();
+    let grey = dir.path().join("grey.png");
+    ibl_core::io::write_image(&grey, &ibl_core::Image::new(4, 4, 1), &Default::default()).unwrap();
+    let out = dir.path().join("q.png");
+    let o = out.to_str().unwrap();
+    let fx = fixture("0008_128.png");
+    let fx = fx.to_str().unwrap();
+    let cases: [(Vec<&str>, i32, &str); 7] = [
+        (vec![truncated.to_str().unwrap(), "-o", o], 2, "broken.png"),
+        (
+            vec!["/nonexistent/normal.png", "-o", o],
+            4,
+            "/nonexistent/normal.png",
+        ),
+        (vec![grey.to_str().unwrap(), "-o", o], 3, "single channel"),
+        (vec![fx, "-o", o, "--bits", "12"], 2, "--bits 12"),
+        (vec![fx, "-o", "q.hdr"], 3, ".png or .exr"),
+        (vec![fx, "-o", o, "--force"], 2, "--batch only"),
+        (vec![fx], 2, "--output"),
+    ];
+    for (args, code, needle) in cases {
+        let r = run(&args);
+        let e = stderr(&r);
+        eprintln!("{args:?} → {} {}", r.status.code().unwrap_or(-1), e.trim());
+        assert_eq!(r.status.code(), Some(code), "{args:?}: {e}");
+        assert!(e.contains(needle), "{args:?}: {e}");
+        if code != 2 || !needle.starts_with("--output") {
+            assert_eq!(e.trim().lines().count(), 1, "{e}");
+        }
+        assert!(!e.contains("panicked"));
+    }
+    assert!(!out.exists());
+}
+
+fn batch_json(root: &Path, extra: &[&str]) -> (Output, serde_json::Value) {
+    let mut args = vec!["--batch", root.to_str().unwrap(), "--json", "-q"];
+    args.extend_from_slice(extra);
+    let o = run(&args);
+    let j = serde_json::from_slice(&o.stdout).unwrap_or(serde_json::Value::Null);
+    (o, j)
+}
+
+fn counts(j: &serde_json::Value) -> [usize; 3] {
+    let r = if j.get("details").is_some() {
+        &j["details"]
+    } else {
+        j
+    };
+    ["converted", "skipped", "failed"]
+        .map(|k| r[k].as_array().map(|a| a.len()).unwrap_or(usize::MAX))
+}
+
+#[test]
+fn batch_converts_skips_and_isolates_a_broken_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("textures");
+    let good = [
+        ("brick", "0000.png"),
+        ("metal", "0003_256.png"),
+        ("cloth/worn", "0008_128.png"),
+    ];
+    for (m, f) in good {
+        std::fs::create_dir_all(root.join(m)).unwrap();
+        std::fs::copy(fixture(f), root.join(m).join("normal.png")).unwrap();
+        std::fs::write(root.join(m).join("albedo.jpg"), b"not looked at").unwrap();
+    }
+    // A material whose normal map is truncated, and an environment folder without one.
+    std::fs::create_dir_all(root.join("broken")).unwrap();
+    let bytes = std::fs::read(fixture("0003_256.png")).unwrap();
+    std::fs::write(root.join("broken/Normal.PNG"), &bytes[..bytes.len() / 2]).unwrap();
+    std::fs::create_dir_all(root.join("studio_env")).unwrap();
+
+    let (o, j) = batch_json(&root, &[]);
+    eprintln!("first run: {}", stderr(&o));
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert_eq!(counts(&j), [3, 0, 1]);
+    let err = stderr(&o);
+    assert!(
+        err.contains("failed:") && err.contains("broken/Normal.PNG"),
+        "{err}"
+    );
+    assert!(
+        err.lines()
+            .last()
+            .unwrap()
+            .contains("1 of 4 material(s) failed"),
+        "{err}"
+    );
+    for (m, f) in good {
+        let q = root.join(m).join("quaternion.png");
+        assert!(q.is_file() && root.join(m).join(".quaternion.png.opts").is_file());
+        let (angle, _, _) = measure(&fixture(f), &q, false);
+        assert!(angle <= 5.3e-5, "{m}: {angle}");
+    }
+    assert!(!root.join("broken/quaternion.png").exists());
+    assert!(!root.join("studio_env/quaternion.png").exists());
+
+    // Second run: the good ones are skipped, the broken one fails again.
+    let before = std::fs::metadata(root.join("brick/quaternion.png"))
+        .unwrap()
+        .modified()
+        .unwrap();
+    let (o, j) = batch_json(&root, &[]);
+    assert_eq!(o.status.code(), Some(2));
+    assert_eq!(counts(&j), [0, 3, 1]);
+    assert_eq!(
+        std::fs::metadata(root.join("brick/quaternion.png"))
+            .unwrap()
+            .modified()
+            .unwrap(),
+        before
+    );
+
+    // Repair the broken file: only it converts; then everything is skipped and the run succeeds.
+    std::fs::copy(fixture("0003_256.png"), root.join("broken/Normal.PNG")).unwrap();
+    let (o, j) = batch_json(&root, &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(counts(&j), [1, 3, 0]);
+    let (o, j) = batch_json(&root, &[]);
+    assert!(o.status.success());
+    assert_eq!(counts(&j), [0, 4, 0]);
+
+    // Other options convert everything again (and the sidecar records them).
+    let (o, j) = batch_json(&root, &["--bits", "8"]);
+    assert!(o.status.success());
+    assert_eq!(counts(&j), [4, 0, 0]);
+    assert_eq!(png_bit_depth(&root.join("metal/quaternion.png")), 8);
+    let side: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(root.join("metal/.quaternion.png.opts")).unwrap())
+            .unwrap();
+    assert_eq!(side["options"]["bits"], 8);
+    // Nothing but outputs and sidecars was added; no temporary files left behind.
+    let names: Vec<String> = std::fs::read_dir(root.join("metal"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(names.len(), 4, "{names:?}");
+}
+
+#[test]
+fn batch_root_errors() {
+    let (o, _) = batch_json(Path::new("/nonexistent/textures"), &[]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("not a folder"));
+    let dir = tempfile::tempdir().unwrap();
+    let (o, _) = batch_json(dir.path(), &["--output-name", "q.tga"]);
+    assert_eq!(o.status.code(), Some(3), "{}", stderr(&o));
+}
+
+#[test]
+fn two_channel_grey_alpha_png() {
+    // x in grey, y in alpha (a BC5 map saved as grey+alpha): a 45° tilt towards +y.
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("bc5.png");
+    let s = std::f32::consts::FRAC_1_SQRT_2;
+    let img = ibl_core::Image::from_data(1, 1, 2, vec![0.5, s * 0.5 + 0.5]).unwrap();
+    ibl_core::io::write_image(&input, &img, &Default::default()).unwrap();
+    let out = dir.path().join("q.exr");
+    let o = run(&[input.to_str().unwrap(), "-o", out.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(3), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--two-channel"));
+    let o = run(&[
+        input.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--two-channel",
+        "-q",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let q = read_image(&out, ColorSpace::Linear).unwrap();
+    let q = [0, 1, 2].map(|k| 2.0 * q.data[k] as f64 - 1.0);
+    // Tilt of 45° towards +y: a = cos 22.5°, b = sin 22.5°, c = 0.
+    let (sn, cs) = 22.5f64.to_radians().sin_cos();
+    assert!(
+        (q[0] - cs).abs() < 1e-4 && (q[1] - sn).abs() < 1e-4 && q[2].abs() < 1e-4,
+        "{q:?}"
+    );
+}

@@ -1,0 +1,219 @@
+//! End-to-end: the real `tpr-map` binary, its outputs checked against closed forms.
+
+use ibl_core::io::{read_image, write_image, ColorSpace, WriteOptions};
+use ibl_core::Image;
+use std::f64::consts::PI;
+use std::path::Path;
+use std::process::{Command, Output};
+
+const BIN: &str = env!("CARGO_BIN_EXE_tpr-map");
+
+fn run(args: &[&str]) -> Output {
+    Command::new(BIN).args(args).output().expect("binary runs")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn tangent(img: &Image, i: usize, j: usize) -> [f64; 2] {
+    let t = img.texel(i, j);
+    [2.0 * t[0] as f64 - 1.0, 2.0 * t[1] as f64 - 1.0]
+}
+
+#[test]
+fn radial_preset_against_circle_tangents() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("pan.png");
+    let o = run(&[
+        "-o",
+        out.to_str().unwrap(),
+        "--size",
+        "64x32",
+        "--preset",
+        "radial:0.25,0.5",
+        "--roughness",
+        "0.2,0.6",
+        "-q",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let img = read_image(&out, ColorSpace::Linear).unwrap();
+    assert_eq!((img.width, img.height, img.channels), (64, 32, 4));
+    assert_eq!(std::fs::read(&out).unwrap()[24], 16, "16-bit PNG");
+    let mut worst = 0.0f64;
+    for j in 0..32 {
+        for i in 0..64 {
+            // Offset from the centre in pixels, +y up the image.
+            let (px, py) = (i as f64 + 0.5 - 16.0, -(j as f64 + 0.5 - 16.0));
+            let r = px.hypot(py);
+            let want = [-py / r, px / r];
+            let t = tangent(&img, i, j);
+            worst = worst
+                .max((t[0] - want[0]).abs())
+                .max((t[1] - want[1]).abs());
+            let rough = img.texel(i, j);
+            assert!((rough[2] - 0.2).abs() < 1e-4 && (rough[3] - 0.6).abs() < 1e-4);
+        }
+    }
+    eprintln!(
+        "radial: max |t − closed form| = {worst:.2e} (16-bit step {:.2e})",
+        1.0 / 65535.0
+    );
+    assert!(worst <= 1.0 / 65535.0 + 1e-6);
+}
+
+#[test]
+fn wave_preset_equals_the_thesis_expression_and_its_closed_form() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = dir.path().join("a.exr");
+    let b = dir.path().join("b.exr");
+    assert!(run(&[
+        "-o",
+        a.to_str().unwrap(),
+        "--size",
+        "16x24",
+        "--preset",
+        "wave",
+        "-q"
+    ])
+    .status
+    .success());
+    let o = run(&[
+        "-o",
+        b.to_str().unwrap(),
+        "--size",
+        "16x24",
+        "--expr",
+        "x = cos(pi*v); y = sin(pi*v)",
+        "-q",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
+    let img = read_image(&a, ColorSpace::Linear).unwrap();
+    let mut worst = 0.0f64;
+    for j in 0..24 {
+        let v = (j as f64 + 0.5) / 24.0;
+        for i in 0..16 {
+            let t = tangent(&img, i, j);
+            worst = worst
+                .max((t[0] - (PI * v).cos()).abs())
+                .max((t[1] - (PI * v).sin()).abs());
+        }
+    }
+    eprintln!("wave (EXR float): max error {worst:.2e}");
+    assert!(worst < 1e-6);
+}
+
+#[test]
+fn angle_map_and_roughness_map() {
+    let dir = tempfile::tempdir().unwrap();
+    let angles = dir.path().join("angles.png");
+    let mut a = Image::new(8, 4, 1);
+    for (k, v) in a.data.iter_mut().enumerate() {
+        *v = (k * 8) as f32 / 255.0;
+    }
+    write_image(
+        &angles,
+        &a,
+        &WriteOptions {
+            png_bits: 8,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let rough = dir.path().join("rough.png");
+    write_image(
+        &rough,
+        &Image::from_data(1, 1, 3, vec![0.25, 0.75, 0.0]).unwrap(),
+        &WriteOptions::default(),
+    )
+    .unwrap();
+    let out = dir.path().join("t.exr");
+    let o = run(&[
+        "-o",
+        out.to_str().unwrap(),
+        "--angle-map",
+        angles.to_str().unwrap(),
+        "--roughness-map",
+        rough.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(j["details"]["stats"]["width"], 8);
+    let img = read_image(&out, ColorSpace::Linear).unwrap();
+    for k in 0..32 {
+        let theta = (k * 8) as f64 / 255.0 * PI;
+        let t = tangent(&img, k % 8, k / 8);
+        assert!(
+            (t[0] - theta.cos()).abs() < 1e-6 && (t[1] - theta.sin()).abs() < 1e-6,
+            "{k}"
+        );
+        let r = img.texel(k % 8, k / 8);
+        assert!((r[2] - 0.25).abs() < 1e-4 && (r[3] - 0.75).abs() < 1e-4);
+    }
+}
+
+#[test]
+fn fallbacks_are_reported_and_errors_are_one_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("t.png");
+    let o = out.to_str().unwrap();
+    // 5×5 radial: the centre texel has no direction.
+    let r = run(&["-o", o, "--size", "5", "--preset", "radial", "--json"]);
+    assert!(r.status.success());
+    let j: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
+    assert_eq!(j["details"]["stats"]["zero_length"], 1);
+    assert!(j["warnings"][0].as_str().unwrap().contains("zero-length"));
+    let missing = Path::new("/nonexistent/a.png");
+    let cases: [(Vec<&str>, i32, &str); 7] = [
+        (
+            vec!["-o", o, "--size", "8", "--expr", "x = cos(pi*v; y = 0"],
+            2,
+            "--expr: column 13",
+        ),
+        (
+            vec![
+                "-o",
+                o,
+                "--size",
+                "8",
+                "--preset",
+                "wave",
+                "--roughness-expr",
+                "rx = 0.5; ry = q",
+            ],
+            2,
+            "--roughness-expr: column 16",
+        ),
+        (
+            vec!["-o", o, "--size", "8"],
+            2,
+            "exactly one direction source",
+        ),
+        (vec!["-o", o, "--preset", "wave"], 2, "--size"),
+        (
+            vec!["-o", o, "--size", "8", "--preset", "swirl"],
+            2,
+            "unknown preset",
+        ),
+        (
+            vec!["-o", o, "--angle-map", missing.to_str().unwrap()],
+            4,
+            "/nonexistent/a.png",
+        ),
+        (
+            vec!["-o", "t.jpg", "--size", "8", "--preset", "wave"],
+            3,
+            ".png or .exr",
+        ),
+    ];
+    for (args, code, needle) in cases {
+        let r = run(&args);
+        let e = stderr(&r);
+        eprintln!("{args:?} → {} {}", r.status.code().unwrap_or(-1), e.trim());
+        assert_eq!(r.status.code(), Some(code), "{args:?}: {e}");
+        assert!(e.contains(needle), "{args:?}: {e}");
+        assert!(!e.contains("panicked"));
+    }
+}
