@@ -20,11 +20,12 @@ demo: build
 	fi
 	@echo "demo outputs are in $(OUT)/"
 
-# Workspace tests (unit, stress and end-to-end), then clippy and rustfmt.
+# Workspace tests (unit, stress and end-to-end), then clippy and rustfmt. Tests run in the
+# release profile so that `make test`, `make demo` and `make bench-quick` share one build.
 test: unit lint fmt-check
 
 unit:
-	$(CARGO) test --workspace
+	$(CARGO) test --release --workspace
 
 lint:
 	$(CARGO) clippy --workspace --all-targets -- -D warnings
@@ -40,6 +41,10 @@ bench:
 
 bench-quick:
 	scripts/bench.sh --quick
+
+# Coverage-guided fuzzing of every parser for a bounded time (FUZZ_SECONDS per target).
+fuzz:
+	scripts/fuzz.sh
 
 clean:
 	rm -rf $(OUT)

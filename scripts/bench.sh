@@ -9,7 +9,9 @@ mkdir -p bench
 for ex in $(ls crates/*/examples/bench.rs 2>/dev/null); do
 	crate=$(basename "$(dirname "$(dirname "$ex")")")
 	echo "== $crate"
-	cargo run --release -q -p "$crate" --example bench -- $quick
+	# Each crate names its example bench-<crate>: identical example names would share one
+	# output path under target/release/examples and could run the wrong harness.
+	cargo run --release -q -p "$crate" --example "bench-$crate" -- $quick
 done
 {
 	echo "# Benchmark report"

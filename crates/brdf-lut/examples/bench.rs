@@ -4,7 +4,7 @@
 //! latter through the direct formulas and through float and 8-bit half-vector LUTs), plus
 //! the half-vector LUT bake itself.
 //!
-//! `cargo build --release -p brdf-lut && cargo run --release -p brdf-lut --example bench -- [--quick]`
+//! `cargo build --release -p brdf-lut && cargo run --release -p brdf-lut --example bench-brdf-lut -- [--quick]`
 //! Writes bench/brdf-lut.md and bench/brdf-lut.svg under the workspace root.
 
 use ibl_brdf::AshikhminShirley;

@@ -1,7 +1,7 @@
 //! Benchmark of the foundation bakes: equirect → cube (area vs bilinear, time against error
 //! to a dense reference), SH projection and the exact irradiance convolution, with the work
 //! counted and throughput set beside the memory-bandwidth bound.
-//! `cargo run --release -p ibl-env --example bench -- [--quick]` → bench/foundation.md
+//! `cargo run --release -p ibl-env --example bench-ibl-env -- [--quick]` → bench/foundation.md
 
 use ibl_core::cube::Face;
 use ibl_core::equirect::{self, Filter};

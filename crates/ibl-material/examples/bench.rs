@@ -3,7 +3,7 @@
 //! write), the share of each stage, and the error of n' decoded from the written map against
 //! the input normal (and against the analytic normal of the synthetic surface).
 //!
-//! `cargo run --release -p ibl-material --example bench -- [--quick]` → bench/material.md
+//! `cargo run --release -p ibl-material --example bench-ibl-material -- [--quick]` → bench/material.md
 
 use ibl_core::io::{self, ColorSpace, WriteOptions};
 use ibl_core::progress::NoProgress;

@@ -2,7 +2,7 @@
 //! fit time breakdown, the §5.1 win-rate table on the fixtures, the ablation of what was tried
 //! to lift it, and MSE for P orders 2–6 × Q orders 1–3 (paper 002 Fig. 8).
 //!
-//! cargo run --release -p ibl-shexp --example bench -- [--quick]
+//! cargo run --release -p ibl-shexp --example bench-ibl-shexp -- [--quick]
 
 use ibl_core::envmap::load_environment;
 use ibl_core::progress::NoProgress;
@@ -44,7 +44,7 @@ fn main() {
     );
     let _ = writeln!(
         md,
-        "`cargo run --release -p ibl-shexp --example bench{}` on {} thread(s). Fixtures: {} (equirect → natural cube size). Cases: 2 materials × {} views × {} roughnesses r = {:?} (α = r²) per environment; sphere {}², ground truth by exact summation over a {}² cube.\n",
+        "`cargo run --release -p ibl-shexp --example bench-ibl-shexp{}` on {} thread(s). Fixtures: {} (equirect → natural cube size). Cases: 2 materials × {} views × {} roughnesses r = {:?} (α = r²) per environment; sphere {}², ground truth by exact summation over a {}² cube.\n",
         if quick { " -- --quick" } else { "" },
         rayon::current_num_threads(),
         fixtures.join(", "),
