@@ -1,0 +1,595 @@
+//! `bake`: plans, runs and cleans RON bake pipelines (see `ibl_pipeline`).
+
+use clap::{Parser, Subcommand, ValueEnum};
+use ibl_core::error::{Classify, ErrorClass};
+use ibl_core::progress::Progress;
+use ibl_pipeline::exec::{self, Observer, RunReport, StageResult, Status};
+use ibl_pipeline::graph::{Graph, Source};
+use ibl_pipeline::plan::{Decision, Plan};
+use ibl_pipeline::scene::Need;
+use ibl_pipeline::{kinds, ninja, paths, Error};
+use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+
+/// Runs declarative RON bake pipelines: only what changed, only what the scene needs, in
+/// parallel, through the same library functions as the bakes' CLIs.
+///
+/// Relative paths in a pipeline are relative to the pipeline file's folder.
+#[derive(Parser)]
+#[command(name = "bake", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Print the stage graph and, for every stage, whether it runs and why.
+    Plan {
+        /// The pipeline (.ron).
+        file: PathBuf,
+        /// Plan as if every needed stage had to run.
+        #[arg(long)]
+        force: bool,
+        /// Print the plan as JSON on stdout.
+        #[arg(long)]
+        json: bool,
+        /// Write the graph in another form instead: a ninja file whose edges are the bakes'
+        /// CLIs, or a Graphviz dot graph.
+        #[arg(long, value_enum)]
+        emit: Option<Emit>,
+        /// Where to write the emitted file (default: build.ninja / stdout for dot).
+        #[arg(short, long)]
+        output: Option<PathBuf>,
+        /// Folder of the bake binaries the ninja edges call (default: this binary's folder).
+        #[arg(long)]
+        bin_dir: Option<PathBuf>,
+    },
+    /// Run the pipeline: independent stages in parallel, unchanged ones skipped.
+    Run {
+        file: PathBuf,
+        /// Stages run at once (default: the number of cores).
+        #[arg(short, long, value_name = "N")]
+        jobs: Option<usize>,
+        /// Re-run every needed stage even if up to date.
+        #[arg(long)]
+        force: bool,
+        /// Print the summary as JSON on stdout.
+        #[arg(long)]
+        json: bool,
+        /// No progress and no per-stage lines on stderr.
+        #[arg(short, long)]
+        quiet: bool,
+    },
+    /// Remove what the pipeline produced and its cache.
+    Clean {
+        file: PathBuf,
+        #[arg(long)]
+        json: bool,
+    },
+    /// List the stage kinds this build knows, with their parameters and defaults.
+    Kinds {
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum Emit {
+    Ninja,
+    Dot,
+}
+
+fn exit_code(class: ErrorClass) -> i32 {
+    match class {
+        ErrorClass::InvalidInput => 2,
+        ErrorClass::Unsupported => 3,
+        ErrorClass::Io => 4,
+    }
+}
+
+fn main() {
+    let cli = Cli::parse();
+    let code = match run(cli) {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("bake: error: {e}");
+            exit_code(e.class())
+        }
+    };
+    std::process::exit(code)
+}
+
+fn run(cli: Cli) -> Result<i32, Error> {
+    match cli.cmd {
+        Cmd::Kinds { json } => {
+            print_kinds(json);
+            Ok(0)
+        }
+        Cmd::Plan {
+            file,
+            force,
+            json,
+            emit,
+            output,
+            bin_dir,
+        } => {
+            let graph = ibl_pipeline::load(&file)?;
+            match emit {
+                Some(Emit::Ninja) => {
+                    let out = output.unwrap_or_else(|| PathBuf::from("build.ninja"));
+                    let bin_dir = bin_dir
+                        .or_else(|| {
+                            std::env::current_exe()
+                                .ok()
+                                .and_then(|p| p.parent().map(Path::to_path_buf))
+                        })
+                        .unwrap_or_else(|| PathBuf::from("."));
+                    let text = ninja::emit(&graph, &out, &paths::absolute(&bin_dir))?;
+                    ibl_core::io::write_atomic(&out, text.as_bytes())?;
+                    eprintln!(
+                        "bake: wrote {} ({} edges); run it with `ninja -C {}`",
+                        out.display(),
+                        text.matches("\nbuild ").count(),
+                        out.parent()
+                            .filter(|p| !p.as_os_str().is_empty())
+                            .unwrap_or(Path::new("."))
+                            .display()
+                    );
+                    Ok(0)
+                }
+                Some(Emit::Dot) => {
+                    let text = dot(&graph);
+                    match output {
+                        Some(out) => ibl_core::io::write_atomic(&out, text.as_bytes())?,
+                        None => print!("{text}"),
+                    }
+                    Ok(0)
+                }
+                None => {
+                    let plan = ibl_pipeline::plan::plan(&graph, force)?;
+                    if json {
+                        println!(
+                            "{}",
+                            serde_json::to_string_pretty(&plan_json(&graph, &plan))
+                                .expect("plan serialises")
+                        );
+                    } else {
+                        print_plan(&graph, &plan);
+                    }
+                    Ok(0)
+                }
+            }
+        }
+        Cmd::Run {
+            file,
+            jobs,
+            force,
+            json,
+            quiet,
+        } => {
+            let graph = ibl_pipeline::load(&file)?;
+            let session = exec::Session::open(&graph)?;
+            let plan = ibl_pipeline::plan::plan(&graph, force)?;
+            let jobs = jobs.unwrap_or_else(|| {
+                std::thread::available_parallelism()
+                    .map(|n| n.get())
+                    .unwrap_or(1)
+            });
+            let show = !quiet && !json;
+            let work = plan.stages.iter().filter(|p| p.decision.is_work()).count();
+            let term = Term::new(show && std::io::stderr().is_terminal(), show, work);
+            let report = exec::run(&session, &graph, plan, jobs, &term)?;
+            drop(session);
+            term.clear();
+            if json {
+                println!(
+                    "{}",
+                    serde_json::to_string_pretty(&report).expect("report serialises")
+                );
+            } else {
+                print_report(&report);
+            }
+            Ok(if report.failed() { 1 } else { 0 })
+        }
+        Cmd::Clean { file, json } => {
+            let graph = ibl_pipeline::load(&file)?;
+            let session = exec::Session::open(&graph)?;
+            let report = exec::clean(session, &graph)?;
+            if json {
+                println!(
+                    "{}",
+                    serde_json::to_string_pretty(&report).expect("report serialises")
+                );
+            } else {
+                println!(
+                    "bake: removed {} file(s){} under {}",
+                    report.removed.len(),
+                    if report.cache.is_some() {
+                        " and the cache"
+                    } else {
+                        ""
+                    },
+                    graph.pipeline.output.display()
+                );
+            }
+            Ok(0)
+        }
+    }
+}
+
+fn reads_text(graph: &Graph, i: usize) -> String {
+    let s = &graph.stages[i];
+    if s.reads.is_empty() {
+        return "-".into();
+    }
+    s.reads
+        .iter()
+        .map(|(n, _)| n.as_str())
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// Prints rows as aligned columns (the last one unpadded).
+fn table(rows: &[Vec<String>]) {
+    let cols = rows.iter().map(|r| r.len()).max().unwrap_or(0);
+    let widths: Vec<usize> = (0..cols)
+        .map(|c| {
+            rows.iter()
+                .filter_map(|r| r.get(c))
+                .map(|s| s.chars().count())
+                .max()
+                .unwrap_or(0)
+        })
+        .collect();
+    for r in rows {
+        let mut line = String::new();
+        for (c, cell) in r.iter().enumerate() {
+            if c + 1 == r.len() {
+                line.push_str(cell);
+            } else {
+                line.push_str(&format!("{cell:<w$}  ", w = widths[c]));
+            }
+        }
+        println!("{}", line.trim_end());
+    }
+}
+
+fn print_plan(graph: &Graph, plan: &Plan) {
+    let count = |f: fn(&Decision) -> bool| plan.stages.iter().filter(|p| f(&p.decision)).count();
+    println!(
+        "pipeline {} -> {}",
+        graph.pipeline.file.display(),
+        graph.pipeline.output.display()
+    );
+    println!(
+        "{} stages: {} to run, {} to restore from the cache, {} up to date, {} not needed\n",
+        graph.stages.len(),
+        count(|d| matches!(d, Decision::Run(_))),
+        count(|d| matches!(d, Decision::Restore(_))),
+        count(|d| matches!(d, Decision::UpToDate)),
+        count(|d| matches!(d, Decision::Skip(_))),
+    );
+    let mut rows = vec![vec![
+        "STAGE".into(),
+        "KIND".into(),
+        "READS".into(),
+        "ACTION".into(),
+        "WHY".into(),
+    ]];
+    for (i, (s, p)) in graph.stages.iter().zip(&plan.stages).enumerate() {
+        let mut why = p.decision.reason().to_string();
+        if let (Need::Needed(need), true) = (
+            &s.need,
+            p.decision.is_work() || p.decision == Decision::UpToDate,
+        ) {
+            if need != "declared" {
+                why.push_str(&format!(" [{need}]"));
+            }
+        }
+        rows.push(vec![
+            s.id.clone(),
+            s.kind_name.clone(),
+            reads_text(graph, i),
+            p.decision.word().into(),
+            why,
+        ]);
+    }
+    table(&rows);
+    if !plan.orphans.is_empty() {
+        println!(
+            "\nno longer in the pipeline (outputs kept until `bake clean`): {}",
+            plan.orphans.join(", ")
+        );
+    }
+}
+
+fn plan_json(graph: &Graph, plan: &Plan) -> serde_json::Value {
+    let stages: Vec<serde_json::Value> = graph
+        .stages
+        .iter()
+        .zip(&plan.stages)
+        .enumerate()
+        .map(|(i, (s, p))| {
+            let outputs = s.runnable().filter(|_| s.needed()).and_then(|(k, params)| k.outputs(params, &graph.input_args(i), &s.dir).ok()).unwrap_or_default();
+            serde_json::json!({
+                "id": s.id,
+                "kind": s.kind_name,
+                "reads": s.reads.iter().map(|(n, src)| serde_json::json!({"name": n, "type": if matches!(src, Source::Stage(_)) {"stage"} else {"input"}})).collect::<Vec<_>>(),
+                "dir": s.dir,
+                "origin": format!("{:?}", s.origin).to_lowercase(),
+                "needed": s.needed(),
+                "need": match &s.need { Need::Needed(w) | Need::NotNeeded(w) => w.clone() },
+                "action": match p.decision { Decision::Run(_) => "run", Decision::Restore(_) => "restore", Decision::UpToDate => "up-to-date", Decision::Skip(_) => "skip" },
+                "reason": p.decision.reason(),
+                "key": p.key,
+                "params": s.params.as_ref().map(|p| p.canonical()),
+                "outputs": outputs,
+            })
+        })
+        .collect();
+    serde_json::json!({ "pipeline": graph.pipeline.file, "output": graph.pipeline.output, "stages": stages, "orphans": plan.orphans })
+}
+
+fn dot(graph: &Graph) -> String {
+    let mut s = String::from(
+        "digraph bake {\n  rankdir=LR;\n  node [shape=box, fontname=\"monospace\"];\n",
+    );
+    for name in graph.inputs.keys() {
+        s.push_str(&format!(
+            "  \"input:{name}\" [label=\"{name}\", shape=note];\n"
+        ));
+    }
+    for (i, st) in graph.stages.iter().enumerate() {
+        let style = if st.needed() {
+            ""
+        } else {
+            ", style=dashed, color=gray"
+        };
+        s.push_str(&format!(
+            "  \"{}\" [label=\"{}\\n({})\"{style}];\n",
+            st.id, st.id, st.kind_name
+        ));
+        for (n, src) in &graph.stages[i].reads {
+            let from = match src {
+                Source::Input(_) => format!("input:{n}"),
+                Source::Stage(_) => n.clone(),
+            };
+            s.push_str(&format!("  \"{from}\" -> \"{}\";\n", st.id));
+        }
+    }
+    s.push_str("}\n");
+    s
+}
+
+fn print_report(r: &RunReport) {
+    let mut rows = vec![vec![
+        "STAGE".into(),
+        "KIND".into(),
+        "STATUS".into(),
+        "TIME".into(),
+        "OUTPUTS".into(),
+    ]];
+    for s in &r.stages {
+        let time = if matches!(s.status, Status::Ran | Status::Restored | Status::Failed) {
+            format!("{:.2} s", s.seconds)
+        } else {
+            "-".into()
+        };
+        let outputs = match s.status {
+            Status::Ran | Status::Restored | Status::UpToDate => outputs_text(&s.outputs),
+            _ => s.reason.clone(),
+        };
+        rows.push(vec![
+            s.id.clone(),
+            s.kind.clone(),
+            s.status.word().into(),
+            time,
+            outputs,
+        ]);
+    }
+    table(&rows);
+    println!(
+        "\n{} ran, {} restored, {} up to date, {} skipped, {} failed, {} blocked in {:.2} s",
+        r.count(Status::Ran),
+        r.count(Status::Restored),
+        r.count(Status::UpToDate),
+        r.count(Status::Skipped),
+        r.count(Status::Failed),
+        r.count(Status::Blocked),
+        r.seconds
+    );
+    for s in r.stages.iter().filter(|s| s.status == Status::Failed) {
+        eprintln!("bake: error: stage '{}': {}", s.id, s.reason);
+    }
+}
+
+/// "6 files in out/probe/cube" or the single file.
+fn outputs_text(outputs: &[PathBuf]) -> String {
+    match outputs {
+        [] => "-".into(),
+        [one] => one.display().to_string(),
+        many => {
+            let first = many[0].parent().unwrap_or(Path::new("."));
+            if many.iter().all(|p| p.parent() == Some(first)) {
+                format!("{} files in {}", many.len(), first.display())
+            } else {
+                format!("{} files under {}", many.len(), common_dir(many).display())
+            }
+        }
+    }
+}
+
+fn common_dir(ps: &[PathBuf]) -> PathBuf {
+    let mut c = ps[0].parent().unwrap_or(Path::new(".")).to_path_buf();
+    while !ps.iter().all(|p| p.starts_with(&c)) {
+        if !c.pop() {
+            break;
+        }
+    }
+    c
+}
+
+/// Progress bars per running stage on a terminal; one line per finished stage otherwise.
+struct Term {
+    multi: Option<MultiProgress>,
+    /// Stages done out of the stages with work, above the per-stage bars.
+    overall: Option<ProgressBar>,
+    lines: bool,
+}
+
+impl Term {
+    fn new(bars: bool, lines: bool, work: usize) -> Self {
+        let multi = bars.then(MultiProgress::new);
+        let overall = multi.as_ref().filter(|_| work > 0).map(|m| {
+            let b = m.add(ProgressBar::new(work as u64));
+            b.set_style(
+                ProgressStyle::with_template("{msg:<36} {pos}/{len} stages, {elapsed}")
+                    .expect("static template"),
+            );
+            b.set_message("bake");
+            b
+        });
+        Term {
+            multi,
+            overall,
+            lines,
+        }
+    }
+    fn clear(&self) {
+        if let Some(b) = &self.overall {
+            b.finish_and_clear();
+        }
+        if let Some(m) = &self.multi {
+            let _ = m.clear();
+        }
+    }
+    fn line(&self, s: String) {
+        match &self.multi {
+            Some(m) => {
+                let _ = m.println(s);
+            }
+            None => eprintln!("{s}"),
+        }
+    }
+}
+
+impl Observer for Term {
+    fn started(&self, id: &str, decision: &Decision) {
+        if self.lines && self.multi.is_none() {
+            eprintln!(
+                "bake: {} {id} ({})",
+                if matches!(decision, Decision::Restore(_)) {
+                    "restoring"
+                } else {
+                    "running"
+                },
+                decision.reason()
+            );
+        }
+    }
+    fn progress(&self, id: &str) -> Box<dyn Progress + '_> {
+        match &self.multi {
+            Some(m) => {
+                let bar = m.add(ProgressBar::new(0));
+                bar.set_style(
+                    ProgressStyle::with_template("{msg:<36} [{bar:30}] {percent:>3}% {eta}")
+                        .expect("static template")
+                        .progress_chars("=> "),
+                );
+                bar.set_message(id.to_string());
+                Box::new(Bar {
+                    bar,
+                    id: id.to_string(),
+                })
+            }
+            None => Box::new(ibl_core::progress::NoProgress),
+        }
+    }
+    fn finished(&self, r: &StageResult) {
+        let work = matches!(
+            r.status,
+            Status::Ran | Status::Restored | Status::Failed | Status::Blocked
+        );
+        if let (Some(b), true) = (&self.overall, work) {
+            b.inc(1);
+        }
+        if self.lines && work {
+            let detail = if r.status == Status::Failed || r.status == Status::Blocked {
+                r.reason.clone()
+            } else {
+                format!("{:.2} s", r.seconds)
+            };
+            self.line(format!("bake: {:<10} {} ({detail})", r.status.word(), r.id));
+            for w in &r.warnings {
+                self.line(format!("bake: warning: {}: {w}", r.id));
+            }
+        }
+    }
+}
+
+struct Bar {
+    bar: ProgressBar,
+    id: String,
+}
+
+impl Progress for Bar {
+    fn start(&self, label: &str, total: u64) {
+        self.bar.reset();
+        self.bar.set_length(total);
+        self.bar.set_message(format!("{}: {label}", self.id));
+    }
+    fn inc(&self, n: u64) {
+        self.bar.inc(n);
+    }
+}
+
+impl Drop for Bar {
+    fn drop(&mut self) {
+        self.bar.finish_and_clear();
+    }
+}
+
+fn print_kinds(json: bool) {
+    let all = kinds::all();
+    if json {
+        let v: Vec<serde_json::Value> = all
+            .iter()
+            .map(|k| serde_json::json!({"kind": k.name(), "command": k.command(), "reads": k.reads().describe(), "summary": k.summary(), "defaults": k.default_params().canonical()}))
+            .collect();
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&v).expect("kinds serialise")
+        );
+        return;
+    }
+    for k in all {
+        println!(
+            "{:<18} {} ({}; CLI: {})",
+            k.name(),
+            k.summary(),
+            k.reads().describe(),
+            k.command().join(" ")
+        );
+        if let serde_json::Value::Object(m) = k.default_params().canonical() {
+            let ps: Vec<String> = k
+                .param_names()
+                .iter()
+                .map(|n| {
+                    format!(
+                        "{n}: {}",
+                        m.get(n)
+                            .map(|v| if v.is_null() {
+                                "none".to_string()
+                            } else {
+                                v.to_string()
+                            })
+                            .unwrap_or_default()
+                    )
+                })
+                .collect();
+            println!("{:<18} params: ({})", "", ps.join(", "));
+        }
+    }
+}

@@ -1,0 +1,789 @@
+//! End-to-end tests: the real `bake` binary on temporary copies of pipelines and fixtures.
+
+use serde_json::Value;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::time::{Duration, Instant};
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+/// A temporary workspace laid out like the real one (pipelines/, fixtures/, out/).
+struct Work {
+    dir: tempfile::TempDir,
+}
+
+impl Work {
+    fn new() -> Self {
+        Work {
+            dir: tempfile::tempdir().unwrap(),
+        }
+    }
+    fn path(&self, rel: &str) -> PathBuf {
+        self.dir.path().join(rel)
+    }
+    /// Copies a file or folder of the real workspace to the same place here.
+    fn copy(&self, rel: &str) {
+        copy_tree(&root().join(rel), &self.path(rel));
+    }
+    fn write(&self, rel: &str, text: &str) {
+        let p = self.path(rel);
+        std::fs::create_dir_all(p.parent().unwrap()).unwrap();
+        std::fs::write(p, text).unwrap();
+    }
+    fn cmd(&self, args: &[&str]) -> Command {
+        let mut c = Command::new(env!("CARGO_BIN_EXE_bake"));
+        c.args(args)
+            .current_dir(self.dir.path())
+            .env_remove("IBL_BAKE_TEST_DELAY_MS");
+        c
+    }
+    fn bake(&self, args: &[&str]) -> Output {
+        self.cmd(args).output().unwrap()
+    }
+    /// `bake run FILE --json`: stage id → status, asserting success.
+    fn run_ok(&self, file: &str, extra: &[&str]) -> BTreeMap<String, String> {
+        let mut args = vec!["run", file, "--json"];
+        args.extend(extra);
+        let out = self.bake(&args);
+        assert!(
+            out.status.success(),
+            "bake run failed: {}\n{}",
+            String::from_utf8_lossy(&out.stderr),
+            String::from_utf8_lossy(&out.stdout)
+        );
+        statuses(&out)
+    }
+}
+
+fn copy_tree(from: &Path, to: &Path) {
+    if from.is_dir() {
+        for e in std::fs::read_dir(from).unwrap() {
+            let e = e.unwrap();
+            copy_tree(&e.path(), &to.join(e.file_name()));
+        }
+    } else {
+        std::fs::create_dir_all(to.parent().unwrap()).unwrap();
+        std::fs::copy(from, to).unwrap();
+    }
+}
+
+fn statuses(out: &Output) -> BTreeMap<String, String> {
+    let v: Value = serde_json::from_slice(&out.stdout)
+        .unwrap_or_else(|e| panic!("{e}: {}", String::from_utf8_lossy(&out.stdout)));
+    v["stages"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| {
+            (
+                s["id"].as_str().unwrap().to_string(),
+                s["status"].as_str().unwrap().to_string(),
+            )
+        })
+        .collect()
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+/// Every file under `dir` (relative paths), `.bake/` excluded.
+fn files_under(dir: &Path) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        let Ok(rd) = std::fs::read_dir(&d) else {
+            continue;
+        };
+        for e in rd.flatten() {
+            let p = e.path();
+            let rel = p.strip_prefix(dir).unwrap().to_string_lossy().into_owned();
+            if rel == ".bake" {
+                continue;
+            }
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                out.push(rel);
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+fn ids_with(st: &BTreeMap<String, String>, status: &str) -> Vec<String> {
+    st.iter()
+        .filter(|(_, s)| *s == status)
+        .map(|(id, _)| id.clone())
+        .collect()
+}
+
+/// A small pipeline of two independent chains, cheap to run.
+const CHAINS: &str = r#"Pipeline(
+    output: "out",
+    inputs: { "a": File("a.exr"), "b": File("b.exr") },
+    stages: [
+        (id: "a1", kind: "equirect-to-cube", reads: ["a"], params: (size: 16)),
+        (id: "a2", kind: "equirect-to-cube", reads: ["a1"], params: (size: 8)),
+        (id: "b1", kind: "equirect-to-cube", reads: ["b"], params: (size: 16, layout: ktx2)),
+        (id: "b2", kind: "irradiance", reads: ["b1"], params: (size: 4)),
+    ],
+)"#;
+
+fn chains() -> Work {
+    let w = Work::new();
+    std::fs::copy(root().join("fixtures/hdri/studio_256.exr"), w.path("a.exr")).unwrap();
+    std::fs::copy(root().join("fixtures/hdri/sunset_256.exr"), w.path("b.exr")).unwrap();
+    w.write("p.ron", CHAINS);
+    w
+}
+
+#[test]
+fn probe_example_runs_then_a_second_run_does_no_work() {
+    let w = Work::new();
+    w.copy("pipelines/probe.ron");
+    w.copy("fixtures/hdri/city_512.exr");
+    let t = Instant::now();
+    let st = w.run_ok("pipelines/probe.ron", &[]);
+    eprintln!("first run of probe.ron: {:.2} s", t.elapsed().as_secs_f64());
+    assert_eq!(
+        ids_with(&st, "ran"),
+        ["cube", "dfg", "irradiance", "prefiltered", "shexp"]
+    );
+    for f in [
+        "cube/px.exr",
+        "cube/nz.exr",
+        "prefiltered/m0_px.exr",
+        "prefiltered/prefilter.json",
+        "irradiance/sh.json",
+        "irradiance/py.exr",
+        "dfg/dfg.exr",
+        "shexp/shexp.json",
+    ] {
+        assert!(w.path("out/probe").join(f).is_file(), "{f} missing");
+    }
+    let t = Instant::now();
+    let st = w.run_ok("pipelines/probe.ron", &[]);
+    eprintln!(
+        "second run of probe.ron: {:.3} s",
+        t.elapsed().as_secs_f64()
+    );
+    assert!(st.values().all(|s| s == "up-to-date"), "{st:?}");
+    // The human summary says so for every stage too.
+    let out = w.bake(&["run", "pipelines/probe.ron"]);
+    let text = stdout(&out);
+    assert_eq!(
+        text.lines()
+            .filter(|l| l.contains("  up to date  "))
+            .count(),
+        5,
+        "{text}"
+    );
+    assert!(text.contains("0 ran, 0 restored, 5 up to date"), "{text}");
+    // From another folder, the same pipeline is the same pipeline (paths are relative to it).
+    let out = Command::new(env!("CARGO_BIN_EXE_bake"))
+        .args(["plan", "probe.ron"])
+        .current_dir(w.path("pipelines"))
+        .output()
+        .unwrap();
+    assert_eq!(
+        stdout(&out)
+            .lines()
+            .filter(|l| l.ends_with("up to date"))
+            .count(),
+        5,
+        "{}",
+        stdout(&out)
+    );
+}
+
+#[test]
+fn a_changed_input_or_parameter_reruns_exactly_what_is_downstream() {
+    let w = chains();
+    let st = w.run_ok("p.ron", &[]);
+    assert_eq!(ids_with(&st, "ran"), ["a1", "a2", "b1", "b2"]);
+    // New bytes for input b.
+    std::fs::copy(
+        root().join("fixtures/hdri/interior_256.exr"),
+        w.path("b.exr"),
+    )
+    .unwrap();
+    let plan = stdout(&w.bake(&["plan", "p.ron"]));
+    assert!(
+        plan.lines()
+            .any(|l| l.starts_with("b1 ") && l.contains("run") && l.contains("input 'b' changed")),
+        "{plan}"
+    );
+    assert!(
+        plan.lines()
+            .any(|l| l.starts_with("b2 ") && l.contains("upstream 'b1' changed")),
+        "{plan}"
+    );
+    let st = w.run_ok("p.ron", &[]);
+    assert_eq!(ids_with(&st, "ran"), ["b1", "b2"]);
+    assert_eq!(ids_with(&st, "up-to-date"), ["a1", "a2"]);
+    // One parameter of a2.
+    let text = CHAINS.replace("params: (size: 8)", "params: (size: 4)");
+    w.write("p.ron", &text);
+    let plan = stdout(&w.bake(&["plan", "p.ron"]));
+    assert!(plan.contains("parameters changed: size 8 -> 4"), "{plan}");
+    let st = w.run_ok("p.ron", &[]);
+    assert_eq!(ids_with(&st, "ran"), ["a2"]);
+    // Back to the old value: the cache still has those outputs.
+    w.write("p.ron", CHAINS);
+    let st = w.run_ok("p.ron", &[]);
+    assert_eq!(ids_with(&st, "restored"), ["a2"]);
+    assert_eq!(ids_with(&st, "ran"), Vec::<String>::new());
+}
+
+#[test]
+fn outputs_deleted_or_edited_by_hand_are_rebuilt() {
+    let w = chains();
+    w.run_ok("p.ron", &[]);
+    let px = std::fs::read(w.path("out/a1/px.exr")).unwrap();
+    let sh = std::fs::read(w.path("out/b2/sh.json")).unwrap();
+    std::fs::remove_file(w.path("out/a1/px.exr")).unwrap();
+    std::fs::remove_dir_all(w.path("out/b2")).unwrap();
+    std::fs::write(w.path("out/a2/nx.exr"), b"edited by hand").unwrap();
+    let plan = stdout(&w.bake(&["plan", "p.ron"]));
+    assert!(plan.contains("outputs missing: px.exr"), "{plan}");
+    assert!(plan.contains("outputs modified: nx.exr"), "{plan}");
+    let st = w.run_ok("p.ron", &[]);
+    assert_eq!(ids_with(&st, "up-to-date"), ["b1"]);
+    assert_eq!(std::fs::read(w.path("out/a1/px.exr")).unwrap(), px);
+    assert_eq!(std::fs::read(w.path("out/b2/sh.json")).unwrap(), sh);
+    assert_ne!(
+        std::fs::read(w.path("out/a2/nx.exr")).unwrap(),
+        b"edited by hand"
+    );
+    // With the cache gone too, they are baked again.
+    std::fs::remove_dir_all(w.path("out/.bake/objects")).unwrap();
+    std::fs::remove_file(w.path("out/a1/px.exr")).unwrap();
+    let st = w.run_ok("p.ron", &[]);
+    assert_eq!(ids_with(&st, "ran"), ["a1"]);
+    assert_eq!(std::fs::read(w.path("out/a1/px.exr")).unwrap(), px);
+}
+
+#[test]
+fn the_scene_decides_what_is_baked_and_plan_says_why() {
+    let w = Work::new();
+    w.copy("pipelines/anisotropic-scene.ron");
+    w.copy("pipelines/materials");
+    w.copy("fixtures/hdri/interior_256.exr");
+    w.copy("fixtures/hdri/sunset_256.exr");
+    let out = w.bake(&["plan", "pipelines/anisotropic-scene.ron"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let plan = stdout(&out);
+    eprintln!("{plan}");
+    let line = |id: &str| {
+        plan.lines()
+            .find(|l| l.starts_with(&format!("{id} ")))
+            .unwrap_or_else(|| panic!("no line for {id}:\n{plan}"))
+            .to_string()
+    };
+    let runs = |id: &str| line(id).contains(" run ");
+    for id in [
+        "lobby/cube",
+        "lobby/irradiance",
+        "lobby/prefilter",
+        "sky/cube",
+        "sky/irradiance",
+        "sky/shexp",
+        "dfg",
+        "fresnel-tail",
+    ] {
+        assert!(runs(id), "{}", line(id));
+    }
+    assert!(line("lobby/prefilter").contains("split-sum up to roughness 0.5"));
+    assert!(
+        line("sky/prefilter").contains("skip")
+            && line("sky/prefilter")
+                .contains("not needed by the scene: probe 'sky' is served by SH-exp")
+    );
+    assert!(line("lobby/shexp")
+        .contains("not needed by the scene: probe 'lobby' is served by split-sum"));
+    // One hv-lut and one size/bias table per distinct (n_u, n_v).
+    let hv: Vec<&str> = plan.lines().filter(|l| l.starts_with("hv-lut/")).collect();
+    assert_eq!(hv.len(), 2, "{hv:?}");
+    assert!(
+        runs("hv-lut/100x10")
+            && runs("hv-lut/1000x20")
+            && runs("as-size-bias/100x10")
+            && runs("as-size-bias/1000x20")
+    );
+    assert!(line("hv-lut/100x10").contains("'brushed-steel', 'satin'"));
+    // Quaternion maps only for anisotropic bump-mapped materials.
+    assert!(runs("brushed-steel/quat-map") && runs("frying-pan/quat-map"));
+    assert!(line("painted-metal/quat-map")
+        .contains("not needed by the scene: material 'painted-metal' is isotropic GGX"));
+    assert!(line("satin/quat-map")
+        .contains("not needed by the scene: material 'satin' is not bump-mapped"));
+    assert!(line("satin/tpr-map").contains("has no TPR map") && runs("frying-pan/tpr-map"));
+
+    // And the run bakes exactly that.
+    let t = Instant::now();
+    let st = w.run_ok("pipelines/anisotropic-scene.ron", &[]);
+    eprintln!("scene run: {:.2} s", t.elapsed().as_secs_f64());
+    assert_eq!(
+        ids_with(&st, "skipped"),
+        [
+            "lobby/shexp",
+            "painted-metal/quat-map",
+            "painted-metal/tpr-map",
+            "satin/quat-map",
+            "satin/tpr-map",
+            "sky/prefilter"
+        ]
+    );
+    let out = w.path("out/anisotropic-scene");
+    assert!(!out.join("sky/prefilter").exists());
+    // 32² chain with levels at r = 0, 0.5, 1: max roughness 0.5 keeps two.
+    let chain: Vec<String> = files_under(&out.join("lobby/prefilter"))
+        .into_iter()
+        .filter(|f| f.ends_with("_px.exr"))
+        .collect();
+    assert_eq!(chain, ["m0_px.exr", "m1_px.exr"]);
+    assert!(out.join("brushed-steel/quat-map/quaternion.png").is_file());
+    assert!(
+        out.join("hv-lut/1000x20/hv.exr").is_file() && out.join("hv-lut/1000x20/hv.json").is_file()
+    );
+    let st = w.run_ok("pipelines/anisotropic-scene.ron", &[]);
+    assert_eq!(ids_with(&st, "ran"), Vec::<String>::new());
+}
+
+#[test]
+fn materials_example_converts_every_material_folder() {
+    let w = Work::new();
+    w.copy("pipelines/materials.ron");
+    w.copy("pipelines/materials");
+    let st = w.run_ok("pipelines/materials.ron", &[]);
+    assert_eq!(ids_with(&st, "ran").len(), 3, "{st:?}");
+    let files = files_under(&w.path("out/materials"));
+    assert_eq!(
+        files,
+        [
+            "brushed-steel-tpr/tpr.png",
+            "frying-pan-tpr/tpr.png",
+            "quaternions/brushed-steel/quaternion.png",
+            "quaternions/frying-pan/quaternion.png",
+            "quaternions/painted-metal/quaternion.png"
+        ]
+    );
+    // A new material folder: only the quaternion stage runs again.
+    w.copy("pipelines/materials/frying-pan/normal.png");
+    copy_tree(
+        &w.path("pipelines/materials/frying-pan"),
+        &w.path("pipelines/materials/wok"),
+    );
+    let st = w.run_ok("pipelines/materials.ron", &[]);
+    assert_eq!(ids_with(&st, "ran"), ["quaternions"]);
+    assert!(w
+        .path("out/materials/quaternions/wok/quaternion.png")
+        .is_file());
+}
+
+#[test]
+fn a_malformed_pipeline_is_reported_with_line_and_column() {
+    let w = chains();
+    w.write("bad.ron", "Pipeline(\n    output: \"out\",\n    stages: [(id: \"a\" kind: \"equirect-to-cube\")],\n)\n");
+    let out = w.bake(&["run", "bad.ron"]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = stderr(&out);
+    eprintln!("{err}");
+    assert!(err.starts_with("bake: error: bad.ron:3:"), "{err}");
+    assert!(
+        err.contains("(id: \"a\" kind: \"equirect-to-cube\")") && err.contains('^'),
+        "the offending text is shown: {err}"
+    );
+    assert!(!w.path("out").exists(), "nothing ran");
+    // Unknown kinds and parameters, all at once, each with the valid names.
+    w.write("bad.ron", "(\n  inputs: {\"a\": File(\"a.exr\")},\n  stages: [\n    (id: \"x\", kind: \"equirect2cube\", reads: [\"a\"]),\n    (id: \"y\", kind: \"equirect-to-cube\", reads: [\"a\"], params: (sise: 8)),\n  ],\n)\n");
+    let err = stderr(&w.bake(&["plan", "bad.ron"]));
+    eprintln!("{err}");
+    assert!(err.contains("bad.ron:4:21: stage 'x': unknown kind 'equirect2cube' (valid kinds: equirect-to-cube, irradiance"), "{err}");
+    assert!(
+        err.contains("bad.ron:5:64:") && err.contains("`sise`") && err.contains("`size`"),
+        "{err}"
+    );
+    assert!(err.contains("2 problems found; nothing was run"), "{err}");
+}
+
+#[test]
+fn a_cycle_is_printed() {
+    let w = chains();
+    w.write("cycle.ron", r#"(stages: [(id: "x", kind: "equirect-to-cube", reads: ["z"]), (id: "y", kind: "equirect-to-cube", reads: ["x"]), (id: "z", kind: "equirect-to-cube", reads: ["y"])])"#);
+    let out = w.bake(&["run", "cycle.ron"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        stderr(&out).contains("cycle: x -> y -> z -> x"),
+        "{}",
+        stderr(&out)
+    );
+}
+
+#[test]
+fn missing_inputs_and_references_are_all_reported_before_any_work() {
+    let w = chains();
+    w.write(
+        "p.ron",
+        r#"(output: "out", inputs: {"a": File("a.exr"), "gone": File("gone.exr"), "lost": Folder("lost")}, stages: [
+            (id: "ok", kind: "equirect-to-cube", reads: ["a"], params: (size: 8)),
+            (id: "x", kind: "equirect-to-cube", reads: ["gone"]),
+            (id: "y", kind: "quat-map", reads: ["lost"]),
+            (id: "z", kind: "irradiance", reads: ["nobody"]),
+        ])"#,
+    );
+    let out = w.bake(&["run", "p.ron"]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = stderr(&out);
+    eprintln!("{err}");
+    assert!(
+        err.contains("input 'gone': gone.exr does not exist"),
+        "{err}"
+    );
+    assert!(
+        err.contains("input 'lost': folder lost does not exist"),
+        "{err}"
+    );
+    assert!(
+        err.contains("stage 'z' reads 'nobody', which is neither an input nor a stage"),
+        "{err}"
+    );
+    assert!(!w.path("out").exists(), "no stage ran, not even 'ok'");
+}
+
+#[test]
+fn a_failing_stage_blocks_its_dependants_and_lets_the_others_finish() {
+    let w = chains();
+    // b.exr truncated: exists (so the plan accepts it) but cannot be decoded.
+    let bytes = std::fs::read(w.path("b.exr")).unwrap();
+    std::fs::write(w.path("b.exr"), &bytes[..bytes.len() / 3]).unwrap();
+    let out = w.bake(&["run", "p.ron", "--json", "--jobs", "2"]);
+    assert_eq!(out.status.code(), Some(1));
+    let st = statuses(&out);
+    assert_eq!(st["b1"], "failed");
+    assert_eq!(st["b2"], "blocked");
+    assert_eq!((st["a1"].as_str(), st["a2"].as_str()), ("ran", "ran"));
+    assert!(
+        !w.path("out/b1").exists() && !w.path("out/b2").exists(),
+        "no partial output"
+    );
+    assert!(!w.path("out/.bake/tmp").exists());
+    let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let reason = v["stages"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|s| s["id"] == "b1")
+        .unwrap()["reason"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    assert!(
+        reason.contains("b.exr"),
+        "the bake's error names the file: {reason}"
+    );
+    // The human form says which stage failed and why, on stderr.
+    let out = w.bake(&["run", "p.ron"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        stderr(&out).contains("bake: error: stage 'b1':"),
+        "{}",
+        stderr(&out)
+    );
+    // Repaired, only the b chain runs.
+    std::fs::write(w.path("b.exr"), &bytes).unwrap();
+    let st = w.run_ok("p.ron", &[]);
+    assert_eq!(ids_with(&st, "ran"), ["b1", "b2"]);
+}
+
+/// A chain of three stages, each slowed down before its commit by the test hook.
+fn slow_chain() -> Work {
+    let w = Work::new();
+    std::fs::copy(root().join("fixtures/hdri/studio_256.exr"), w.path("a.exr")).unwrap();
+    w.write(
+        "slow.ron",
+        r#"(output: "out", inputs: {"a": File("a.exr")}, stages: [
+            (id: "s1", kind: "equirect-to-cube", reads: ["a"], params: (size: 16)),
+            (id: "s2", kind: "equirect-to-cube", reads: ["s1"], params: (size: 8)),
+            (id: "s3", kind: "equirect-to-cube", reads: ["s2"], params: (size: 4)),
+        ])"#,
+    );
+    w
+}
+
+fn wait_for_stage_in_manifest(w: &Work, id: &str, child: &mut std::process::Child) {
+    let t = Instant::now();
+    loop {
+        let text = std::fs::read_to_string(w.path("out/.bake/manifest.json")).unwrap_or_default();
+        if text.contains(&format!("\"{id}\": {{")) {
+            return;
+        }
+        assert!(child.try_wait().unwrap().is_none(), "bake ended early");
+        assert!(
+            t.elapsed() < Duration::from_secs(60),
+            "stage {id} never completed"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+fn no_temporaries(dir: &Path) {
+    let all = files_under(dir);
+    assert!(
+        all.iter().all(|f| !f.contains(".tmp")),
+        "temporary files left: {all:?}"
+    );
+}
+
+#[test]
+fn an_interrupted_run_leaves_only_complete_outputs_and_the_next_run_resumes() {
+    let w = slow_chain();
+    // Ctrl-C (SIGINT) while s2 is between its bake and its commit.
+    let mut child = w
+        .cmd(&["run", "slow.ron", "--jobs", "1", "--quiet"])
+        .env("IBL_BAKE_TEST_DELAY_MS", "1500")
+        .spawn()
+        .unwrap();
+    wait_for_stage_in_manifest(&w, "s1", &mut child);
+    // Meanwhile the output folder is taken.
+    let busy = w.bake(&["run", "slow.ron"]);
+    assert_eq!(busy.status.code(), Some(4), "{}", stderr(&busy));
+    assert!(
+        stderr(&busy).contains(&format!(
+            "another bake (pid {}) is using this output folder",
+            child.id()
+        )),
+        "{}",
+        stderr(&busy)
+    );
+    let kill = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(kill.success());
+    let status = child.wait().unwrap();
+    assert_eq!(status.code(), Some(130), "{status:?}");
+    assert_eq!(
+        files_under(&w.path("out")).len(),
+        6,
+        "only s1's six faces: {:?}",
+        files_under(&w.path("out"))
+    );
+    assert!(!w.path("out/s2").exists());
+    assert!(!w.path("out/.bake/tmp").exists() && !w.path("out/.bake/lock").exists());
+    no_temporaries(&w.path("out"));
+    let st = w.run_ok("slow.ron", &[]);
+    assert_eq!(st["s1"], "up-to-date");
+    assert_eq!(ids_with(&st, "ran"), ["s2", "s3"]);
+
+    // SIGKILL (no handler can run) in the middle of a forced run: the outputs in place are
+    // whole files, and the next run takes over the stale lock and finishes.
+    let before: Vec<Vec<u8>> = ["out/s2/px.exr", "out/s3/px.exr"]
+        .iter()
+        .map(|f| std::fs::read(w.path(f)).unwrap())
+        .collect();
+    std::fs::remove_dir_all(w.path("out/s3")).unwrap();
+    let mut child = w
+        .cmd(&["run", "slow.ron", "--jobs", "1", "--quiet", "--force"])
+        .env("IBL_BAKE_TEST_DELAY_MS", "1500")
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(2000));
+    child.kill().unwrap();
+    child.wait().unwrap();
+    assert_eq!(std::fs::read(w.path("out/s2/px.exr")).unwrap(), before[0]);
+    no_temporaries(&w.path("out"));
+    let st = w.run_ok("slow.ron", &[]);
+    assert_eq!(st["s3"], "restored", "{st:?}");
+    assert_eq!(std::fs::read(w.path("out/s3/px.exr")).unwrap(), before[1]);
+    assert!(!w.path("out/.bake/tmp").exists());
+}
+
+#[test]
+fn clean_removes_what_the_pipeline_made_and_its_cache() {
+    let w = chains();
+    w.run_ok("p.ron", &[]);
+    std::fs::write(w.path("out/notes.txt"), b"mine").unwrap();
+    let out = w.bake(&["clean", "p.ron"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert_eq!(
+        files_under(&w.path("out")),
+        ["notes.txt"],
+        "only what bake did not make is left"
+    );
+    assert!(!w.path("out/.bake").exists());
+    assert!(
+        w.path("a.exr").is_file() && w.path("b.exr").is_file(),
+        "inputs untouched"
+    );
+    let st = w.run_ok("p.ron", &[]);
+    assert_eq!(ids_with(&st, "ran").len(), 4);
+}
+
+#[test]
+fn plan_lists_reads_and_json_forms_are_machine_readable() {
+    let w = chains();
+    let out = w.bake(&["plan", "p.ron", "--json"]);
+    let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let stages = v["stages"].as_array().unwrap();
+    assert_eq!(stages.len(), 4);
+    let b2 = stages.iter().find(|s| s["id"] == "b2").unwrap();
+    assert_eq!(b2["reads"][0]["name"], "b1");
+    assert_eq!(b2["action"], "run");
+    assert_eq!(b2["params"]["size"], 4);
+    assert!(b2["outputs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|o| o.as_str().unwrap().ends_with("out/b2/sh.json")));
+    let dot = stdout(&w.bake(&["plan", "p.ron", "--emit", "dot"]));
+    assert!(dot.contains("\"a1\" -> \"a2\""), "{dot}");
+    let kinds = stdout(&w.bake(&["kinds"]));
+    assert!(
+        kinds.contains("prefilter") && kinds.contains("max_roughness"),
+        "{kinds}"
+    );
+}
+
+/// The packages of the CLIs a ninja file calls, built (or found fresh) next to `bake`.
+fn build_clis(packages: &[&str]) -> Result<PathBuf, String> {
+    let bin_dir = Path::new(env!("CARGO_BIN_EXE_bake"))
+        .parent()
+        .unwrap()
+        .to_path_buf();
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let mut cmd = Command::new(cargo);
+    // The profile `cargo test` itself used, so the libraries it compiled are reused and the
+    // binaries it put beside `bake` are the ones rebuilt (if at all).
+    let profile = if bin_dir.ends_with("release") {
+        "release"
+    } else {
+        "test"
+    };
+    cmd.args(["build", "--profile", profile])
+        .current_dir(root());
+    for p in packages {
+        cmd.args(["-p", p]);
+    }
+    let out = cmd.output().map_err(|e| format!("cannot run cargo: {e}"))?;
+    if !out.status.success() {
+        return Err(format!(
+            "cargo build failed: {}",
+            stderr(&out).lines().last().unwrap_or("")
+        ));
+    }
+    for p in packages {
+        if !bin_dir.join(p).is_file() {
+            return Err(format!("{} is not in {}", p, bin_dir.display()));
+        }
+    }
+    Ok(bin_dir)
+}
+
+#[test]
+fn the_emitted_ninja_file_runs_the_same_bakes_as_run() {
+    if Command::new("ninja").arg("--version").output().is_err() {
+        eprintln!("SKIPPED: ninja is not installed (apt-get install ninja-build)");
+        return;
+    }
+    let w = Work::new();
+    w.copy("pipelines/materials");
+    std::fs::copy(root().join("fixtures/hdri/studio_256.exr"), w.path("a.exr")).unwrap();
+    // Every kind, small.
+    w.write(
+        "all.ron",
+        r#"(output: "out", inputs: {"a": File("a.exr"), "mats": Folder("pipelines/materials"), "one": File("pipelines/materials/frying-pan/normal.png")}, stages: [
+            (id: "cube", kind: "equirect-to-cube", reads: ["a"], params: (size: 16)),
+            (id: "chain", kind: "prefilter", reads: ["cube"], params: (size: 16, levels: 3, quality: draft, max_roughness: 0.5)),
+            (id: "irr", kind: "irradiance", reads: ["cube"], params: (size: 4, sh_file: "sh.ron")),
+            (id: "fit", kind: "shexp-fit", reads: ["cube"], params: (normals: 8, views: 8, samples: 32, size: 8, emit_shader: true)),
+            (id: "dfg", kind: "dfg", params: (size: 8, samples: 32)),
+            (id: "tail", kind: "fresnel-tail", params: (size: 8, samples: 32)),
+            (id: "hv", kind: "hv-lut", params: (nu: 100, nv: 10, size: 8)),
+            (id: "sb", kind: "as-size-bias", params: (nu: 100, nv: 10, size: 8, samples: 32)),
+            (id: "quats", kind: "quat-map", reads: ["mats"], params: (bits: 8, output_name: "q.png")),
+            (id: "quat", kind: "quat-map", reads: ["one"]),
+            (id: "tpr", kind: "tpr-map", params: (size: "16x8", preset: "spiral:0.5,0.5,2", roughness: "0.25,0.5")),
+        ])"#,
+    );
+    let graph_kinds = [
+        "equirect-to-cube",
+        "prefilter",
+        "irradiance",
+        "shexp-fit",
+        "brdf-lut",
+        "hv-lut",
+        "quat-map",
+        "tpr-map",
+    ];
+    let bin_dir = match build_clis(&graph_kinds) {
+        Ok(d) => d,
+        Err(e) => {
+            eprintln!("SKIPPED: the bake CLIs are not available: {e}");
+            return;
+        }
+    };
+    w.run_ok("all.ron", &[]);
+    std::fs::rename(w.path("out"), w.path("out-run")).unwrap();
+    let out = w.bake(&[
+        "plan",
+        "all.ron",
+        "--emit",
+        "ninja",
+        "-o",
+        "build/build.ninja",
+        "--bin-dir",
+        bin_dir.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let ninja_text = std::fs::read_to_string(w.path("build/build.ninja")).unwrap();
+    assert!(
+        ninja_text
+            .contains("$bindir/brdf-lut dfg -o ../out/dfg/dfg.exr --size=8 --samples=32 --quiet"),
+        "{ninja_text}"
+    );
+    let out = Command::new("ninja")
+        .args(["-C", "build"])
+        .current_dir(w.path(""))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "ninja failed:\n{}\n{}",
+        stdout(&out),
+        stderr(&out)
+    );
+    let ran = files_under(&w.path("out-run"));
+    assert_eq!(
+        files_under(&w.path("out")),
+        ran,
+        "ninja made the same files"
+    );
+    for f in &ran {
+        let (a, b) = (
+            std::fs::read(w.path("out-run").join(f)).unwrap(),
+            std::fs::read(w.path("out").join(f)).unwrap(),
+        );
+        assert!(a == b, "{f} differs between bake run and ninja");
+    }
+    eprintln!(
+        "ninja and bake run made the same {} files, byte for byte",
+        ran.len()
+    );
+    // ninja sees nothing left to do.
+    let out = Command::new("ninja")
+        .args(["-C", "build", "-n"])
+        .current_dir(w.path(""))
+        .output()
+        .unwrap();
+    assert!(stdout(&out).contains("no work to do"), "{}", stdout(&out));
+}

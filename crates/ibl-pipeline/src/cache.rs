@@ -1,0 +1,559 @@
+//! The content-addressed cache: stage keys, the manifest of what is built, and the object store.
+//!
+//! A stage's key is the blake3 hash of the tool version, its kind, its canonical parameters and,
+//! for each source it reads in order, the digest of that input's bytes (file names too for
+//! folders and globs) or the key of the upstream stage. Keys of upstream stages (not the bytes
+//! of their outputs) make every key known before anything runs; bakes are deterministic, so a
+//! key names its outputs' bytes.
+//!
+//! Under `OUTPUT/.bake/`:
+//! - `manifest.json`: per stage, the key it was built with, what the key was made of (to say
+//!   why a stage re-runs), and its outputs with size, mtime and hash (to notice outputs deleted
+//!   or edited by hand); and a stamp cache of input hashes (size + mtime → hash), so an unchanged
+//!   run re-reads nothing.
+//! - `cache/<key>.json` and `objects/<hash>`: the outputs of recent keys of each stage, as hard
+//!   links (copies where links are impossible), so deleted outputs and reverted parameters come
+//!   back without baking.
+//! - `tmp/`: staging for outputs being written (renamed into place only when complete), and
+//!   `journal/`: commits in flight, rolled forward by the next run after a kill.
+//!
+//! Every file here is written by temp + rename.
+
+use crate::error::{Error, Result};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+
+pub const MANIFEST_VERSION: u32 = 1;
+/// How many keys per stage keep their outputs in the object store.
+pub const KEEP_KEYS: usize = 3;
+
+/// Size, modification time and content hash of a file.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct FileStamp {
+    pub size: u64,
+    pub mtime_ns: u64,
+    pub hash: String,
+}
+
+/// What a stage key is made of.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct KeyParts {
+    pub tool: String,
+    pub kind: String,
+    /// Canonical JSON of the parameters.
+    pub params: String,
+    /// (name, digest) of each source read, in order: an input's content digest or a stage's key.
+    pub reads: Vec<(String, String)>,
+}
+
+impl KeyParts {
+    /// The key: a hash of everything above (names of sources excluded: renaming an input or a
+    /// stage does not invalidate what reads it).
+    pub fn key(&self) -> String {
+        let mut h = blake3::Hasher::new();
+        for part in ["ibl-bake/key/v1", &self.tool, &self.kind, &self.params] {
+            h.update(part.as_bytes());
+            h.update(&[0]);
+        }
+        for (_, digest) in &self.reads {
+            h.update(digest.as_bytes());
+            h.update(&[0]);
+        }
+        h.finalize().to_hex().to_string()
+    }
+
+    /// Why `self` (the key a stage was built with) differs from `now`, in words.
+    pub fn diff(&self, now: &KeyParts) -> String {
+        let mut why = Vec::new();
+        if self.tool != now.tool {
+            why.push(format!(
+                "tool version changed ({} -> {})",
+                self.tool, now.tool
+            ));
+        }
+        if self.kind != now.kind {
+            why.push(format!("kind changed ({} -> {})", self.kind, now.kind));
+        }
+        if self.params != now.params {
+            why.push(params_diff(&self.params, &now.params));
+        }
+        if self.reads.len() != now.reads.len()
+            || self.reads.iter().zip(&now.reads).any(|(a, b)| a.0 != b.0)
+        {
+            if self
+                .reads
+                .iter()
+                .map(|r| &r.1)
+                .ne(now.reads.iter().map(|r| &r.1))
+            {
+                why.push("reads changed".into());
+            }
+        } else {
+            for ((name, a), (_, b)) in self.reads.iter().zip(&now.reads) {
+                if a != b {
+                    why.push(format!("{name} changed"));
+                }
+            }
+        }
+        if why.is_empty() {
+            "key changed".into()
+        } else {
+            why.join("; ")
+        }
+    }
+}
+
+/// "parameters changed: size 64 -> 32, half false -> true".
+fn params_diff(old: &str, new: &str) -> String {
+    let (Ok(serde_json::Value::Object(a)), Ok(serde_json::Value::Object(b))) = (
+        serde_json::from_str::<serde_json::Value>(old),
+        serde_json::from_str::<serde_json::Value>(new),
+    ) else {
+        return "parameters changed".into();
+    };
+    let mut keys: Vec<&String> = a.keys().chain(b.keys()).collect();
+    keys.sort();
+    keys.dedup();
+    let null = serde_json::Value::Null;
+    let changes: Vec<String> = keys
+        .into_iter()
+        .filter(|k| a.get(*k) != b.get(*k))
+        .map(|k| {
+            format!(
+                "{k} {} -> {}",
+                a.get(k).unwrap_or(&null),
+                b.get(k).unwrap_or(&null)
+            )
+        })
+        .collect();
+    format!("parameters changed: {}", changes.join(", "))
+}
+
+/// An output of a built stage.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct OutputRecord {
+    /// Relative to the stage's folder.
+    pub rel: String,
+    #[serde(flatten)]
+    pub stamp: FileStamp,
+}
+
+/// A built stage.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StageRecord {
+    pub key: String,
+    pub parts: KeyParts,
+    /// The stage's folder, relative to the output folder.
+    pub dir: String,
+    pub outputs: Vec<OutputRecord>,
+    pub seconds: f64,
+    /// Earlier keys whose outputs the object store keeps (most recent first).
+    #[serde(default)]
+    pub history: Vec<String>,
+}
+
+/// What is built under an output folder.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct Manifest {
+    pub version: u32,
+    pub stages: BTreeMap<String, StageRecord>,
+    /// Input hash cache: path → stamp.
+    #[serde(default)]
+    pub files: BTreeMap<String, FileStamp>,
+}
+
+/// Paths under `OUTPUT/.bake/`.
+#[derive(Clone, Debug)]
+pub struct CacheDir {
+    pub output: PathBuf,
+    pub root: PathBuf,
+}
+
+impl CacheDir {
+    pub fn new(output: &Path) -> Self {
+        CacheDir {
+            output: output.to_path_buf(),
+            root: output.join(".bake"),
+        }
+    }
+    pub fn manifest_path(&self) -> PathBuf {
+        self.root.join("manifest.json")
+    }
+    pub fn entry_path(&self, key: &str) -> PathBuf {
+        self.root.join("cache").join(format!("{key}.json"))
+    }
+    pub fn object_path(&self, hash: &str) -> PathBuf {
+        self.root.join("objects").join(&hash[..2]).join(hash)
+    }
+    pub fn tmp(&self) -> PathBuf {
+        self.root.join("tmp")
+    }
+    pub fn journal(&self) -> PathBuf {
+        self.root.join("journal")
+    }
+    pub fn lock_path(&self) -> PathBuf {
+        self.root.join("lock")
+    }
+
+    /// The manifest, or an empty one when there is none (or it is from another version).
+    pub fn load_manifest(&self) -> Result<Manifest> {
+        let path = self.manifest_path();
+        match std::fs::read(&path) {
+            Ok(bytes) => match serde_json::from_slice::<Manifest>(&bytes) {
+                Ok(m) if m.version == MANIFEST_VERSION => Ok(m),
+                // An unreadable or older manifest only costs a rebuild.
+                _ => Ok(Manifest {
+                    version: MANIFEST_VERSION,
+                    ..Default::default()
+                }),
+            },
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(Manifest {
+                version: MANIFEST_VERSION,
+                ..Default::default()
+            }),
+            Err(e) => Err(Error::io(path, e)),
+        }
+    }
+
+    /// Writes the manifest (atomically, synced), unless the file already holds exactly that.
+    pub fn save_manifest(&self, m: &Manifest) -> Result<()> {
+        let bytes = serde_json::to_vec_pretty(m).expect("manifest serialises");
+        if std::fs::read(self.manifest_path()).is_ok_and(|old| old == bytes) {
+            return Ok(());
+        }
+        write_atomic(&self.manifest_path(), &bytes)
+    }
+
+    /// The cache entry of `key`, if present and all its objects exist.
+    pub fn entry(&self, key: &str) -> Option<CacheEntry> {
+        let bytes = std::fs::read(self.entry_path(key)).ok()?;
+        let e: CacheEntry = serde_json::from_slice(&bytes).ok()?;
+        e.files
+            .iter()
+            .all(|f| self.object_path(&f.stamp.hash).is_file())
+            .then_some(e)
+    }
+
+    /// Keeps `files` (already in place in `dir`) as the outputs of `key`.
+    pub fn put(&self, key: &str, dir: &Path, files: &[OutputRecord]) -> Result<()> {
+        for f in files {
+            let obj = self.object_path(&f.stamp.hash);
+            if obj.is_file() {
+                continue;
+            }
+            let parent = obj.parent().expect("object has a folder");
+            std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
+            let tmp = temp_beside(&obj);
+            let src = dir.join(&f.rel);
+            if std::fs::hard_link(&src, &tmp).is_err() {
+                std::fs::copy(&src, &tmp).map_err(|e| Error::io(&src, e))?;
+            }
+            std::fs::rename(&tmp, &obj).map_err(|e| Error::io(&obj, e))?;
+        }
+        let entry = CacheEntry {
+            files: files.to_vec(),
+        };
+        write_atomic(
+            &self.entry_path(key),
+            &serde_json::to_vec_pretty(&entry).expect("entry serialises"),
+        )
+    }
+
+    /// Links (or copies) the objects of `entry` into `staging`, checking their hashes first.
+    /// Returns (staged file, path relative to the stage folder); `None` if an object is damaged.
+    pub fn stage_entry(
+        &self,
+        entry: &CacheEntry,
+        staging: &Path,
+    ) -> Result<Option<Vec<(PathBuf, String)>>> {
+        std::fs::create_dir_all(staging).map_err(|e| Error::io(staging, e))?;
+        let mut out = Vec::new();
+        for (n, f) in entry.files.iter().enumerate() {
+            let obj = self.object_path(&f.stamp.hash);
+            match hash_file(&obj) {
+                Ok((h, size)) if h == f.stamp.hash && size == f.stamp.size => {}
+                _ => {
+                    let _ = std::fs::remove_file(&obj);
+                    return Ok(None);
+                }
+            }
+            let staged = staging.join(format!("{n}"));
+            if std::fs::hard_link(&obj, &staged).is_err() {
+                std::fs::copy(&obj, &staged).map_err(|e| Error::io(&obj, e))?;
+            }
+            out.push((staged, f.rel.clone()));
+        }
+        Ok(Some(out))
+    }
+
+    /// Removes cache entries no stage of `m` keeps, and objects no kept entry uses.
+    pub fn collect_garbage(&self, m: &Manifest) -> Result<()> {
+        let kept: std::collections::HashSet<String> = m
+            .stages
+            .values()
+            .flat_map(|r| std::iter::once(r.key.clone()).chain(r.history.iter().cloned()))
+            .collect();
+        let mut live = std::collections::HashSet::new();
+        let cache = self.root.join("cache");
+        if let Ok(rd) = std::fs::read_dir(&cache) {
+            for e in rd.flatten() {
+                let name = e.file_name().to_string_lossy().into_owned();
+                let key = name.trim_end_matches(".json");
+                if kept.contains(key) {
+                    if let Ok(bytes) = std::fs::read(e.path()) {
+                        if let Ok(entry) = serde_json::from_slice::<CacheEntry>(&bytes) {
+                            live.extend(entry.files.into_iter().map(|f| f.stamp.hash));
+                        }
+                    }
+                } else {
+                    let _ = std::fs::remove_file(e.path());
+                }
+            }
+        }
+        if let Ok(rd) = std::fs::read_dir(self.root.join("objects")) {
+            for sub in rd.flatten() {
+                if let Ok(objs) = std::fs::read_dir(sub.path()) {
+                    for o in objs.flatten() {
+                        if !live.contains(&*o.file_name().to_string_lossy()) {
+                            let _ = std::fs::remove_file(o.path());
+                        }
+                    }
+                }
+                let _ = std::fs::remove_dir(sub.path());
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The outputs of one key, relative to the stage's folder.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct CacheEntry {
+    pub files: Vec<OutputRecord>,
+}
+
+/// Modification time in nanoseconds since the epoch (0 when unknown).
+pub fn mtime_ns(md: &std::fs::Metadata) -> u64 {
+    md.modified()
+        .ok()
+        .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+        .map(|d| d.as_nanos() as u64)
+        .unwrap_or(0)
+}
+
+/// blake3 of a file's bytes (hex) and its size.
+pub fn hash_file(path: &Path) -> std::io::Result<(String, u64)> {
+    let mut f = std::fs::File::open(path)?;
+    let mut h = blake3::Hasher::new();
+    let mut buf = vec![0u8; 1 << 16];
+    let mut size = 0u64;
+    loop {
+        let n = f.read(&mut buf)?;
+        if n == 0 {
+            break;
+        }
+        size += n as u64;
+        h.update(&buf[..n]);
+    }
+    Ok((h.finalize().to_hex().to_string(), size))
+}
+
+pub fn hash_bytes(bytes: &[u8]) -> String {
+    blake3::hash(bytes).to_hex().to_string()
+}
+
+/// Hashes files, trusting a stamp whose size and mtime are unchanged.
+pub struct Hasher<'a> {
+    pub known: &'a BTreeMap<String, FileStamp>,
+    pub fresh: BTreeMap<String, FileStamp>,
+}
+
+impl<'a> Hasher<'a> {
+    pub fn new(known: &'a BTreeMap<String, FileStamp>) -> Self {
+        Hasher {
+            known,
+            fresh: BTreeMap::new(),
+        }
+    }
+
+    pub fn stamp(&mut self, path: &Path) -> std::io::Result<FileStamp> {
+        let key = crate::paths::absolute(path).to_string_lossy().into_owned();
+        if let Some(s) = self.fresh.get(&key) {
+            return Ok(s.clone());
+        }
+        let md = std::fs::metadata(path)?;
+        let (size, mtime) = (md.len(), mtime_ns(&md));
+        let stamp = match self.known.get(&key) {
+            Some(s) if s.size == size && s.mtime_ns == mtime && mtime != 0 => s.clone(),
+            _ => {
+                let (hash, size) = hash_file(path)?;
+                FileStamp {
+                    size,
+                    mtime_ns: mtime,
+                    hash,
+                }
+            }
+        };
+        self.fresh.insert(key, stamp.clone());
+        Ok(stamp)
+    }
+}
+
+/// The digest of an input from its files' hashes: `kind` and names matter, as bakes read
+/// folder layouts and choose decoders by extension.
+pub fn input_digest(kind: &str, base: &Path, files: &[(PathBuf, String)]) -> String {
+    let mut h = blake3::Hasher::new();
+    h.update(kind.as_bytes());
+    h.update(&[0]);
+    for (path, hash) in files {
+        let name = path.strip_prefix(base).unwrap_or(path);
+        let name = if kind == "file" {
+            path.extension()
+                .map(|e| e.to_string_lossy().to_ascii_lowercase())
+                .unwrap_or_default()
+        } else {
+            name.to_string_lossy().into_owned()
+        };
+        h.update(name.as_bytes());
+        h.update(&[0]);
+        h.update(hash.as_bytes());
+        h.update(&[0]);
+    }
+    h.finalize().to_hex().to_string()
+}
+
+/// A hidden temporary name beside `target`, unique to this process and call.
+pub fn temp_beside(target: &Path) -> PathBuf {
+    use std::sync::atomic::{AtomicU64, Ordering};
+    static N: AtomicU64 = AtomicU64::new(0);
+    let name = target
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    target.with_file_name(format!(
+        ".{name}.tmp-{}-{}",
+        std::process::id(),
+        N.fetch_add(1, Ordering::Relaxed)
+    ))
+}
+
+/// Writes a runner file (manifest, entry, journal) by temp + rename, creating its folder.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    ibl_core::io::write_atomic(path, bytes).map_err(Error::from)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parts() -> KeyParts {
+        KeyParts {
+            tool: "0.1.0".into(),
+            kind: "prefilter".into(),
+            params: r#"{"samples":64,"size":32}"#.into(),
+            reads: vec![("upstream 'cube'".into(), "k1".into())],
+        }
+    }
+
+    #[test]
+    fn keys_change_with_every_part_but_not_with_names() {
+        let base = parts();
+        let k = base.key();
+        assert_eq!(k, parts().key());
+        let mut p = parts();
+        p.tool = "0.2.0".into();
+        assert_ne!(p.key(), k);
+        let mut p = parts();
+        p.params = r#"{"samples":64,"size":16}"#.into();
+        assert_ne!(p.key(), k);
+        assert_eq!(base.diff(&p), "parameters changed: size 32 -> 16");
+        let mut p = parts();
+        p.reads[0].1 = "k2".into();
+        assert_ne!(p.key(), k);
+        assert_eq!(base.diff(&p), "upstream 'cube' changed");
+        let mut p = parts();
+        p.reads[0].0 = "renamed".into();
+        assert_eq!(p.key(), k);
+        let mut p = parts();
+        p.reads.push(("x".into(), "d".into()));
+        assert_ne!(p.key(), k);
+    }
+
+    #[test]
+    fn stamps_skip_rehashing_until_the_file_changes() {
+        let dir = tempfile::tempdir().unwrap();
+        let f = dir.path().join("a.bin");
+        std::fs::write(&f, b"hello").unwrap();
+        let empty = BTreeMap::new();
+        let mut h = Hasher::new(&empty);
+        let s = h.stamp(&f).unwrap();
+        assert_eq!(s.hash, hash_bytes(b"hello"));
+        // A stamp with the same size and mtime is trusted (even if we lie about the hash).
+        let mut known = h.fresh.clone();
+        known.values_mut().for_each(|v| v.hash = "trusted".into());
+        assert_eq!(Hasher::new(&known).stamp(&f).unwrap().hash, "trusted");
+        std::fs::write(&f, b"hellO!").unwrap();
+        assert_eq!(
+            Hasher::new(&known).stamp(&f).unwrap().hash,
+            hash_bytes(b"hellO!")
+        );
+    }
+
+    #[test]
+    fn input_digests_see_names_for_folders_and_only_extensions_for_files() {
+        let base = Path::new("/b");
+        let f = |n: &str| (PathBuf::from(n), "h".to_string());
+        assert_eq!(
+            input_digest("file", base, &[f("/b/x.exr")]),
+            input_digest("file", base, &[f("/c/y.exr")])
+        );
+        assert_ne!(
+            input_digest("file", base, &[f("/b/x.exr")]),
+            input_digest("file", base, &[f("/b/x.hdr")])
+        );
+        assert_ne!(
+            input_digest("folder", base, &[f("/b/m/normal.png")]),
+            input_digest("folder", base, &[f("/b/n/normal.png")])
+        );
+    }
+
+    #[test]
+    fn store_keeps_and_restores_outputs_and_collects_garbage() {
+        let dir = tempfile::tempdir().unwrap();
+        let cache = CacheDir::new(dir.path());
+        let stage = dir.path().join("s");
+        std::fs::create_dir_all(&stage).unwrap();
+        std::fs::write(stage.join("a.exr"), b"AAA").unwrap();
+        let rec = OutputRecord {
+            rel: "a.exr".into(),
+            stamp: FileStamp {
+                size: 3,
+                mtime_ns: 0,
+                hash: hash_bytes(b"AAA"),
+            },
+        };
+        cache.put("k1", &stage, std::slice::from_ref(&rec)).unwrap();
+        std::fs::remove_file(stage.join("a.exr")).unwrap();
+        let entry = cache.entry("k1").unwrap();
+        let staged = cache
+            .stage_entry(&entry, &dir.path().join("tmp"))
+            .unwrap()
+            .unwrap();
+        assert_eq!(std::fs::read(&staged[0].0).unwrap(), b"AAA");
+        assert_eq!(staged[0].1, "a.exr");
+        // A damaged object is refused (and dropped).
+        std::fs::remove_file(&staged[0].0).unwrap();
+        std::fs::write(cache.object_path(&rec.stamp.hash), b"AAB").unwrap();
+        assert!(cache
+            .stage_entry(&entry, &dir.path().join("tmp2"))
+            .unwrap()
+            .is_none());
+        assert!(cache.entry("k1").is_none());
+        // Entries of keys no stage keeps go, with their objects.
+        cache.put("k1", &dir.path().join("tmp"), &[]).unwrap();
+        cache.collect_garbage(&Manifest::default()).unwrap();
+        assert!(!cache.entry_path("k1").exists());
+    }
+}

@@ -1,0 +1,835 @@
+//! The executor: a dependency-ordered scheduler running up to N stages at once, each through
+//! its bake's library function in-process, with outputs committed atomically.
+//!
+//! A stage's files are encoded in memory by the bake, written to `OUTPUT/.bake/tmp/`, and only
+//! then committed: a journal naming the renames is written, the files are renamed into place,
+//! the manifest records the stage, the journal is removed. So a failed stage leaves nothing, an
+//! interrupted run (Ctrl-C, SIGTERM: the handler waits for a commit in flight, removes the
+//! staging folder and exits) leaves only complete outputs, and a killed run (SIGKILL) leaves at
+//! worst a journal that the next run rolls forward. A stage that fails stops the stages that
+//! read it; independent stages go on.
+
+use crate::cache::{self, CacheDir, KeyParts, Manifest, OutputRecord, StageRecord};
+use crate::error::{Error, Result};
+use crate::graph::Graph;
+use crate::kinds::{BakeError, Baked};
+use crate::paths;
+use crate::plan::{Decision, Plan};
+use ibl_core::progress::Progress;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+use std::sync::{mpsc, Mutex, RwLock};
+use std::time::Instant;
+
+/// Shared by every thread writing under the output folder (staging files, committing,
+/// saving the manifest); the interrupt handler takes it exclusively, so it waits for writes in
+/// flight and no new one starts between its clean-up and the exit.
+static GATE: RwLock<()> = RwLock::new(());
+/// Serialises commits (journal, renames, manifest) between workers.
+static COMMIT: Mutex<()> = Mutex::new(());
+
+/// Permission to write under the output folder (see [`GATE`]).
+fn gate() -> std::sync::RwLockReadGuard<'static, ()> {
+    GATE.read().unwrap_or_else(|e| e.into_inner())
+}
+
+/// Permission to commit: the gate, then the commit lock.
+fn commit_lock() -> (
+    std::sync::RwLockReadGuard<'static, ()>,
+    std::sync::MutexGuard<'static, ()>,
+) {
+    let g = gate();
+    (g, COMMIT.lock().unwrap_or_else(|e| e.into_inner()))
+}
+/// What the interrupt handler removes: the staging folder and lock file of the live session.
+static CLEANUP: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+/// Test hook: each stage sleeps this long after baking, before committing (to kill a run mid-stage).
+const DELAY_ENV: &str = "IBL_BAKE_TEST_DELAY_MS";
+
+/// How a stage ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Status {
+    Ran,
+    Restored,
+    UpToDate,
+    Skipped,
+    Failed,
+    /// Not run because a stage it reads failed.
+    Blocked,
+}
+
+impl Status {
+    pub fn word(&self) -> &'static str {
+        match self {
+            Status::Ran => "ran",
+            Status::Restored => "restored",
+            Status::UpToDate => "up to date",
+            Status::Skipped => "skipped",
+            Status::Failed => "FAILED",
+            Status::Blocked => "blocked",
+        }
+    }
+}
+
+/// The result of one stage.
+#[derive(Clone, Debug, Serialize)]
+pub struct StageResult {
+    pub id: String,
+    pub kind: String,
+    pub status: Status,
+    /// Why it ran or was skipped; the error for a failed stage.
+    pub reason: String,
+    pub seconds: f64,
+    pub outputs: Vec<PathBuf>,
+    pub warnings: Vec<String>,
+}
+
+/// The results of a run, in stage order.
+#[derive(Clone, Debug, Serialize)]
+pub struct RunReport {
+    pub pipeline: PathBuf,
+    pub output: PathBuf,
+    pub stages: Vec<StageResult>,
+    pub seconds: f64,
+}
+
+impl RunReport {
+    pub fn failed(&self) -> bool {
+        self.stages
+            .iter()
+            .any(|s| matches!(s.status, Status::Failed | Status::Blocked))
+    }
+    pub fn count(&self, status: Status) -> usize {
+        self.stages.iter().filter(|s| s.status == status).count()
+    }
+}
+
+/// Receives the executor's events (the binary shows them on a terminal).
+pub trait Observer: Sync {
+    fn started(&self, _id: &str, _decision: &Decision) {}
+    /// A progress sink for a running stage's bake.
+    fn progress(&self, _id: &str) -> Box<dyn Progress + '_> {
+        Box::new(ibl_core::progress::NoProgress)
+    }
+    fn finished(&self, _result: &StageResult) {}
+}
+
+/// Reports nothing.
+pub struct Quiet;
+impl Observer for Quiet {}
+
+/// A commit in flight, written before the renames so that a killed run can be rolled forward.
+#[derive(Serialize, Deserialize)]
+struct Journal {
+    id: String,
+    record: StageRecord,
+    renames: Vec<(PathBuf, PathBuf)>,
+}
+
+/// Exclusive use of an output folder: the lock, recovery of killed runs, the staging folder.
+pub struct Session {
+    pub cache: CacheDir,
+    tmp: PathBuf,
+}
+
+impl Session {
+    /// Locks `graph`'s output folder, rolls forward commits a killed run left, clears stale
+    /// staging files, and arranges for Ctrl-C / SIGTERM to leave no partial outputs.
+    pub fn open(graph: &Graph) -> Result<Session> {
+        Session::open_output(&graph.pipeline.output)
+    }
+
+    /// [`Session::open`] for an output folder.
+    pub fn open_output(output: &Path) -> Result<Session> {
+        let cache = CacheDir::new(output);
+        std::fs::create_dir_all(&cache.root).map_err(|e| Error::io(&cache.root, e))?;
+        take_lock(&cache.lock_path())?;
+        let tmp_root = cache.tmp();
+        let tmp = tmp_root.join(std::process::id().to_string());
+        *CLEANUP.lock().unwrap() = vec![tmp.clone(), cache.lock_path()];
+        install_interrupt_handler();
+        let session = Session { cache, tmp };
+        // Journals name staged files of the killed run: roll them forward before clearing.
+        session.recover()?;
+        let _ = std::fs::remove_dir_all(&tmp_root);
+        Ok(session)
+    }
+
+    /// Rolls forward every journal: finishes its renames and records its stage.
+    fn recover(&self) -> Result<()> {
+        let Ok(rd) = std::fs::read_dir(self.cache.journal()) else {
+            return Ok(());
+        };
+        let mut manifest = self.cache.load_manifest()?;
+        let mut any = false;
+        for e in rd.flatten() {
+            let path = e.path();
+            let Ok(j) = std::fs::read(&path)
+                .map_err(|_| ())
+                .and_then(|b| serde_json::from_slice::<Journal>(&b).map_err(|_| ()))
+            else {
+                let _ = std::fs::remove_file(&path);
+                continue;
+            };
+            for (staged, target) in &j.renames {
+                if staged.exists() {
+                    if let Some(d) = target.parent() {
+                        std::fs::create_dir_all(d).map_err(|e| Error::io(d, e))?;
+                    }
+                    std::fs::rename(staged, target).map_err(|e| Error::io(target, e))?;
+                }
+            }
+            let dir = self.cache.output.join(&j.record.dir);
+            let _ = self.cache.put(&j.record.key, &dir, &j.record.outputs);
+            apply_record(&mut manifest, &self.cache.output, &j.id, j.record);
+            any = true;
+            let _ = std::fs::remove_file(&path);
+        }
+        if any {
+            self.cache.save_manifest(&manifest)?;
+        }
+        Ok(())
+    }
+}
+
+impl Drop for Session {
+    fn drop(&mut self) {
+        let _guard = commit_lock();
+        let _ = std::fs::remove_dir_all(&self.tmp);
+        let _ = std::fs::remove_dir(self.cache.tmp());
+        let _ = std::fs::remove_dir(self.cache.journal());
+        let _ = std::fs::remove_file(self.cache.lock_path());
+        HELD.lock()
+            .unwrap()
+            .retain(|p| *p != self.cache.lock_path());
+        CLEANUP.lock().unwrap().clear();
+    }
+}
+
+/// Lock files this process holds (a lock naming our own pid is ours only if listed here: a
+/// dead process may have had our pid).
+static HELD: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+fn pid_alive(pid: u32, lock: &Path) -> bool {
+    if pid == std::process::id() {
+        return HELD.lock().unwrap().iter().any(|p| p == lock);
+    }
+    if Path::new("/proc/self").exists() {
+        return Path::new(&format!("/proc/{pid}")).exists();
+    }
+    // Without /proc we cannot tell; a lock left by a dead process must then be removed by hand.
+    true
+}
+
+fn take_lock(path: &Path) -> Result<()> {
+    use std::io::Write;
+    for _ in 0..2 {
+        match std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(path)
+        {
+            Ok(mut f) => {
+                let _ = write!(f, "{}", std::process::id());
+                HELD.lock().unwrap().push(path.to_path_buf());
+                return Ok(());
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
+                let pid = std::fs::read_to_string(path)
+                    .ok()
+                    .and_then(|s| s.trim().parse::<u32>().ok());
+                match pid {
+                    Some(pid) if pid_alive(pid, path) => {
+                        return Err(Error::Busy {
+                            path: path.to_path_buf(),
+                            why: format!("another bake (pid {pid}) is using this output folder"),
+                        });
+                    }
+                    _ => {
+                        let _ = std::fs::remove_file(path);
+                    }
+                }
+            }
+            Err(e) => return Err(Error::io(path, e)),
+        }
+    }
+    Err(Error::Busy {
+        path: path.to_path_buf(),
+        why: "could not take the lock".into(),
+    })
+}
+
+fn install_interrupt_handler() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        let _ = ctrlc::set_handler(|| {
+            // Wait for writes in flight, keep new ones from starting, leave only complete outputs.
+            let _gate = GATE.write();
+            for p in CLEANUP.lock().map(|v| v.clone()).unwrap_or_default() {
+                let _ = if p.is_dir() {
+                    std::fs::remove_dir_all(&p)
+                } else {
+                    std::fs::remove_file(&p)
+                };
+                // The staging folder's parent (`.bake/tmp`) goes too when nothing else is in it.
+                if let Some(parent) = p
+                    .parent()
+                    .filter(|d| d.file_name().is_some_and(|n| n == "tmp"))
+                {
+                    let _ = std::fs::remove_dir(parent);
+                }
+            }
+            eprintln!(
+                "bake: interrupted; completed stages are kept, the next run resumes from them"
+            );
+            std::process::exit(130);
+        });
+    });
+}
+
+/// Records `record` for stage `id`: keeps the previous key in its history (for the object
+/// store) and removes the previous outputs that the new ones do not replace.
+fn apply_record(m: &mut Manifest, output: &Path, id: &str, mut record: StageRecord) {
+    if let Some(old) = m.stages.remove(id) {
+        let new_files: std::collections::HashSet<PathBuf> = record
+            .outputs
+            .iter()
+            .map(|o| output.join(&record.dir).join(&o.rel))
+            .collect();
+        for o in &old.outputs {
+            let p = output.join(&old.dir).join(&o.rel);
+            if !new_files.contains(&p) {
+                let _ = std::fs::remove_file(&p);
+                remove_empty_parents(&p, output);
+            }
+        }
+        let mut history = vec![];
+        if old.key != record.key {
+            history.push(old.key);
+        }
+        history.extend(old.history.into_iter().filter(|k| *k != record.key));
+        history.truncate(cache::KEEP_KEYS - 1);
+        record.history = history;
+    }
+    m.stages.insert(id.to_string(), record);
+}
+
+/// Removes the empty folders from `file`'s folder up to (not including) `stop`.
+pub fn remove_empty_parents(file: &Path, stop: &Path) {
+    let mut d = file.parent();
+    while let Some(dir) = d {
+        if !paths::is_within(dir, stop)
+            || paths::normalize(dir) == paths::normalize(stop)
+            || std::fs::remove_dir(dir).is_err()
+        {
+            break;
+        }
+        d = dir.parent();
+    }
+}
+
+/// What a worker sends back.
+struct Done {
+    index: usize,
+    result: StageResult,
+}
+
+/// Runs the work of `plan` with up to `jobs` stages at once.
+pub fn run(
+    session: &Session,
+    graph: &Graph,
+    plan: Plan,
+    jobs: usize,
+    obs: &dyn Observer,
+) -> Result<RunReport> {
+    let start = Instant::now();
+    let jobs = jobs.max(1);
+    let n = graph.stages.len();
+    let delay_ms: u64 = std::env::var(DELAY_ENV)
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(0);
+    let manifest = Mutex::new(plan.manifest);
+    // Save the refreshed input stamps now, so even an interrupted run keeps them.
+    {
+        let _g = commit_lock();
+        session.cache.save_manifest(&manifest.lock().unwrap())?;
+    }
+
+    let mut results: Vec<Option<StageResult>> = vec![None; n];
+    let mut pending: Vec<bool> = plan.stages.iter().map(|p| p.decision.is_work()).collect();
+    for (i, (s, p)) in graph.stages.iter().zip(&plan.stages).enumerate() {
+        if p.decision.is_work() {
+            continue;
+        }
+        let (status, outputs) = match &p.decision {
+            Decision::UpToDate => {
+                let rec = manifest.lock().unwrap().stages.get(&s.id).cloned();
+                (
+                    Status::UpToDate,
+                    rec.map(|r| r.outputs.iter().map(|o| s.dir.join(&o.rel)).collect())
+                        .unwrap_or_default(),
+                )
+            }
+            _ => (Status::Skipped, vec![]),
+        };
+        let r = StageResult {
+            id: s.id.clone(),
+            kind: s.kind_name.clone(),
+            status,
+            reason: p.decision.reason().to_string(),
+            seconds: 0.0,
+            outputs,
+            warnings: vec![],
+        };
+        obs.finished(&r);
+        results[i] = Some(r);
+    }
+
+    let (tx, rx) = mpsc::channel::<Done>();
+    std::thread::scope(|scope| {
+        let mut running = 0usize;
+        loop {
+            // Start every stage whose reads are done, lowest index first, up to `jobs`.
+            while running < jobs {
+                let ready = (0..n).find(|&i| {
+                    pending[i]
+                        && graph.stages[i].deps().all(|d| {
+                            results[d].as_ref().is_some_and(|r| {
+                                matches!(
+                                    r.status,
+                                    Status::Ran | Status::Restored | Status::UpToDate
+                                )
+                            })
+                        })
+                });
+                let Some(i) = ready else { break };
+                pending[i] = false;
+                running += 1;
+                let tx = tx.clone();
+                let (manifest, plan_stage) = (&manifest, &plan.stages[i]);
+                scope.spawn(move || {
+                    let result = run_stage(session, graph, i, plan_stage, manifest, delay_ms, obs);
+                    let _ = tx.send(Done { index: i, result });
+                });
+            }
+            if running == 0 {
+                break;
+            }
+            let done = rx.recv().expect("a worker reports");
+            running -= 1;
+            let failed = done.result.status == Status::Failed;
+            obs.finished(&done.result);
+            let id = done.result.id.clone();
+            results[done.index] = Some(done.result);
+            if failed {
+                for j in graph.dependants(done.index) {
+                    if pending[j] {
+                        pending[j] = false;
+                        let s = &graph.stages[j];
+                        let r = StageResult {
+                            id: s.id.clone(),
+                            kind: s.kind_name.clone(),
+                            status: Status::Blocked,
+                            reason: format!("not run: '{id}' failed"),
+                            seconds: 0.0,
+                            outputs: vec![],
+                            warnings: vec![],
+                        };
+                        obs.finished(&r);
+                        results[j] = Some(r);
+                    }
+                }
+            }
+        }
+    });
+
+    {
+        let _g = commit_lock();
+        let m = manifest.lock().unwrap();
+        session.cache.save_manifest(&m)?;
+        let _ = session.cache.collect_garbage(&m);
+    }
+    Ok(RunReport {
+        pipeline: graph.pipeline.file.clone(),
+        output: graph.pipeline.output.clone(),
+        stages: results
+            .into_iter()
+            .map(|r| r.expect("every stage has a result"))
+            .collect(),
+        seconds: start.elapsed().as_secs_f64(),
+    })
+}
+
+/// Runs (or restores) one stage and commits its outputs.
+fn run_stage(
+    session: &Session,
+    graph: &Graph,
+    i: usize,
+    planned: &crate::plan::PlannedStage,
+    manifest: &Mutex<Manifest>,
+    delay_ms: u64,
+    obs: &dyn Observer,
+) -> StageResult {
+    let s = &graph.stages[i];
+    let t0 = Instant::now();
+    obs.started(&s.id, &planned.decision);
+    let key = planned.key.clone().expect("work has a key");
+    let parts = planned.parts.clone().expect("work has key parts");
+    let staging = session.tmp.join(format!("{i}-{}", paths::slug(&s.id)));
+    let mut result = StageResult {
+        id: s.id.clone(),
+        kind: s.kind_name.clone(),
+        status: Status::Ran,
+        reason: planned.decision.reason().to_string(),
+        seconds: 0.0,
+        outputs: vec![],
+        warnings: vec![],
+    };
+
+    let outcome: std::result::Result<Vec<(PathBuf, String, cache::FileStamp)>, String> = (|| {
+        if let Decision::Restore(_) = planned.decision {
+            if let Some(entry) = session.cache.entry(&key) {
+                let _g = gate();
+                if let Some(staged) = session
+                    .cache
+                    .stage_entry(&entry, &staging)
+                    .map_err(|e| e.to_string())?
+                {
+                    result.status = Status::Restored;
+                    return staged
+                        .into_iter()
+                        .zip(entry.files)
+                        .map(|((path, rel), f)| {
+                            let md = std::fs::metadata(&path)
+                                .map_err(|e| format!("{}: {e}", path.display()))?;
+                            Ok((
+                                path,
+                                rel,
+                                cache::FileStamp {
+                                    mtime_ns: cache::mtime_ns(&md),
+                                    ..f.stamp
+                                },
+                            ))
+                        })
+                        .collect();
+                }
+            }
+            result.reason = format!("{} (cache damaged: baking)", result.reason);
+        }
+        let (kind, params) = s.runnable().expect("work is runnable");
+        let inputs = graph.input_args(i);
+        let progress = obs.progress(&s.id);
+        let baked = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            kind.run(params, &inputs, &s.dir, progress.as_ref())
+        }));
+        drop(progress);
+        let Baked { files, warnings } = match baked {
+            Ok(Ok(b)) => b,
+            Ok(Err(BakeError { message, .. })) => return Err(message),
+            Err(panic) => {
+                let msg = panic
+                    .downcast_ref::<String>()
+                    .cloned()
+                    .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
+                    .unwrap_or_default();
+                return Err(format!("the bake panicked: {msg}"));
+            }
+        };
+        result.warnings = warnings;
+        let _g = gate();
+        stage_files(&staging, &s.dir, files)
+    })();
+
+    let staged = match outcome {
+        Ok(staged) => staged,
+        Err(message) => {
+            let _ = std::fs::remove_dir_all(&staging);
+            result.status = Status::Failed;
+            result.reason = message;
+            result.seconds = t0.elapsed().as_secs_f64();
+            return result;
+        }
+    };
+    if delay_ms > 0 {
+        std::thread::sleep(std::time::Duration::from_millis(delay_ms));
+    }
+    let seconds = t0.elapsed().as_secs_f64();
+    match commit(session, graph, i, key, parts, staged, seconds, manifest) {
+        Ok(outputs) => result.outputs = outputs,
+        Err(e) => {
+            result.status = Status::Failed;
+            result.reason = e.to_string();
+        }
+    }
+    let _ = std::fs::remove_dir_all(&staging);
+    result.seconds = t0.elapsed().as_secs_f64();
+    result
+}
+
+/// Writes a bake's encoded files into `staging` (synced), checking they belong in `dir`.
+/// Returns (staged file, path relative to `dir`, stamp).
+fn stage_files(
+    staging: &Path,
+    dir: &Path,
+    files: Vec<(PathBuf, Vec<u8>)>,
+) -> std::result::Result<Vec<(PathBuf, String, cache::FileStamp)>, String> {
+    use std::io::Write;
+    std::fs::create_dir_all(staging).map_err(|e| format!("{}: {e}", staging.display()))?;
+    let mut out = Vec::with_capacity(files.len());
+    for (n, (path, bytes)) in files.into_iter().enumerate() {
+        let norm = paths::normalize(&path);
+        let rel = norm.strip_prefix(paths::normalize(dir)).map_err(|_| {
+            format!(
+                "the bake wrote {} outside its folder {}",
+                path.display(),
+                dir.display()
+            )
+        })?;
+        let staged = staging.join(n.to_string());
+        let write = || -> std::io::Result<()> {
+            let mut f = std::fs::File::create(&staged)?;
+            f.write_all(&bytes)?;
+            f.sync_data()
+        };
+        write().map_err(|e| format!("{}: {e}", staged.display()))?;
+        let md = std::fs::metadata(&staged).map_err(|e| format!("{}: {e}", staged.display()))?;
+        let stamp = cache::FileStamp {
+            size: bytes.len() as u64,
+            mtime_ns: cache::mtime_ns(&md),
+            hash: cache::hash_bytes(&bytes),
+        };
+        out.push((staged, rel.to_string_lossy().into_owned(), stamp));
+    }
+    Ok(out)
+}
+
+/// Renames staged files into place and records the stage, under the commit lock and a journal.
+#[allow(clippy::too_many_arguments)]
+fn commit(
+    session: &Session,
+    graph: &Graph,
+    i: usize,
+    key: String,
+    parts: KeyParts,
+    staged: Vec<(PathBuf, String, cache::FileStamp)>,
+    seconds: f64,
+    manifest: &Mutex<Manifest>,
+) -> Result<Vec<PathBuf>> {
+    let s = &graph.stages[i];
+    let output = &graph.pipeline.output;
+    let rel_dir = s
+        .dir
+        .strip_prefix(output)
+        .unwrap_or(&s.dir)
+        .to_string_lossy()
+        .into_owned();
+    let record = StageRecord {
+        key: key.clone(),
+        parts,
+        dir: rel_dir,
+        outputs: staged
+            .iter()
+            .map(|(_, rel, stamp)| OutputRecord {
+                rel: rel.clone(),
+                stamp: stamp.clone(),
+            })
+            .collect(),
+        seconds,
+        history: vec![],
+    };
+    let renames: Vec<(PathBuf, PathBuf)> = staged
+        .iter()
+        .map(|(p, rel, _)| (p.clone(), s.dir.join(rel)))
+        .collect();
+    let _g = commit_lock();
+    let journal_path = session
+        .cache
+        .journal()
+        .join(format!("{}.json", paths::slug(&s.id)));
+    let journal = Journal {
+        id: s.id.clone(),
+        record: record.clone(),
+        renames: renames.clone(),
+    };
+    cache::write_atomic(
+        &journal_path,
+        &serde_json::to_vec(&journal).expect("journal serialises"),
+    )?;
+    for (staged, target) in &renames {
+        if let Some(d) = target.parent() {
+            std::fs::create_dir_all(d).map_err(|e| Error::io(d, e))?;
+        }
+        std::fs::rename(staged, target).map_err(|e| Error::io(target, e))?;
+    }
+    // The object store is a convenience: failing to link into it must not fail the stage.
+    let _ = session.cache.put(&key, &s.dir, &record.outputs);
+    {
+        let mut m = manifest.lock().unwrap();
+        apply_record(&mut m, output, &s.id, record);
+        session.cache.save_manifest(&m)?;
+    }
+    let _ = std::fs::remove_file(&journal_path);
+    Ok(renames.into_iter().map(|(_, t)| t).collect())
+}
+
+/// What `clean` removed.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct CleanReport {
+    /// Output files removed.
+    pub removed: Vec<PathBuf>,
+    /// The cache folder, if there was one (removed whole).
+    pub cache: Option<PathBuf>,
+}
+
+/// Removes every output the pipeline recorded or would write, and its cache folder.
+pub fn clean(session: Session, graph: &Graph) -> Result<CleanReport> {
+    let output = graph.pipeline.output.clone();
+    let manifest = session.cache.load_manifest()?;
+    let mut files: Vec<PathBuf> = manifest
+        .stages
+        .values()
+        .flat_map(|r| {
+            r.outputs
+                .iter()
+                .map(|o| output.join(&r.dir).join(&o.rel))
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    // Also what a ninja run of the same pipeline wrote (same files, not in the manifest).
+    for (i, s) in graph.stages.iter().enumerate() {
+        if let (true, Some((kind, params))) = (s.needed(), s.runnable()) {
+            if let Ok(outs) = kind.outputs(params, &graph.input_args(i), &s.dir) {
+                files.extend(outs);
+            }
+        }
+    }
+    files.sort();
+    files.dedup();
+    let mut report = CleanReport::default();
+    for f in files {
+        if paths::is_within(&f, &output) && std::fs::remove_file(&f).is_ok() {
+            remove_empty_parents(&f, &output);
+            report.removed.push(f);
+        }
+    }
+    let cache_root = session.cache.root.clone();
+    drop(session);
+    if cache_root.exists() {
+        std::fs::remove_dir_all(&cache_root).map_err(|e| Error::io(&cache_root, e))?;
+        report.cache = Some(cache_root);
+    }
+    let _ = std::fs::remove_dir(&output);
+    Ok(report)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn record(dir: &str, files: &[(&str, &[u8])]) -> StageRecord {
+        StageRecord {
+            key: cache::hash_bytes(dir.as_bytes()),
+            parts: KeyParts {
+                tool: "t".into(),
+                kind: "k".into(),
+                params: "{}".into(),
+                reads: vec![],
+            },
+            dir: dir.into(),
+            outputs: files
+                .iter()
+                .map(|(rel, b)| OutputRecord {
+                    rel: rel.to_string(),
+                    stamp: cache::FileStamp {
+                        size: b.len() as u64,
+                        mtime_ns: 0,
+                        hash: cache::hash_bytes(b),
+                    },
+                })
+                .collect(),
+            seconds: 0.0,
+            history: vec![],
+        }
+    }
+
+    #[test]
+    fn a_journal_left_by_a_killed_run_is_rolled_forward() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("out");
+        let cache = CacheDir::new(&out);
+        // A killed run: one file renamed into place, one still staged, the journal written.
+        let staged = cache.tmp().join("4242");
+        std::fs::create_dir_all(&staged).unwrap();
+        std::fs::write(staged.join("1"), b"second").unwrap();
+        std::fs::create_dir_all(out.join("s")).unwrap();
+        std::fs::write(out.join("s/a.exr"), b"first").unwrap();
+        let rec = record("s", &[("a.exr", b"first"), ("b.exr", b"second")]);
+        let j = Journal {
+            id: "s".into(),
+            record: rec.clone(),
+            renames: vec![
+                (staged.join("0"), out.join("s/a.exr")),
+                (staged.join("1"), out.join("s/b.exr")),
+            ],
+        };
+        cache::write_atomic(
+            &cache.journal().join("s.json"),
+            &serde_json::to_vec(&j).unwrap(),
+        )
+        .unwrap();
+        std::fs::write(cache.lock_path(), "4294967295").unwrap();
+
+        let session = Session::open_output(&out).unwrap();
+        assert_eq!(std::fs::read(out.join("s/b.exr")).unwrap(), b"second");
+        assert!(
+            !cache.tmp().join("4242").exists(),
+            "stale staging is cleared"
+        );
+        assert_eq!(std::fs::read_dir(cache.journal()).unwrap().count(), 0);
+        let m = cache.load_manifest().unwrap();
+        assert_eq!(m.stages["s"].key, rec.key);
+        assert!(
+            cache.entry(&rec.key).is_some(),
+            "the outputs went into the object store"
+        );
+        // A second session cannot open the folder while this one holds it.
+        assert!(matches!(
+            Session::open_output(&out),
+            Err(Error::Busy { .. })
+        ));
+        drop(session);
+        assert!(!cache.lock_path().exists());
+        drop(Session::open_output(&out).unwrap());
+    }
+
+    #[test]
+    fn a_new_record_removes_the_outputs_the_old_one_had_and_keeps_history() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path();
+        std::fs::create_dir_all(out.join("s")).unwrap();
+        for f in ["m0.exr", "m1.exr", "m2.exr"] {
+            std::fs::write(out.join("s").join(f), f).unwrap();
+        }
+        let mut m = Manifest::default();
+        apply_record(
+            &mut m,
+            out,
+            "s",
+            record(
+                "s",
+                &[
+                    ("m0.exr", b"m0.exr"),
+                    ("m1.exr", b"m1.exr"),
+                    ("m2.exr", b"m2.exr"),
+                ],
+            ),
+        );
+        let mut shorter = record("s", &[("m0.exr", b"m0.exr"), ("m1.exr", b"m1.exr")]);
+        shorter.key = "other".into();
+        apply_record(&mut m, out, "s", shorter);
+        assert!(out.join("s/m1.exr").exists() && !out.join("s/m2.exr").exists());
+        assert_eq!(m.stages["s"].history, vec![cache::hash_bytes(b"s")]);
+    }
+}

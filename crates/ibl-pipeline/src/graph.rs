@@ -1,0 +1,716 @@
+//! The stage graph: declared and scene-derived stages, their reads resolved to inputs or
+//! stages, checked (ids, references, arity, cycles, missing inputs) and put in dependency order,
+//! with the set of stages the pipeline needs.
+
+use crate::error::{Diagnostic, Error, Result};
+use crate::kinds::{AnyParams, Kind};
+use crate::paths;
+use crate::scene::{self, Need};
+use crate::schema::{Input, Pipeline};
+use std::collections::{BTreeMap, HashMap};
+use std::path::{Path, PathBuf};
+
+/// What a stage reads.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Source {
+    /// A declared (or scene) input, by name.
+    Input(String),
+    /// Another stage, by index into [`Graph::stages`].
+    Stage(usize),
+}
+
+/// Where a stage comes from.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Origin {
+    Declared,
+    Scene,
+}
+
+/// A stage of the graph.
+#[derive(Clone)]
+pub struct Stage {
+    pub id: String,
+    pub kind_name: String,
+    /// `None` only for stages the scene does not need, of kinds this build lacks.
+    pub kind: Option<&'static dyn Kind>,
+    pub params: Option<AnyParams>,
+    pub reads: Vec<(String, Source)>,
+    /// The stage's output folder.
+    pub dir: PathBuf,
+    pub origin: Origin,
+    pub need: Need,
+    pub offset: usize,
+}
+
+impl Stage {
+    pub fn needed(&self) -> bool {
+        matches!(self.need, Need::Needed(_))
+    }
+    /// Kind and parameters of a stage that can run.
+    pub fn runnable(&self) -> Option<(&'static dyn Kind, &AnyParams)> {
+        Some((self.kind?, self.params.as_ref()?))
+    }
+    /// Indices of the stages this one reads.
+    pub fn deps(&self) -> impl Iterator<Item = usize> + '_ {
+        self.reads.iter().filter_map(|(_, s)| match s {
+            Source::Stage(i) => Some(*i),
+            Source::Input(_) => None,
+        })
+    }
+}
+
+/// An input with its files found on disk.
+#[derive(Clone, Debug)]
+pub struct ResolvedInput {
+    pub input: Input,
+    /// The resolved path (or pattern for a glob).
+    pub path: PathBuf,
+    /// Its files: the file itself, a folder's files recursively (sorted), a glob's matches.
+    pub files: Vec<PathBuf>,
+    /// What a bake is given for it: the file, the folder, or each match.
+    pub args: Vec<PathBuf>,
+}
+
+/// A checked pipeline, stages in dependency order.
+pub struct Graph {
+    pub pipeline: Pipeline,
+    pub inputs: BTreeMap<String, ResolvedInput>,
+    pub stages: Vec<Stage>,
+}
+
+impl Graph {
+    /// The stage with id `id`.
+    pub fn index(&self, id: &str) -> Option<usize> {
+        self.stages.iter().position(|s| s.id == id)
+    }
+
+    /// The paths stage `i`'s bake is given, in `reads` order.
+    pub fn input_args(&self, i: usize) -> Vec<PathBuf> {
+        let mut args = Vec::new();
+        for (_, src) in &self.stages[i].reads {
+            match src {
+                Source::Input(name) => args.extend(self.inputs[name].args.iter().cloned()),
+                Source::Stage(j) => {
+                    let s = &self.stages[*j];
+                    let (kind, params) = s.runnable().expect("a read stage is runnable");
+                    args.push(kind.product(params, &s.dir));
+                }
+            }
+        }
+        args
+    }
+
+    /// All stages that read stage `i`, directly or not.
+    pub fn dependants(&self, i: usize) -> Vec<usize> {
+        let mut out = vec![false; self.stages.len()];
+        let mut stack = vec![i];
+        while let Some(k) = stack.pop() {
+            for (j, s) in self.stages.iter().enumerate() {
+                if !out[j] && s.deps().any(|d| d == k) {
+                    out[j] = true;
+                    stack.push(j);
+                }
+            }
+        }
+        (0..out.len()).filter(|&j| out[j]).collect()
+    }
+}
+
+/// Checks a stage id: non-empty segments of `[A-Za-z0-9_.-]` separated by `/`, none `.`/`..`.
+fn check_id(id: &str) -> std::result::Result<(), String> {
+    if id.is_empty() {
+        return Err("a stage id cannot be empty".into());
+    }
+    for seg in id.split('/') {
+        if seg.is_empty() || seg == "." || seg == ".." || seg.starts_with(".bake") {
+            return Err(format!(
+                "stage id '{id}' has an empty, '.', '..' or '.bake' segment"
+            ));
+        }
+        if let Some(c) = seg
+            .chars()
+            .find(|c| !(c.is_ascii_alphanumeric() || "_.-".contains(*c)))
+        {
+            return Err(format!("stage id '{id}' has the character '{c}' (use letters, digits, '_', '.', '-' and '/')"));
+        }
+    }
+    Ok(())
+}
+
+/// Builds and checks the graph of a parsed pipeline. Every problem found is reported at once.
+pub fn build(pipeline: Pipeline) -> Result<Graph> {
+    let mut diags: Vec<Diagnostic> = Vec::new();
+    let p = &pipeline;
+
+    // 1. All stages: declared, then derived from the scene.
+    let mut stages: Vec<Stage> = Vec::new();
+    let mut raw_reads: Vec<Vec<String>> = Vec::new();
+    for d in &p.stages {
+        let dir = paths::normalize(&p.output.join(d.out.as_deref().unwrap_or(&d.id)));
+        stages.push(Stage {
+            id: d.id.clone(),
+            kind_name: d.kind.name().to_string(),
+            kind: Some(d.kind),
+            params: Some(d.params.clone()),
+            reads: vec![],
+            dir,
+            origin: Origin::Declared,
+            need: Need::Needed("declared".into()),
+            offset: d.offset,
+        });
+        raw_reads.push(d.reads.clone());
+    }
+    let mut input_decls: BTreeMap<String, (Input, usize)> = p.inputs.clone();
+    if let Some(scene) = &p.scene {
+        let (derived, scene_inputs) = scene::derive(p, scene, &mut diags);
+        for (name, input, at) in scene_inputs {
+            if input_decls.contains_key(&name) {
+                diags.push(p.diag(
+                    at,
+                    format!("scene input '{name}' clashes with a declared input of the same name"),
+                ));
+            }
+            input_decls.insert(name, (input, at));
+        }
+        for d in derived {
+            let kind = crate::kinds::find(d.kind);
+            if kind.is_none() && matches!(d.need, Need::Needed(_)) {
+                diags.push(p.diag(d.offset, format!("the scene needs stage '{}' of kind '{}', which this build of bake does not have", d.id, d.kind)));
+            }
+            stages.push(Stage {
+                dir: paths::normalize(&p.output.join(&d.id)),
+                id: d.id,
+                kind_name: d.kind.to_string(),
+                kind,
+                params: d.params,
+                reads: vec![],
+                origin: Origin::Scene,
+                need: d.need,
+                offset: d.offset,
+            });
+            raw_reads.push(d.reads);
+        }
+    }
+
+    // 2. Ids: valid, unique, distinct from input names, distinct output folders.
+    let mut by_id: HashMap<String, usize> = HashMap::new();
+    for (i, s) in stages.iter().enumerate() {
+        if let Err(e) = check_id(&s.id) {
+            diags.push(p.diag(s.offset, e));
+        }
+        if let Some(&j) = by_id.get(s.id.as_str()) {
+            let what = if stages[j].origin == Origin::Scene || s.origin == Origin::Scene {
+                " (the scene derives a stage of that id)"
+            } else {
+                ""
+            };
+            diags.push(p.diag(s.offset, format!("duplicate stage id '{}'{what}", s.id)));
+        } else {
+            by_id.insert(s.id.clone(), i);
+        }
+        if input_decls.contains_key(&s.id) {
+            diags.push(p.diag(
+                s.offset,
+                format!("'{}' is both an input and a stage id", s.id),
+            ));
+        }
+    }
+    for s in &stages {
+        let output = paths::normalize(&p.output);
+        if !paths::is_within(&s.dir, &output) || s.dir == output {
+            diags.push(p.diag(
+                s.offset,
+                format!(
+                    "stage '{}' would write to {}, which is not a folder inside the output {}",
+                    s.id,
+                    s.dir.display(),
+                    output.display()
+                ),
+            ));
+        }
+    }
+    let mut dirs: HashMap<&Path, &str> = HashMap::new();
+    for s in &stages {
+        if let Some(other) = dirs.insert(&s.dir, &s.id).filter(|other| *other != s.id) {
+            diags.push(p.diag(
+                s.offset,
+                format!(
+                    "stages '{other}' and '{}' write to the same folder {}",
+                    s.id,
+                    s.dir.display()
+                ),
+            ));
+        }
+    }
+
+    // 3. Reads resolve to inputs or stages.
+    let mut reads_of: Vec<Vec<(String, Source)>> = Vec::new();
+    let mut unresolved = vec![false; stages.len()];
+    for (i, (s, reads)) in stages.iter().zip(&raw_reads).enumerate() {
+        let mut rs = Vec::new();
+        for r in reads {
+            if input_decls.contains_key(r) {
+                rs.push((r.clone(), Source::Input(r.clone())));
+            } else if let Some(&j) = by_id.get(r.as_str()) {
+                rs.push((r.clone(), Source::Stage(j)));
+            } else {
+                let at = p.src[s.offset.min(p.src.len())..]
+                    .find(&format!("\"{r}\""))
+                    .map(|o| s.offset + o)
+                    .unwrap_or(s.offset);
+                let mut known: Vec<&str> = input_decls.keys().map(|k| k.as_str()).collect();
+                let mut ids: Vec<&str> = by_id.keys().map(|s| s.as_str()).collect();
+                ids.sort();
+                known.extend(ids);
+                diags.push(p.diag(
+                    at,
+                    format!(
+                        "stage '{}' reads '{r}', which is neither an input nor a stage (known: {})",
+                        s.id,
+                        known.join(", ")
+                    ),
+                ));
+                unresolved[i] = true;
+            }
+        }
+        reads_of.push(rs);
+    }
+    for (s, rs) in stages.iter_mut().zip(reads_of) {
+        s.reads = rs;
+    }
+
+    // 4. Cycles (reported with the cycle's path), then dependency order.
+    let order = match topo_order(&stages) {
+        Ok(o) => o,
+        Err(cycle) => {
+            let names: Vec<&str> = cycle.iter().map(|&i| stages[i].id.as_str()).collect();
+            diags.push(p.diag(
+                stages[cycle[0]].offset,
+                format!("cycle: {} -> {}", names.join(" -> "), names[0]),
+            ));
+            return Err(Error::Invalid(diags));
+        }
+    };
+
+    // 5. What is needed: the closure of the targets over reads.
+    let targets: Vec<usize> = match &p.targets {
+        Some(ts) => ts
+            .iter()
+            .filter_map(|(t, at)| match by_id.get(t.as_str()) {
+                Some(&i) => Some(i),
+                None => {
+                    diags.push(p.diag(
+                        *at,
+                        format!(
+                                "output '{t}' is not a stage (stages: {})",
+                                stages
+                                    .iter()
+                                    .map(|s| s.id.as_str())
+                                    .collect::<Vec<_>>()
+                                    .join(", ")
+                            ),
+                    ));
+                    None
+                }
+            })
+            .collect(),
+        None => (0..stages.len()).filter(|&i| stages[i].needed()).collect(),
+    };
+    // A target is needed for its own reason; a stage a needed stage reads is needed by it.
+    let mut is_target = vec![false; stages.len()];
+    for &t in &targets {
+        is_target[t] = true;
+    }
+    let mut read_by: Vec<Option<usize>> = vec![None; stages.len()];
+    for &i in order.iter().rev() {
+        if is_target[i] || read_by[i].is_some() {
+            for d in stages[i].deps().collect::<Vec<_>>() {
+                read_by[d].get_or_insert(i);
+            }
+        }
+    }
+    let explicit_targets = p.targets.is_some();
+    let ids: Vec<String> = stages.iter().map(|s| s.id.clone()).collect();
+    for (i, s) in stages.iter_mut().enumerate() {
+        s.need = match (&s.need, is_target[i], read_by[i]) {
+            (Need::Needed(_), true, _) if explicit_targets && s.origin == Origin::Declared => {
+                Need::Needed("an output of the pipeline".into())
+            }
+            (Need::Needed(why), true, _) => Need::Needed(why.clone()),
+            (Need::NotNeeded(_), true, _) => Need::Needed("an output of the pipeline".into()),
+            (Need::Needed(why), false, Some(_)) if s.origin == Origin::Scene => {
+                Need::Needed(why.clone())
+            }
+            (_, _, Some(by)) => Need::Needed(format!("read by '{}'", ids[by])),
+            (Need::NotNeeded(why), _, None) => Need::NotNeeded(why.clone()),
+            (Need::Needed(_), _, None) => {
+                Need::NotNeeded("not needed by the pipeline's outputs".into())
+            }
+        };
+        if s.needed() && s.kind.is_none() {
+            diags.push(p.diag(
+                s.offset,
+                format!(
+                    "stage '{}' needs kind '{}', which this build of bake does not have",
+                    s.id, s.kind_name
+                ),
+            ));
+        }
+    }
+
+    // 6. Inputs of needed stages exist; arity of every needed stage.
+    let mut inputs = BTreeMap::new();
+    let used: std::collections::BTreeSet<&str> = stages
+        .iter()
+        .filter(|s| s.needed())
+        .flat_map(|s| {
+            s.reads.iter().filter_map(|(_, src)| {
+                if let Source::Input(n) = src {
+                    Some(n.as_str())
+                } else {
+                    None
+                }
+            })
+        })
+        .collect();
+    for (name, (input, at)) in &input_decls {
+        let resolved = resolve_input(p, input);
+        match resolved {
+            Ok(r) => {
+                inputs.insert(name.clone(), r);
+            }
+            Err(why) if used.contains(name.as_str()) => {
+                diags.push(p.diag(*at, format!("input '{name}': {why}")))
+            }
+            Err(_) => {
+                inputs.insert(
+                    name.clone(),
+                    ResolvedInput {
+                        input: input.clone(),
+                        path: p.resolve(input.pattern()),
+                        files: vec![],
+                        args: vec![],
+                    },
+                );
+            }
+        }
+    }
+    for (s, _) in stages
+        .iter()
+        .zip(&unresolved)
+        .filter(|(s, unresolved)| s.needed() && !**unresolved)
+    {
+        let Some(kind) = s.kind else { continue };
+        let n: usize = s
+            .reads
+            .iter()
+            .map(|(_, src)| match src {
+                Source::Input(name) => inputs.get(name).map(|r| r.args.len()).unwrap_or(1),
+                Source::Stage(_) => 1,
+            })
+            .sum();
+        let a = kind.reads();
+        if n < a.min || n > a.max {
+            diags.push(p.diag(
+                s.offset,
+                format!(
+                    "stage '{}' ({}) {}, but its reads give {n}",
+                    s.id,
+                    kind.name(),
+                    a.describe()
+                ),
+            ));
+        }
+    }
+    if !diags.is_empty() {
+        return Err(Error::Invalid(diags));
+    }
+
+    // Reorder stages topologically, remapping indices.
+    let mut new_index = vec![0; stages.len()];
+    for (new, &old) in order.iter().enumerate() {
+        new_index[old] = new;
+    }
+    let mut ordered: Vec<Option<Stage>> = stages.into_iter().map(Some).collect();
+    let mut stages: Vec<Stage> = order
+        .iter()
+        .map(|&old| ordered[old].take().expect("each once"))
+        .collect();
+    for s in &mut stages {
+        for (_, src) in &mut s.reads {
+            if let Source::Stage(j) = src {
+                *j = new_index[*j];
+            }
+        }
+    }
+    Ok(Graph {
+        pipeline,
+        inputs,
+        stages,
+    })
+}
+
+/// Kahn's algorithm, ties broken by declaration order; on a cycle, the stages of one cycle.
+fn topo_order(stages: &[Stage]) -> std::result::Result<Vec<usize>, Vec<usize>> {
+    let n = stages.len();
+    let mut indeg = vec![0usize; n];
+    let mut users: Vec<Vec<usize>> = vec![vec![]; n];
+    for (i, s) in stages.iter().enumerate() {
+        for d in s.deps() {
+            indeg[i] += 1;
+            users[d].push(i);
+        }
+    }
+    let mut ready: std::collections::BTreeSet<usize> = (0..n).filter(|&i| indeg[i] == 0).collect();
+    let mut order = Vec::with_capacity(n);
+    while let Some(i) = ready.pop_first() {
+        order.push(i);
+        for &u in &users[i] {
+            indeg[u] -= 1;
+            if indeg[u] == 0 {
+                ready.insert(u);
+            }
+        }
+    }
+    if order.len() == n {
+        return Ok(order);
+    }
+    // Walk backwards along reads from a stage left over: every left-over stage reads another
+    // left-over stage, so the walk must revisit one; the loop from there is a cycle.
+    let left: Vec<bool> = (0..n).map(|i| indeg[i] > 0).collect();
+    let mut path = vec![(0..n).find(|&i| left[i]).expect("a left-over stage")];
+    loop {
+        let cur = *path.last().unwrap();
+        let next = stages[cur]
+            .deps()
+            .find(|&d| left[d])
+            .expect("left-over stages read left-over stages");
+        if let Some(pos) = path.iter().position(|&x| x == next) {
+            // path goes cur -> next along "reads"; print the cycle in data-flow order.
+            let mut cycle: Vec<usize> = path[pos..].to_vec();
+            cycle.reverse();
+            // Start at the stage declared first, so the message does not depend on the walk.
+            let first = (0..cycle.len())
+                .min_by_key(|&k| cycle[k])
+                .expect("a cycle has a stage");
+            cycle.rotate_left(first);
+            return Err(cycle);
+        }
+        path.push(next);
+    }
+}
+
+/// Finds an input's files on disk.
+fn resolve_input(p: &Pipeline, input: &Input) -> std::result::Result<ResolvedInput, String> {
+    let path = p.resolve(input.pattern());
+    let (files, args) = match input {
+        Input::File(_) => {
+            if !path.is_file() {
+                return Err(if path.exists() {
+                    format!("{} is not a file", path.display())
+                } else {
+                    format!("{} does not exist", path.display())
+                });
+            }
+            (vec![path.clone()], vec![path.clone()])
+        }
+        Input::Folder(_) => {
+            if !path.is_dir() {
+                return Err(if path.exists() {
+                    format!("{} is not a folder", path.display())
+                } else {
+                    format!("folder {} does not exist", path.display())
+                });
+            }
+            // The pipeline's own outputs are not part of an input folder that holds them.
+            let files: Vec<PathBuf> = walk(&path)
+                .map_err(|e| format!("{}: {e}", path.display()))?
+                .into_iter()
+                .filter(|f| !paths::is_within(f, &p.output))
+                .collect();
+            (files, vec![path.clone()])
+        }
+        Input::Glob(_) => {
+            let pat = path.to_string_lossy().into_owned();
+            let files: Vec<PathBuf> = glob::glob(&pat)
+                .map_err(|e| format!("bad glob '{pat}': {e}"))?
+                .filter_map(|r| r.ok())
+                .filter(|f| f.is_file())
+                .collect();
+            if files.is_empty() {
+                return Err(format!("glob '{}' matches no files", pat));
+            }
+            (files.clone(), files)
+        }
+    };
+    Ok(ResolvedInput {
+        input: input.clone(),
+        path,
+        files,
+        args,
+    })
+}
+
+/// Files under `dir`, recursively, sorted, skipping hidden entries.
+pub fn walk(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d)? {
+            let e = e?;
+            if e.file_name().to_string_lossy().starts_with('.') {
+                continue;
+            }
+            let t = e.file_type()?;
+            if t.is_dir() {
+                stack.push(e.path());
+            } else if t.is_file() || t.is_symlink() {
+                out.push(e.path());
+            }
+        }
+    }
+    out.sort();
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::schema;
+
+    fn graph(src: &str) -> Result<Graph> {
+        build(schema::parse(Path::new("p.ron"), src.to_string())?)
+    }
+
+    fn diags(src: &str) -> Vec<Diagnostic> {
+        match graph(src) {
+            Err(Error::Invalid(d)) => d,
+            Err(e) => panic!("{e}"),
+            Ok(_) => panic!("accepted"),
+        }
+    }
+
+    const E2C: &str = "kind: \"equirect-to-cube\"";
+
+    #[test]
+    fn cycles_are_printed_in_data_flow_order() {
+        let src = format!("(stages: [(id: \"a\", {E2C}, reads: [\"c\"]), (id: \"b\", {E2C}, reads: [\"a\"]), (id: \"c\", {E2C}, reads: [\"b\"]), (id: \"d\", {E2C}, reads: [\"a\"])])");
+        let d = diags(&src);
+        eprintln!("{}", d[0]);
+        assert_eq!(d.len(), 1);
+        assert_eq!(d[0].message, "cycle: a -> b -> c -> a");
+        let d = diags(&format!("(stages: [(id: \"s\", {E2C}, reads: [\"s\"])])"));
+        assert_eq!(d[0].message, "cycle: s -> s");
+    }
+
+    #[test]
+    fn unknown_reads_duplicates_and_missing_inputs_are_all_reported() {
+        let src = format!(
+            "(inputs: {{\"sky\": File(\"no/such.exr\"), \"unused\": File(\"nope.exr\")}}, stages: [(id: \"a\", {E2C}, reads: [\"sky\"]), (id: \"a\", {E2C}, reads: [\"ghost\"]), (id: \"b\", {E2C})])"
+        );
+        let d = diags(&src);
+        for x in &d {
+            eprintln!("{x}");
+        }
+        let all = d
+            .iter()
+            .map(|x| x.message.clone())
+            .collect::<Vec<_>>()
+            .join("\n");
+        assert!(all.contains("duplicate stage id 'a'"), "{all}");
+        assert!(
+            all.contains("reads 'ghost', which is neither an input nor a stage"),
+            "{all}"
+        );
+        assert!(
+            all.contains("input 'sky': no/such.exr does not exist"),
+            "{all}"
+        );
+        assert!(
+            !all.contains("input 'unused'"),
+            "unused inputs are not required: {all}"
+        );
+        assert!(
+            all.contains("stage 'b' (equirect-to-cube) reads exactly 1"),
+            "{all}"
+        );
+    }
+
+    #[test]
+    fn order_is_topological_and_outputs_select_what_is_needed() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("sky.exr"), b"x").unwrap();
+        let src = format!(
+            "(inputs: {{\"sky\": File(\"sky.exr\")}}, stages: [(id: \"late\", {E2C}, reads: [\"mid\"]), (id: \"mid\", {E2C}, reads: [\"first\"]), (id: \"first\", {E2C}, reads: [\"sky\"]), (id: \"other\", {E2C}, reads: [\"sky\"])], outputs: [\"mid\"])"
+        );
+        let g = build(schema::parse(&dir.path().join("p.ron"), src).unwrap()).unwrap();
+        let ids: Vec<_> = g.stages.iter().map(|s| s.id.as_str()).collect();
+        assert_eq!(ids, ["first", "mid", "late", "other"]);
+        let need: Vec<_> = g.stages.iter().map(|s| s.need.clone()).collect();
+        assert_eq!(need[0], Need::Needed("read by 'mid'".into()));
+        assert_eq!(need[1], Need::Needed("an output of the pipeline".into()));
+        assert_eq!(
+            need[2],
+            Need::NotNeeded("not needed by the pipeline's outputs".into())
+        );
+        assert_eq!(g.stages[1].reads[0].1, Source::Stage(0));
+        assert_eq!(
+            g.input_args(1),
+            vec![paths::normalize(&dir.path().join("out/first"))]
+        );
+        assert_eq!(g.dependants(0), vec![1, 2]);
+    }
+
+    #[test]
+    fn folder_and_glob_inputs_list_their_files() {
+        let dir = tempfile::tempdir().unwrap();
+        for f in [
+            "m/a/normal.png",
+            "m/b/normal.png",
+            "m/.hidden",
+            "h/x.exr",
+            "h/y.exr",
+            "h/z.txt",
+        ] {
+            let p = dir.path().join(f);
+            std::fs::create_dir_all(p.parent().unwrap()).unwrap();
+            std::fs::write(p, f).unwrap();
+        }
+        let src = format!("(inputs: {{\"m\": Folder(\"m\"), \"h\": Glob(\"h/*.exr\")}}, stages: [(id: \"c\", {E2C}, reads: [\"m\"])])");
+        let g = build(schema::parse(&dir.path().join("p.ron"), src).unwrap()).unwrap();
+        assert_eq!(g.inputs["m"].files.len(), 2);
+        assert_eq!(g.inputs["m"].args, vec![dir.path().join("m")]);
+        assert_eq!(g.inputs["h"].args.len(), 2);
+        let src = format!(
+            "(inputs: {{\"h\": Glob(\"h/*.exr\")}}, stages: [(id: \"c\", {E2C}, reads: [\"h\"])])"
+        );
+        let d = match build(schema::parse(&dir.path().join("p.ron"), src).unwrap()) {
+            Err(Error::Invalid(d)) => d,
+            _ => panic!(),
+        };
+        assert!(d[0].message.contains("its reads give 2"), "{}", d[0]);
+    }
+
+    #[test]
+    fn stage_folders_stay_inside_the_output_and_apart() {
+        for (out, want) in [
+            ("../elsewhere", "not a folder inside the output"),
+            (".", "not a folder inside the output"),
+            ("b", "write to the same folder"),
+        ] {
+            let src = format!("(stages: [(id: \"a\", {E2C}, out: \"{out}\"), (id: \"b\", {E2C})])");
+            let d = diags(&src);
+            assert!(d.iter().any(|d| d.message.contains(want)), "{out}: {d:?}");
+        }
+    }
+
+    #[test]
+    fn ids_are_checked() {
+        for bad in ["", "a//b", "../x", "a b", ".bake"] {
+            assert!(check_id(bad).is_err(), "{bad}");
+        }
+        for good in ["cube", "lobby/cube", "hv-lut/100x10", "a.b_c"] {
+            assert!(check_id(good).is_ok(), "{good}");
+        }
+    }
+}

@@ -1,0 +1,474 @@
+//! The stage-kind registry: each kind is a small adapter from a kind name to a bake's `Params`
+//! type (the very struct its CLI parses), what it reads, where it writes, and a call to the
+//! bake library's pure `run`, whose encoded files the executor writes atomically.
+//!
+//! Adding a bake is one `static` [`Adapter`] in one of the submodules and one line in [`all`].
+
+pub mod cli;
+mod env;
+#[cfg(feature = "lut")]
+mod lut;
+#[cfg(feature = "material")]
+mod material;
+#[cfg(feature = "prefilter")]
+mod prefilter;
+#[cfg(feature = "shexp")]
+mod shexp;
+
+use ibl_core::error::{Classify, ErrorClass};
+use ibl_core::progress::Progress;
+use serde::{de::DeserializeOwned, Serialize};
+use std::any::Any;
+use std::fmt;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+/// Every stage kind this build of the runner knows, in the order `bake kinds` lists them.
+pub fn all() -> Vec<&'static dyn Kind> {
+    #[allow(unused_mut)] // without the optional bakes nothing is pushed
+    let mut kinds: Vec<&'static dyn Kind> = vec![&env::EQUIRECT_TO_CUBE, &env::IRRADIANCE];
+    #[cfg(feature = "prefilter")]
+    kinds.push(&prefilter::PREFILTER);
+    #[cfg(feature = "shexp")]
+    kinds.push(&shexp::SHEXP_FIT);
+    #[cfg(feature = "lut")]
+    kinds.extend([
+        &lut::DFG as &dyn Kind,
+        &lut::FRESNEL_TAIL,
+        &lut::HV_LUT,
+        &lut::AS_SIZE_BIAS,
+    ]);
+    #[cfg(feature = "material")]
+    kinds.extend([&material::QUAT_MAP as &dyn Kind, &material::TPR_MAP]);
+    kinds
+}
+
+/// The kind called `name`.
+pub fn find(name: &str) -> Option<&'static dyn Kind> {
+    all().into_iter().find(|k| k.name() == name)
+}
+
+/// Names of all kinds, for error messages.
+pub fn names() -> Vec<&'static str> {
+    all().iter().map(|k| k.name()).collect()
+}
+
+/// What a `Params` struct must be to serve as a stage's parameters: the CLI's clap struct, the
+/// RON keys via serde, with clap's defaults as `Default`.
+pub trait BakeParams:
+    clap::Args
+    + clap::FromArgMatches
+    + Serialize
+    + DeserializeOwned
+    + Default
+    + Clone
+    + fmt::Debug
+    + Send
+    + Sync
+    + 'static
+{
+}
+impl<T> BakeParams for T where
+    T: clap::Args
+        + clap::FromArgMatches
+        + Serialize
+        + DeserializeOwned
+        + Default
+        + Clone
+        + fmt::Debug
+        + Send
+        + Sync
+        + 'static
+{
+}
+
+/// A stage's parameters with their type erased (the kind that parsed them knows it).
+pub type AnyParams = Arc<dyn ParamsObj>;
+
+/// What the runner needs of parameters without knowing their type.
+pub trait ParamsObj: Any + Send + Sync + fmt::Debug {
+    fn as_any(&self) -> &dyn Any;
+    /// Canonical form for cache keys: JSON with object keys sorted, every field present.
+    fn canonical(&self) -> serde_json::Value;
+    /// Command-line flags that make the CLI parse these parameters (non-defaults only).
+    fn cli_args(&self) -> Result<Vec<String>, String>;
+}
+
+impl<P: BakeParams> ParamsObj for P {
+    fn as_any(&self) -> &dyn Any {
+        self
+    }
+    fn canonical(&self) -> serde_json::Value {
+        // serde_json's map is a BTreeMap (no `preserve_order`), so keys come out sorted.
+        serde_json::to_value(self).expect("Params serialise to JSON")
+    }
+    fn cli_args(&self) -> Result<Vec<String>, String> {
+        cli::to_args(self)
+    }
+}
+
+/// The canonical text of parameters hashed into cache keys.
+pub fn canonical_text(p: &AnyParams) -> String {
+    serde_json::to_string(&p.canonical()).expect("JSON value prints")
+}
+
+/// How many sources a kind reads, and what they are.
+#[derive(Clone, Copy, Debug)]
+pub struct Arity {
+    pub min: usize,
+    pub max: usize,
+    /// What each source is, for messages ("an environment: equirect, cube folder or KTX2").
+    pub what: &'static str,
+}
+
+impl Arity {
+    pub const NONE: Arity = Arity {
+        min: 0,
+        max: 0,
+        what: "nothing",
+    };
+    pub const fn one(what: &'static str) -> Arity {
+        Arity {
+            min: 1,
+            max: 1,
+            what,
+        }
+    }
+    pub fn describe(&self) -> String {
+        match (self.min, self.max) {
+            (0, 0) => "reads nothing".to_string(),
+            (a, b) if a == b => format!("reads exactly {a} ({})", self.what),
+            (a, usize::MAX) => format!("reads at least {a} ({})", self.what),
+            (a, b) => format!("reads {a} to {b} ({})", self.what),
+        }
+    }
+}
+
+/// A bake's failure as the runner keeps it: its one-line message and exit-code class.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct BakeError {
+    pub message: String,
+    pub class: ErrorClass,
+}
+
+impl<E: Classify + 'static> From<E> for BakeError {
+    fn from(e: E) -> Self {
+        BakeError {
+            message: crate::error::error_chain(&e),
+            class: e.class(),
+        }
+    }
+}
+
+impl fmt::Display for BakeError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.message)
+    }
+}
+
+/// What a bake produced: encoded files (not yet written) and warnings for the log.
+#[derive(Default)]
+pub struct Baked {
+    pub files: Vec<(PathBuf, Vec<u8>)>,
+    pub warnings: Vec<String>,
+}
+
+/// A stage kind, type-erased: everything the planner, executor and ninja emitter ask of it.
+pub trait Kind: Send + Sync {
+    /// The name used in pipelines (`kind: "prefilter"`).
+    fn name(&self) -> &'static str;
+    fn summary(&self) -> &'static str;
+    /// The CLI that runs the same bake: binary name, then subcommand if any.
+    fn command(&self) -> &'static [&'static str];
+    /// The cargo package that builds that binary.
+    fn package(&self) -> &'static str;
+    fn reads(&self) -> Arity;
+    /// The RON keys (= long flags with `_` for `-`) this kind's parameters accept.
+    fn param_names(&self) -> Vec<String>;
+    /// Parses the RON text of `params: (...)` (missing keys take their defaults).
+    fn parse(&self, ron: &str) -> Result<AnyParams, ron::error::SpannedError>;
+    fn default_params(&self) -> AnyParams;
+    /// Non-default parameters exercising every kind of field (tests round-trip them).
+    fn example_params(&self) -> AnyParams;
+    /// `p` with `key` set to `value` (the scene's overrides: max roughness, n_u and n_v).
+    fn with(&self, p: &AnyParams, key: &str, value: serde_json::Value)
+        -> Result<AnyParams, String>;
+    /// The bake's own validation of its parameters (before any work).
+    fn validate(&self, p: &AnyParams) -> Result<(), BakeError>;
+    /// The `-o` argument for a stage writing into `dir`.
+    fn out_arg(&self, p: &AnyParams, dir: &Path) -> PathBuf;
+    /// What a downstream stage reads of this stage's outputs (the cube folder, the KTX2 file...).
+    fn product(&self, p: &AnyParams, dir: &Path) -> PathBuf;
+    /// The files a run will write, known before running (for ninja and for `plan`).
+    fn outputs(
+        &self,
+        p: &AnyParams,
+        inputs: &[PathBuf],
+        dir: &Path,
+    ) -> Result<Vec<PathBuf>, BakeError>;
+    /// Runs the bake in-process; nothing is written.
+    fn run(
+        &self,
+        p: &AnyParams,
+        inputs: &[PathBuf],
+        dir: &Path,
+        progress: &dyn Progress,
+    ) -> Result<Baked, BakeError>;
+    /// The CLI commands (argv, binary name first) that run the same bake; `rel` writes a path
+    /// as the command line should name it.
+    fn argv(
+        &self,
+        p: &AnyParams,
+        inputs: &[PathBuf],
+        dir: &Path,
+        rel: &dyn Fn(&Path) -> PathBuf,
+    ) -> Result<Vec<Vec<String>>, String>;
+    /// Checks that `p` survives `Params → CLI args → clap → Params` unchanged.
+    fn cli_round_trip(&self, p: &AnyParams) -> Result<Vec<String>, String>;
+}
+
+/// Lists the files a run writes, given the resolved inputs and the `-o` path.
+pub type OutputsFn<P> = fn(&P, &[PathBuf], &Path) -> Result<Vec<PathBuf>, BakeError>;
+/// Runs the bake in-process, given the resolved inputs and the `-o` path.
+pub type RunFn<P> = fn(&P, &[PathBuf], &Path, &dyn Progress) -> Result<Baked, BakeError>;
+/// Writes the CLI commands of a stage: inputs, stage folder, how to write a path.
+pub type ArgvFn<P> =
+    fn(&P, &[PathBuf], &Path, &dyn Fn(&Path) -> PathBuf) -> Result<Vec<Vec<String>>, String>;
+
+/// The adapter behind every kind: plain functions over the bake's own `Params` type.
+pub struct Adapter<P> {
+    pub name: &'static str,
+    pub summary: &'static str,
+    pub command: &'static [&'static str],
+    pub package: &'static str,
+    pub reads: Arity,
+    /// The `-o` argument given the stage's folder (the folder itself, or a file in it).
+    pub out: fn(&P, &Path) -> PathBuf,
+    pub product: fn(&P, &Path) -> PathBuf,
+    /// Outputs of a run given the resolved inputs and the `-o` path.
+    pub outputs: OutputsFn<P>,
+    /// The in-process bake given the resolved inputs and the `-o` path.
+    pub run: RunFn<P>,
+    pub validate: fn(&P) -> Result<(), BakeError>,
+    pub example: fn() -> P,
+    /// The CLI commands (argv, binary first) doing the same work, given the inputs, the stage
+    /// folder, and how to write a path for the command line (relative to the ninja file);
+    /// `None`: one command,
+    /// `BIN [SUB] INPUTS... -o OUT FLAGS... --quiet`.
+    pub argv: Option<ArgvFn<P>>,
+}
+
+/// `-o DIR`: the CLI writes into the stage's folder.
+pub fn in_dir<P>(_: &P, dir: &Path) -> PathBuf {
+    dir.to_path_buf()
+}
+
+/// The single command most CLIs take: `BIN [SUB] INPUTS... -o OUT FLAGS... --quiet`.
+pub fn standard_argv(
+    command: &[&str],
+    inputs: &[PathBuf],
+    out: &Path,
+    flags: Vec<String>,
+) -> Vec<String> {
+    let mut args: Vec<String> = command.iter().map(|s| s.to_string()).collect();
+    args.extend(inputs.iter().map(|p| p.display().to_string()));
+    args.push("-o".into());
+    args.push(out.display().to_string());
+    args.extend(flags);
+    args.push("--quiet".into());
+    args
+}
+
+impl<P: BakeParams> Adapter<P> {
+    fn typed<'a>(&self, p: &'a AnyParams) -> &'a P {
+        p.as_any()
+            .downcast_ref::<P>()
+            .unwrap_or_else(|| panic!("parameters of another kind given to '{}'", self.name))
+    }
+}
+
+/// RON as pipelines are written: `size: 64` for an `Option` field, no `Some(...)` needed.
+pub fn ron_options() -> ron::Options {
+    ron::Options::default().with_default_extension(ron::extensions::Extensions::IMPLICIT_SOME)
+}
+
+impl<P: BakeParams> Kind for Adapter<P> {
+    fn name(&self) -> &'static str {
+        self.name
+    }
+    fn summary(&self) -> &'static str {
+        self.summary
+    }
+    fn command(&self) -> &'static [&'static str] {
+        self.command
+    }
+    fn package(&self) -> &'static str {
+        self.package
+    }
+    fn reads(&self) -> Arity {
+        self.reads
+    }
+    fn param_names(&self) -> Vec<String> {
+        cli::fields(&P::default())
+            .map(|f| f.into_iter().map(|(n, _)| n).collect())
+            .unwrap_or_default()
+    }
+    fn parse(&self, ron: &str) -> Result<AnyParams, ron::error::SpannedError> {
+        let p: P = ron_options().from_str(ron)?;
+        Ok(Arc::new(p))
+    }
+    fn default_params(&self) -> AnyParams {
+        Arc::new(P::default())
+    }
+    fn example_params(&self) -> AnyParams {
+        Arc::new((self.example)())
+    }
+    fn with(
+        &self,
+        p: &AnyParams,
+        key: &str,
+        value: serde_json::Value,
+    ) -> Result<AnyParams, String> {
+        let mut v = serde_json::to_value(self.typed(p)).map_err(|e| e.to_string())?;
+        let obj = v.as_object_mut().ok_or("parameters are not a struct")?;
+        if !obj.contains_key(key) {
+            return Err(format!("'{}' has no parameter '{key}'", self.name));
+        }
+        obj.insert(key.to_string(), value);
+        let p: P = serde_json::from_value(v)
+            .map_err(|e| format!("'{}' parameter '{key}': {e}", self.name))?;
+        Ok(Arc::new(p))
+    }
+    fn validate(&self, p: &AnyParams) -> Result<(), BakeError> {
+        (self.validate)(self.typed(p))
+    }
+    fn out_arg(&self, p: &AnyParams, dir: &Path) -> PathBuf {
+        (self.out)(self.typed(p), dir)
+    }
+    fn product(&self, p: &AnyParams, dir: &Path) -> PathBuf {
+        (self.product)(self.typed(p), &self.out_arg(p, dir))
+    }
+    fn outputs(
+        &self,
+        p: &AnyParams,
+        inputs: &[PathBuf],
+        dir: &Path,
+    ) -> Result<Vec<PathBuf>, BakeError> {
+        (self.outputs)(self.typed(p), inputs, &self.out_arg(p, dir))
+    }
+    fn run(
+        &self,
+        p: &AnyParams,
+        inputs: &[PathBuf],
+        dir: &Path,
+        progress: &dyn Progress,
+    ) -> Result<Baked, BakeError> {
+        (self.run)(self.typed(p), inputs, &self.out_arg(p, dir), progress)
+    }
+    fn argv(
+        &self,
+        p: &AnyParams,
+        inputs: &[PathBuf],
+        dir: &Path,
+        rel: &dyn Fn(&Path) -> PathBuf,
+    ) -> Result<Vec<Vec<String>>, String> {
+        match self.argv {
+            Some(f) => f(self.typed(p), inputs, dir, rel),
+            None => {
+                let inputs: Vec<PathBuf> = inputs.iter().map(|i| rel(i)).collect();
+                Ok(vec![standard_argv(
+                    self.command,
+                    &inputs,
+                    &rel(&self.out_arg(p, dir)),
+                    self.typed(p).cli_args()?,
+                )])
+            }
+        }
+    }
+    fn cli_round_trip(&self, p: &AnyParams) -> Result<Vec<String>, String> {
+        let p = self.typed(p);
+        let args = cli::to_args(p)?;
+        let back: P = cli::from_args(&args)?;
+        let (a, b) = (
+            serde_json::to_value(p).unwrap(),
+            serde_json::to_value(&back).unwrap(),
+        );
+        if a != b {
+            return Err(format!(
+                "'{}': {args:?} parse back to {b} instead of {a}",
+                self.name
+            ));
+        }
+        Ok(args)
+    }
+}
+
+/// An adapter's example parameters from RON text (a typo fails the kinds' tests).
+pub(crate) fn example<P: BakeParams>(ron: &str) -> P {
+    ron_options()
+        .from_str(ron)
+        .unwrap_or_else(|e| panic!("example parameters {ron}: {e}"))
+}
+
+/// Errors of adapters themselves (wrong number of inputs reaching `run`).
+pub(crate) fn input_error(kind: &str, why: impl Into<String>) -> BakeError {
+    BakeError {
+        message: format!("{kind}: {}", why.into()),
+        class: ErrorClass::InvalidInput,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_kind_round_trips_its_parameters_through_its_cli() {
+        for k in all() {
+            for p in [k.default_params(), k.example_params()] {
+                let args = k
+                    .cli_round_trip(&p)
+                    .unwrap_or_else(|e| panic!("{}: {e}", k.name()));
+                eprintln!("{}: {args:?}", k.name());
+            }
+            assert!(
+                !k.cli_round_trip(&k.example_params()).unwrap().is_empty(),
+                "{}: the example must differ from the defaults",
+                k.name()
+            );
+        }
+    }
+
+    #[test]
+    fn empty_params_are_the_defaults_and_unknown_keys_are_refused_with_the_valid_names() {
+        for k in all() {
+            let p = k.parse("()").unwrap();
+            assert_eq!(
+                canonical_text(&p),
+                canonical_text(&k.default_params()),
+                "{}",
+                k.name()
+            );
+            let e = k
+                .parse("(no_such_key: 1)")
+                .err()
+                .unwrap_or_else(|| panic!("{} accepted an unknown key", k.name()));
+            let msg = e.code.to_string();
+            let first = &k.param_names()[0];
+            assert!(
+                msg.contains(first.as_str()),
+                "{}: message should list valid names: {msg}",
+                k.name()
+            );
+        }
+    }
+
+    #[test]
+    fn canonical_text_is_stable_and_changes_with_any_field() {
+        for k in all() {
+            let (d, e) = (k.default_params(), k.example_params());
+            assert_eq!(canonical_text(&d), canonical_text(&k.default_params()));
+            assert_ne!(canonical_text(&d), canonical_text(&e), "{}", k.name());
+        }
+    }
+}

@@ -1,0 +1,33 @@
+//! Stage kind of `ibl-prefilter`: the GGX prefiltered specular chain.
+
+use super::env::{cube_product, one_input, ENVIRONMENT};
+use super::{Adapter, Arity, Baked};
+use ibl_core::envmap::load_environment;
+use ibl_core::progress::Progress;
+use ibl_prefilter::bake::{self as pf, Params};
+
+pub static PREFILTER: Adapter<Params> = Adapter {
+    name: "prefilter",
+    summary: "GGX prefiltered specular mip chain (split-sum radiance)",
+    command: &["prefilter"],
+    package: "prefilter",
+    reads: Arity::one(ENVIRONMENT),
+    out: super::in_dir,
+    product: |p, out| cube_product(out, p.layout, "prefilter"),
+    outputs: |p, _, out| Ok(pf::output_paths(p, out)),
+    run: |p, inputs, out, progress: &dyn Progress| {
+        let env = load_environment(one_input("prefilter", inputs)?, p.sanitize)?;
+        let baked = pf::run(p, &env, out, progress)?;
+        let mut warnings = env.warnings();
+        warnings.extend(baked.chain.report.note.clone());
+        Ok(Baked {
+            files: baked.files,
+            warnings,
+        })
+    },
+    validate: |p| Ok(p.validate()?),
+    argv: None,
+    example: || {
+        super::example("(size: 16, levels: 3, quality: high, method: fis, samples: 32, max_roughness: 0.25, layout: ktx2, half: true, reference: true, rotate: 45.5, sanitize: true)")
+    },
+};

@@ -1,0 +1,107 @@
+//! Lexical path helpers: normalising `a/../b`, relative paths for ninja files, and the
+//! hidden staging names the runner uses.
+
+use std::path::{Component, Path, PathBuf};
+
+/// Removes `.` and resolves `..` lexically (`pipelines/../out` → `out`); keeps leading `..`.
+pub fn normalize(p: &Path) -> PathBuf {
+    let mut out: Vec<Component> = Vec::new();
+    for c in p.components() {
+        match c {
+            Component::CurDir => {}
+            Component::ParentDir => match out.last() {
+                Some(Component::Normal(_)) => {
+                    out.pop();
+                }
+                Some(Component::RootDir) | Some(Component::Prefix(_)) => {}
+                _ => out.push(c),
+            },
+            c => out.push(c),
+        }
+    }
+    if out.is_empty() {
+        return PathBuf::from(".");
+    }
+    out.iter().collect()
+}
+
+/// An absolute, normalised form of `p` (relative to the current folder).
+pub fn absolute(p: &Path) -> PathBuf {
+    normalize(&std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf()))
+}
+
+/// `p` relative to folder `base` (both made absolute first): `../x/y` when needed.
+pub fn relative_to(p: &Path, base: &Path) -> PathBuf {
+    let (p, base) = (absolute(p), absolute(base));
+    let pc: Vec<_> = p.components().collect();
+    let bc: Vec<_> = base.components().collect();
+    let common = pc.iter().zip(&bc).take_while(|(a, b)| a == b).count();
+    if common == 0 {
+        return p;
+    }
+    let mut r = PathBuf::new();
+    for _ in common..bc.len() {
+        r.push("..");
+    }
+    for c in &pc[common..] {
+        r.push(c);
+    }
+    if r.as_os_str().is_empty() {
+        PathBuf::from(".")
+    } else {
+        r
+    }
+}
+
+/// True when `p` is `dir` or inside it (lexically).
+pub fn is_within(p: &Path, dir: &Path) -> bool {
+    normalize(p).starts_with(normalize(dir))
+}
+
+/// A file-name-safe form of a stage id (`lobby/cube` → `lobby_cube`).
+pub fn slug(id: &str) -> String {
+    id.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '.' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn normalises_lexically() {
+        assert_eq!(
+            normalize(Path::new("pipelines/../out/x")),
+            PathBuf::from("out/x")
+        );
+        assert_eq!(normalize(Path::new("./a/./b/..")), PathBuf::from("a"));
+        assert_eq!(normalize(Path::new("../a")), PathBuf::from("../a"));
+        assert_eq!(normalize(Path::new("/../a")), PathBuf::from("/a"));
+        assert_eq!(normalize(Path::new("a/..")), PathBuf::from("."));
+    }
+
+    #[test]
+    fn relative_paths_walk_up_and_down() {
+        assert_eq!(
+            relative_to(Path::new("/w/out/probe/a.exr"), Path::new("/w/build")),
+            PathBuf::from("../out/probe/a.exr")
+        );
+        assert_eq!(
+            relative_to(Path::new("/w/a"), Path::new("/w")),
+            PathBuf::from("a")
+        );
+        assert_eq!(
+            relative_to(Path::new("/w"), Path::new("/w")),
+            PathBuf::from(".")
+        );
+        assert!(is_within(Path::new("/w/out/../out/x"), Path::new("/w/out")));
+        assert!(!is_within(Path::new("/w/outx"), Path::new("/w/out")));
+    }
+}
