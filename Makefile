@@ -13,12 +13,14 @@ build:
 # Bakes the embedded default fixture into out/ and says where the results are.
 demo: build
 	@if [ -x target/release/bake ] && [ -f pipelines/probe.ron ]; then \
-		target/release/bake run pipelines/probe.ron; \
+		target/release/bake run pipelines/probe.ron && \
+		echo "demo outputs are in $(OUT)/probe/: cube/ (faces), prefiltered/ (GGX chain + prefilter.json)," && \
+		echo "  irradiance/ (sh.json + E/pi cube), dfg/dfg.exr, shexp/shexp.json; run it again: all up to date"; \
 	else \
 		target/release/equirect-to-cube $(DEMO_INPUT) -o $(OUT)/cube --size 128 && \
-		target/release/irradiance $(DEMO_INPUT) -o $(OUT)/irradiance; \
+		target/release/irradiance $(DEMO_INPUT) -o $(OUT)/irradiance && \
+		echo "demo outputs are in $(OUT)/"; \
 	fi
-	@echo "demo outputs are in $(OUT)/"
 
 # Workspace tests (unit, stress and end-to-end), then clippy and rustfmt. Tests run in the
 # release profile so that `make test`, `make demo` and `make bench-quick` share one build.
