@@ -111,85 +111,37 @@ fn find_binary(name: &str) -> Option<PathBuf> {
     (ok && p.exists()).then_some(p)
 }
 
+/// Log-log plot of mean abs error against samples per texel, one curve per table and
+/// estimator, the default (1024 samples) ringed.
 fn svg(rows: &[Row], path: &Path) {
-    let (w, h, m) = (720.0, 420.0, 60.0);
-    let series: Vec<(String, Vec<&Row>)> = {
-        let mut keys: Vec<String> = rows
-            .iter()
-            .map(|r| format!("{} {}", r.table, r.variant))
-            .collect();
-        keys.dedup();
-        keys.into_iter()
-            .map(|k| {
-                let v: Vec<&Row> = rows
-                    .iter()
-                    .filter(|r| format!("{} {}", r.table, r.variant) == k)
-                    .collect();
-                (k, v)
-            })
-            .filter(|(_, v)| v.len() > 1)
-            .collect()
+    let mut keys: Vec<String> = rows
+        .iter()
+        .map(|r| format!("{} {}", r.table, r.variant))
+        .collect();
+    keys.dedup();
+    let series = keys
+        .into_iter()
+        .map(|k| {
+            let pts: Vec<&Row> = rows
+                .iter()
+                .filter(|r| format!("{} {}", r.table, r.variant) == k)
+                .collect();
+            ibl_plot::Series {
+                points: pts.iter().map(|r| (r.samples as f64, r.mean)).collect(),
+                default: pts.iter().position(|r| r.samples == 1024),
+                label: k,
+            }
+        })
+        .filter(|s| s.points.len() > 1)
+        .collect();
+    let chart = ibl_plot::Chart {
+        title: "brdf-lut: mean abs error vs the 2^20-node quadrature".into(),
+        x_label: "samples per texel".into(),
+        y_label: "mean abs error".into(),
+        series,
+        targets: vec![(0.002, "DFG goal 0.002".into())],
     };
-    let (smin, smax) = (64f64.log2(), 4096f64.log2());
-    let (emin, emax) = (-6.0f64, -1.0f64);
-    let x = |s: u32| m + (w - 2.0 * m) * ((s as f64).log2() - smin) / (smax - smin);
-    let y = |e: f64| {
-        h - m - (h - 2.0 * m) * ((e.max(1e-9).log10() - emin) / (emax - emin)).clamp(0.0, 1.0)
-    };
-    let colours = [
-        "#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f",
-        "#bcbd22", "#17becf",
-    ];
-    let mut s = String::new();
-    let _ = writeln!(
-        s,
-        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" font-family="sans-serif" font-size="11">"#
-    );
-    let _ = writeln!(
-        s,
-        r#"<rect width="{w}" height="{h}" fill="white"/><text x="{}" y="20" text-anchor="middle" font-size="13">Mean abs error vs 2^20-node quadrature, by samples per texel</text>"#,
-        w / 2.0
-    );
-    for e in -6..=-1 {
-        let yy = y(10f64.powi(e));
-        let _ = writeln!(
-            s,
-            r##"<line x1="{m}" x2="{}" y1="{yy}" y2="{yy}" stroke="#ddd"/><text x="{}" y="{}" text-anchor="end">1e{e}</text>"##,
-            w - m,
-            m - 4.0,
-            yy + 4.0
-        );
-    }
-    for k in 6..=12 {
-        let xx = x(1 << k);
-        let _ = writeln!(
-            s,
-            r##"<line x1="{xx}" x2="{xx}" y1="{m}" y2="{}" stroke="#eee"/><text x="{xx}" y="{}" text-anchor="middle">{}</text>"##,
-            h - m,
-            h - m + 14.0,
-            1 << k
-        );
-    }
-    for (n, (name, pts)) in series.iter().enumerate() {
-        let c = colours[n % colours.len()];
-        let d: Vec<String> = pts
-            .iter()
-            .map(|r| format!("{:.1},{:.1}", x(r.samples), y(r.mean)))
-            .collect();
-        let _ = writeln!(
-            s,
-            r#"<polyline fill="none" stroke="{c}" stroke-width="1.5" points="{}"/>"#,
-            d.join(" ")
-        );
-        let _ = writeln!(
-            s,
-            r#"<text x="{}" y="{}" fill="{c}">{name}</text>"#,
-            w - m - 210.0,
-            m + 14.0 * n as f64
-        );
-    }
-    let _ = writeln!(s, "</svg>");
-    std::fs::write(path, s).expect("write svg");
+    std::fs::write(path, chart.to_svg()).expect("write svg");
 }
 
 fn main() {

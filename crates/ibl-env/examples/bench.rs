@@ -137,9 +137,10 @@ fn main() {
 
     writeln!(md, "### equirect → cube: time against error\n").unwrap();
     writeln!(md, "Errors on luminance against a 48×48-grid area reference (whose own error is about 0.1–0.2%): mean over texels of the relative error, and Σ|error| / Σ reference (dominated by the sun's texels); energy: the cube's mean radiance against the source's.\n").unwrap();
-    writeln!(md, "| source | face | filter | time (ms) | Mtexel/s | bandwidth bound (Mtexel/s) | mean rel. error | Σ-relative error | energy error |").unwrap();
-    writeln!(md, "|---|---|---|---|---|---|---|---|---|").unwrap();
+    writeln!(md, "| source | face | filter | time (ms) | Mtexel/s | bandwidth bound (Mtexel/s) | mean rel. error | Σ-relative error | energy error | output MiB (RGB32F) |").unwrap();
+    writeln!(md, "|---|---|---|---|---|---|---|---|---|---|").unwrap();
     let big = if quick { src.clone() } else { upscale2(&src) };
+    let mut chart_points: Vec<(Filter, usize, f64, f64)> = Vec::new();
     let cases: Vec<(&Image, usize)> = if quick {
         vec![(&src, 64), (&src, 128)]
     } else {
@@ -152,6 +153,7 @@ fn main() {
             });
             let err = if n <= 256 {
                 let (a, b) = rel_errors(&cube, img);
+                chart_points.push((filter, n, t, a));
                 format!("{a:.4} | {b:.4}")
             } else {
                 "— | —".into()
@@ -177,6 +179,31 @@ fn main() {
             .unwrap();
         }
     }
+
+    let series = [Filter::Area, Filter::Bilinear]
+        .iter()
+        .map(|f| {
+            let pts: Vec<&(Filter, usize, f64, f64)> =
+                chart_points.iter().filter(|p| p.0 == *f).collect();
+            ibl_plot::Series {
+                label: format!("{f:?} filter").to_lowercase(),
+                points: pts.iter().map(|p| (p.2, p.3)).collect(),
+                default: if *f == Filter::Area {
+                    pts.iter().position(|p| p.1 == src.width / 4).or(Some(0))
+                } else {
+                    None
+                },
+            }
+        })
+        .collect();
+    let chart = ibl_plot::Chart {
+        title: "equirect-to-cube: time vs mean relative error (per face size)".into(),
+        x_label: "time (s)".into(),
+        y_label: "mean relative error".into(),
+        series,
+        targets: vec![(0.01, "goal 1%".into())],
+    };
+    writeln!(md, "\n![time against error](foundation.svg)\n").unwrap();
 
     writeln!(md, "\n### SH projection (radiance) of a 6×256² cube\n").unwrap();
     writeln!(
@@ -233,4 +260,5 @@ fn main() {
     let out_dir = root().join("bench");
     std::fs::create_dir_all(&out_dir).unwrap();
     io::write_atomic(&out_dir.join("foundation.md"), md.as_bytes()).unwrap();
+    io::write_atomic(&out_dir.join("foundation.svg"), chart.to_svg().as_bytes()).unwrap();
 }

@@ -395,62 +395,29 @@ fn speed_goal(root: &Path, quick: bool) -> Option<String> {
     Some(s)
 }
 
-/// Log-log plot of chain time against worst-level MARE, one polyline per method.
+/// Log-log plot of chain time against worst-level MARE, one curve per method, the default
+/// quality ringed and the preset bounds drawn.
 fn svg(points: &[(String, &'static str, f64, f64)]) -> String {
-    let (w, h, m) = (720.0, 440.0, 70.0);
-    let lx = |x: f64| x.max(1e-6).log10();
-    let ly = |y: f64| y.max(1e-5).log10();
-    let (x0, x1) = points.iter().fold((f64::MAX, f64::MIN), |(a, b), p| {
-        (a.min(lx(p.2)), b.max(lx(p.2)))
-    });
-    let (y0, y1) = points.iter().fold((f64::MAX, f64::MIN), |(a, b), p| {
-        (a.min(ly(p.3)), b.max(ly(p.3)))
-    });
-    let (x0, x1, y0, y1) = (
-        x0.floor(),
-        x1.ceil(),
-        y0.floor(),
-        y1.ceil().max(y0.floor() + 1.0),
-    );
-    let px = |x: f64| m + (lx(x) - x0) / (x1 - x0) * (w - 1.5 * m);
-    let py = |y: f64| h - m - (ly(y) - y0) / (y1 - y0) * (h - 1.5 * m);
-    let mut s = format!("<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"{h}\" font-family=\"sans-serif\" font-size=\"12\">\n");
-    s += &format!("<rect width=\"{w}\" height=\"{h}\" fill=\"white\"/>\n");
-    s += &format!("<text x=\"{}\" y=\"20\" text-anchor=\"middle\" font-size=\"14\">prefilter: total level time vs worst-level mean abs relative error (small fixtures)</text>\n", w / 2.0);
-    for e in (x0 as i32)..=(x1 as i32) {
-        let x = px(10f64.powi(e));
-        s += &format!("<line x1=\"{x}\" y1=\"{}\" x2=\"{x}\" y2=\"{}\" stroke=\"#ddd\"/><text x=\"{x}\" y=\"{}\" text-anchor=\"middle\">1e{e} s</text>\n", m * 0.5, h - m, h - m + 18.0);
+    let series = ["tree", "fis"]
+        .iter()
+        .map(|m| {
+            let pts: Vec<&(String, &str, f64, f64)> = points.iter().filter(|p| p.1 == *m).collect();
+            ibl_plot::Series {
+                label: format!("--method {m}"),
+                points: pts.iter().map(|p| (p.2, p.3)).collect(),
+                default: pts.iter().position(|p| p.0.contains("default")),
+            }
+        })
+        .collect();
+    ibl_plot::Chart {
+        title: "prefilter: chain time vs worst-level mean abs relative error".into(),
+        x_label: "time (s)".into(),
+        y_label: "worst-level MARE (%)".into(),
+        series,
+        targets: vec![
+            (1.0, "default bound 1%".into()),
+            (0.3, "high bound 0.3%".into()),
+        ],
     }
-    for e in (y0 as i32)..=(y1 as i32) {
-        let y = py(10f64.powi(e));
-        s += &format!("<line x1=\"{m}\" y1=\"{y}\" x2=\"{}\" y2=\"{y}\" stroke=\"#ddd\"/><text x=\"{}\" y=\"{}\" text-anchor=\"end\">1e{e} %</text>\n", w - m * 0.5, m - 6.0, y + 4.0);
-    }
-    for (target, label) in [(1.0, "default bound 1%"), (0.3, "high bound 0.3%")] {
-        if ly(target) >= y0 && ly(target) <= y1 {
-            let y = py(target);
-            s += &format!("<line x1=\"{m}\" y1=\"{y}\" x2=\"{}\" y2=\"{y}\" stroke=\"#c33\" stroke-dasharray=\"4 3\"/><text x=\"{}\" y=\"{}\" fill=\"#c33\" text-anchor=\"end\">{label}</text>\n", w - m * 0.5, w - m * 0.5, y - 4.0);
-        }
-    }
-    for (series, colour) in [("tree", "#1f6fb4"), ("fis", "#e08a1e")] {
-        let pts: Vec<&(String, &str, f64, f64)> = points.iter().filter(|p| p.1 == series).collect();
-        let path: Vec<String> = pts
-            .iter()
-            .map(|p| format!("{:.1},{:.1}", px(p.2), py(p.3)))
-            .collect();
-        s += &format!(
-            "<polyline points=\"{}\" fill=\"none\" stroke=\"{colour}\" stroke-width=\"2\"/>\n",
-            path.join(" ")
-        );
-        for p in pts {
-            s += &format!("<circle cx=\"{:.1}\" cy=\"{:.1}\" r=\"4\" fill=\"{colour}\"/><text x=\"{:.1}\" y=\"{:.1}\">{}</text>\n", px(p.2), py(p.3), px(p.2) + 6.0, py(p.3) - 6.0, p.0);
-        }
-    }
-    s += &format!(
-        "<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">time (s, log)</text>\n",
-        w / 2.0,
-        h - 20.0
-    );
-    s += &format!("<text x=\"16\" y=\"{}\" transform=\"rotate(-90 16 {})\" text-anchor=\"middle\">worst-level MARE (%, log)</text>\n", h / 2.0, h / 2.0);
-    s += "</svg>\n";
-    s
+    .to_svg()
 }
