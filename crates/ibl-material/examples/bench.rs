@@ -377,10 +377,29 @@ fn main() {
         "\nThe bound is 2·asin(√3·eps), eps = 1/(2^bits − 1) for PNG and 2^-11 for half floats (see `quaternion::quantisation_bound`). \
          The error against the analytic normal adds the input's own 16-bit quantisation."
     );
+    // One point per output encoding (the knob): time against the decoded n' error; 16-bit PNG
+    // is the default.
+    let chart = ibl_plot::Chart {
+        title: "quat-map: whole conversion time vs max n' error, by output encoding".into(),
+        x_label: "time (s)".into(),
+        y_label: "max n' error (rad)".into(),
+        series: rows
+            .iter()
+            .filter(|r| r.threads == rows.iter().map(|q| q.threads).max().unwrap_or(1))
+            .map(|r| ibl_plot::Series {
+                label: r.label.to_string(),
+                points: vec![(r.total(), r.err_input)],
+                default: (r.label == "PNG 16-bit").then_some(0),
+            })
+            .collect(),
+        targets: vec![],
+    };
+    let _ = writeln!(md, "\n![time against error](material.svg)");
     real_maps(&root, &mut md);
     print!("{md}");
     let out_dir = root.join("bench");
     std::fs::create_dir_all(&out_dir).unwrap();
     std::fs::write(out_dir.join("material.md"), &md).unwrap();
+    std::fs::write(out_dir.join("material.svg"), chart.to_svg()).unwrap();
     eprintln!("wrote {}", out_dir.join("material.md").display());
 }

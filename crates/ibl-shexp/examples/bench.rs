@@ -23,6 +23,13 @@ struct Env {
     floor: [f64; 3],
 }
 
+/// The bench/ folder at the workspace root.
+fn out_dir_for_chart() -> std::path::PathBuf {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../bench");
+    std::fs::create_dir_all(&dir).expect("create bench/");
+    dir
+}
+
 fn main() {
     let quick = std::env::args().any(|a| a == "--quick");
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
@@ -547,13 +554,36 @@ fn main() {
         (total, total_ss)
     };
     let (dc, ss_total) = chrome_mse(0, 0);
+    let mut series: Vec<ibl_plot::Series> = orders_q
+        .iter()
+        .map(|q| ibl_plot::Series {
+            label: format!("Q order {q}"),
+            ..Default::default()
+        })
+        .collect();
     for p in &orders_p {
         let mut row = format!("| {p} |");
-        for q in &orders_q {
-            let _ = write!(row, " {:.4} |", chrome_mse(*p, *q).0 / dc);
+        for (k, q) in orders_q.iter().enumerate() {
+            let mse = chrome_mse(*p, *q).0 / dc;
+            let _ = write!(row, " {mse:.4} |");
+            // Coefficients per channel: (P+1)² for P, (Q+1)² − 1 for Q without its DC term.
+            let coeffs = ((p + 1) * (p + 1) + (q + 1) * (q + 1) - 1) as f64;
+            if *p == 4 && *q == 2 {
+                series[k].default = Some(series[k].points.len());
+            }
+            series[k].points.push((coeffs, mse));
         }
         let _ = writeln!(md, "{row}");
     }
+    let chart = ibl_plot::Chart {
+        title: "shexp-fit: normalised chrome MSE at r = 0.5 against SH orders".into(),
+        x_label: "coefficients per channel".into(),
+        y_label: "MSE / MSE of DC-only fit".into(),
+        series,
+        targets: vec![(ss_total / dc, "split-sum".into())],
+    };
+    std::fs::write(out_dir_for_chart().join("shexp.svg"), chart.to_svg()).expect("write shexp.svg");
+    let _ = writeln!(md, "\n![MSE against SH orders](shexp.svg)");
     let _ = writeln!(
         md,
         "\nSplit-sum at the same cases, same normalisation: {:.4}\n",
