@@ -344,25 +344,35 @@ fn damaged_fixture_negatives_are_clamped_with_a_warning() {
 }
 
 #[test]
-fn outputs_are_byte_identical_for_one_and_two_threads() {
+fn every_fixture_is_byte_identical_with_one_and_two_threads() {
     let dir = tempfile::tempdir().unwrap();
-    let src = fixture("hdri/city_512.exr");
-    let mut outs = Vec::new();
-    for threads in ["1", "2"] {
-        let out = dir.path().join(threads);
-        let o = run(&[
-            src.to_str().unwrap(),
-            "-o",
-            out.to_str().unwrap(),
-            "--size",
-            "32",
-            "--rotate",
-            "12.5",
-            "--threads",
-            threads,
-        ]);
-        assert!(o.status.success(), "{}", stderr(&o));
-        outs.push(Face::ALL.map(|f| std::fs::read(out.join(format!("{}.exr", f.name()))).unwrap()));
+    for name in [
+        "city_512.exr",
+        "studio_256.exr",
+        "sunset_256.exr",
+        "interior_256.exr",
+        "studio_256.hdr",
+    ] {
+        let src = fixture(&format!("hdri/{name}"));
+        let mut outs = Vec::new();
+        for threads in ["1", "2"] {
+            let out = dir.path().join(format!("{name}-{threads}"));
+            let o = run(&[
+                src.to_str().unwrap(),
+                "-o",
+                out.to_str().unwrap(),
+                "--size",
+                "24",
+                "--rotate",
+                "12.5",
+                "--threads",
+                threads,
+            ]);
+            assert!(o.status.success(), "{}", stderr(&o));
+            outs.push(
+                Face::ALL.map(|f| std::fs::read(out.join(format!("{}.exr", f.name()))).unwrap()),
+            );
+        }
+        assert!(outs[0] == outs[1], "{name}");
     }
-    assert!(outs[0] == outs[1]);
 }

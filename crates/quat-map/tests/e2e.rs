@@ -339,3 +339,27 @@ fn two_channel_grey_alpha_png() {
         "{q:?}"
     );
 }
+
+#[test]
+fn every_fixture_is_byte_identical_with_one_and_two_threads() {
+    let dir = tempfile::tempdir().unwrap();
+    for name in ["0000.png", "0003_256.png", "0008_128.png"] {
+        let outs: Vec<Vec<u8>> = ["1", "2"]
+            .iter()
+            .map(|t| {
+                let out = dir.path().join(format!("{t}_{name}"));
+                let o = run(&[
+                    fixture(name).to_str().unwrap(),
+                    "-o",
+                    out.to_str().unwrap(),
+                    "--threads",
+                    t,
+                    "--quiet",
+                ]);
+                assert!(o.status.success(), "{}", stderr(&o));
+                std::fs::read(&out).unwrap()
+            })
+            .collect();
+        assert!(outs[0] == outs[1], "{name}");
+    }
+}

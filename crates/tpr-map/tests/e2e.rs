@@ -217,3 +217,33 @@ fn fallbacks_are_reported_and_errors_are_one_line() {
         assert!(!e.contains("panicked"));
     }
 }
+
+#[test]
+fn presets_and_expressions_are_byte_identical_with_one_and_two_threads() {
+    let dir = tempfile::tempdir().unwrap();
+    for source in [
+        ["--preset", "spiral:0.5,0.5,3"],
+        ["--expr", "x = cos(pi*v); y = sin(pi*u)"],
+    ] {
+        let outs: Vec<Vec<u8>> = ["1", "2"]
+            .iter()
+            .map(|t| {
+                let out = dir.path().join(format!("{t}.png"));
+                let o = run(&[
+                    "-o",
+                    out.to_str().unwrap(),
+                    "--size",
+                    "96x64",
+                    source[0],
+                    source[1],
+                    "--threads",
+                    t,
+                    "--quiet",
+                ]);
+                assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+                std::fs::read(&out).unwrap()
+            })
+            .collect();
+        assert!(outs[0] == outs[1], "{source:?}");
+    }
+}
