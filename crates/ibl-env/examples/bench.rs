@@ -170,11 +170,12 @@ fn main() {
             };
             writeln!(
                 md,
-                "| {}×{} | {n}² | {label} | {:.1} | {:.2} | {bound:.0} | {err} | {energy:+.2e} |",
+                "| {}×{} | {n}² | {label} | {:.1} | {:.2} | {bound:.0} | {err} | {energy:+.2e} | {:.1} |",
                 img.width,
                 img.height,
                 t * 1e3,
-                texels as f64 / t / 1e6
+                texels as f64 / t / 1e6,
+                (texels * 12) as f64 / 1048576.0
             )
             .unwrap();
         }
