@@ -28,7 +28,29 @@ pub fn linear_to_srgb(c: f32) -> f32 {
     }
 }
 
+/// Refuses a PNG palette (PLTE chunk) that is not whole RGB triples: `png` 0.18.1 panics on
+/// one (image-rs/image-png#694; found by fuzzing, `fuzz/regressions/png/`). `io::guard` would
+/// catch the panic, but not before the panic message reached stderr.
+fn check_png_palette(path: &Path, bytes: &[u8]) -> Result<()> {
+    if !bytes.starts_with(b"\x89PNG\r\n\x1a\n") {
+        return Ok(());
+    }
+    let mut at = 8usize;
+    while let Some(head) = bytes.get(at..at.saturating_add(8)) {
+        let len = u32::from_be_bytes([head[0], head[1], head[2], head[3]]) as usize;
+        if &head[4..8] == b"PLTE" && !len.is_multiple_of(3) {
+            return Err(Error::invalid(
+                path,
+                format!("PNG palette of {len} bytes is not whole RGB entries"),
+            ));
+        }
+        at = at.saturating_add(12).saturating_add(len);
+    }
+    Ok(())
+}
+
 pub fn decode(path: &Path, bytes: &[u8], color: ColorSpace) -> Result<Image> {
+    check_png_palette(path, bytes)?;
     let bad = |e: image::ImageError| Error::invalid(path, format!("not a readable image: {e}"));
     let reader = image::ImageReader::new(Cursor::new(bytes))
         .with_guessed_format()
