@@ -38,36 +38,11 @@ struct Bake<P: Args> {
     common: ibl_cli::CommonArgs,
 }
 
-/// Parses the command line; usage errors print one line (not clap's multi-line report) and
-/// exit with 2, --help and --version print as usual.
-fn parse() -> Cli {
-    Cli::try_parse().unwrap_or_else(|e| {
-        use clap::error::ErrorKind::*;
-        if matches!(
-            e.kind(),
-            DisplayHelp | DisplayVersion | DisplayHelpOnMissingArgumentOrSubcommand
-        ) {
-            e.exit();
-        }
-        // clap's first paragraph (message and, for missing arguments, their names) on one line.
-        let text = e.render().to_string();
-        let first: Vec<&str> = text
-            .lines()
-            .take_while(|l| !l.trim().is_empty())
-            .map(str::trim)
-            .collect();
-        let joined = first.join(" ");
-        let line = joined.trim_start_matches("error: ");
-        eprintln!("brdf-lut: error: {line}");
-        std::process::exit(2);
-    })
-}
-
 /// A bake waiting for the CLI context (thread pool, progress).
 type Job = Box<dyn FnOnce(&ibl_cli::Ctx) -> ibl_lut::Result<ibl_lut::Baked>>;
 
 fn main() {
-    let cli = parse();
+    let cli = ibl_cli::parse::<Cli>("brdf-lut");
     let (common, run): (ibl_cli::CommonArgs, Job) = match cli.table {
         Table::Dfg(b) => (
             b.common,

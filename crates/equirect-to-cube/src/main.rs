@@ -22,7 +22,7 @@ struct Cli {
 }
 
 fn main() {
-    let cli = Cli::parse();
+    let cli = ibl_cli::parse::<Cli>("equirect-to-cube");
     ibl_cli::run("equirect-to-cube", cli.common.clone(), |ctx| {
         cli.params.validate()?;
         let env = load_environment(&cli.input, cli.params.sanitize)?;

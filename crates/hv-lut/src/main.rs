@@ -19,32 +19,8 @@ struct Cli {
     common: ibl_cli::CommonArgs,
 }
 
-/// Usage errors print one line and exit with 2; --help and --version print as usual.
-fn parse() -> Cli {
-    Cli::try_parse().unwrap_or_else(|e| {
-        use clap::error::ErrorKind::*;
-        if matches!(
-            e.kind(),
-            DisplayHelp | DisplayVersion | DisplayHelpOnMissingArgumentOrSubcommand
-        ) {
-            e.exit();
-        }
-        // clap's first paragraph (message and, for missing arguments, their names) on one line.
-        let text = e.render().to_string();
-        let first: Vec<&str> = text
-            .lines()
-            .take_while(|l| !l.trim().is_empty())
-            .map(str::trim)
-            .collect();
-        let joined = first.join(" ");
-        let line = joined.trim_start_matches("error: ");
-        eprintln!("hv-lut: error: {line}");
-        std::process::exit(2);
-    })
-}
-
 fn main() {
-    let cli = parse();
+    let cli = ibl_cli::parse::<Cli>("hv-lut");
     ibl_cli::run("hv-lut", cli.common.clone(), |ctx| {
         let baked = run(&cli.params, &cli.output, ctx.progress())?;
         ibl_core::io::write_many_atomic(&baked.files)?;

@@ -181,3 +181,49 @@ impl Progress for TerminalProgress {
         }
     }
 }
+
+/// Parses the command line; usage errors become one line `tool: …` on stderr and exit code 2
+/// (`--help` and `--version` print as usual). Every binary parses through this.
+pub fn parse<P: clap::Parser>(tool: &str) -> P {
+    match P::try_parse() {
+        Ok(p) => p,
+        Err(e) => {
+            use clap::error::ErrorKind;
+            if matches!(
+                e.kind(),
+                ErrorKind::DisplayHelp
+                    | ErrorKind::DisplayVersion
+                    | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand
+            ) {
+                e.exit();
+            }
+            eprintln!("{tool}: {}", usage_error_line(&e.to_string()));
+            std::process::exit(2);
+        }
+    }
+}
+
+/// The first paragraph of a clap error, joined into one line.
+fn usage_error_line(text: &str) -> String {
+    let lines: Vec<&str> = text
+        .lines()
+        .map(str::trim)
+        .take_while(|l| !l.starts_with("Usage:") && !l.starts_with("For more information"))
+        .filter(|l| !l.is_empty())
+        .collect();
+    lines.join(" ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn usage_errors_fold_to_one_line() {
+        let text = "error: unexpected argument '--sise' found\n\n  tip: a similar argument exists: '--size'\n\nUsage: x [OPTIONS]\n\nFor more information, try '--help'.\n";
+        assert_eq!(
+            usage_error_line(text),
+            "error: unexpected argument '--sise' found tip: a similar argument exists: '--size'"
+        );
+    }
+}

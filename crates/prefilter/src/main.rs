@@ -23,7 +23,7 @@ struct Cli {
 }
 
 fn main() {
-    let cli = Cli::parse();
+    let cli = ibl_cli::parse::<Cli>("prefilter");
     ibl_cli::run("prefilter", cli.common.clone(), |ctx| {
         cli.params.validate()?;
         let env = load_environment(&cli.input, cli.params.sanitize)?;

@@ -37,7 +37,7 @@ struct Cli {
 }
 
 fn main() {
-    let cli = Cli::parse();
+    let cli = ibl_cli::parse::<Cli>("quat-map");
     ibl_cli::run(
         "quat-map",
         cli.common.clone(),

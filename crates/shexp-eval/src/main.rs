@@ -37,34 +37,8 @@ struct Cli {
     common: ibl_cli::CommonArgs,
 }
 
-fn parse_args() -> Cli {
-    match Cli::try_parse() {
-        Ok(c) => c,
-        Err(e) => {
-            use clap::error::ErrorKind;
-            if matches!(
-                e.kind(),
-                ErrorKind::DisplayHelp
-                    | ErrorKind::DisplayVersion
-                    | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand
-            ) {
-                e.exit();
-            }
-            let text = e.to_string();
-            let line: Vec<&str> = text
-                .lines()
-                .map(str::trim)
-                .take_while(|l| !l.starts_with("Usage:") && !l.starts_with("For more information"))
-                .filter(|l| !l.is_empty())
-                .collect();
-            eprintln!("shexp-eval: {}", line.join(" "));
-            std::process::exit(2);
-        }
-    }
-}
-
 fn main() {
-    let cli = parse_args();
+    let cli = ibl_cli::parse::<Cli>("shexp-eval");
     ibl_cli::run("shexp-eval", cli.common.clone(), |ctx| {
         cli.params.validate()?;
         if cli.inputs.len() > 1 && (cli.coeffs.is_some() || cli.prefiltered.is_some()) {

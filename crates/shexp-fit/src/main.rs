@@ -23,35 +23,8 @@ struct Cli {
     common: ibl_cli::CommonArgs,
 }
 
-/// Parses the command line; usage errors become one line on stderr and exit code 2.
-fn parse_args() -> Cli {
-    match Cli::try_parse() {
-        Ok(c) => c,
-        Err(e) => {
-            use clap::error::ErrorKind;
-            if matches!(
-                e.kind(),
-                ErrorKind::DisplayHelp
-                    | ErrorKind::DisplayVersion
-                    | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand
-            ) {
-                e.exit();
-            }
-            let text = e.to_string();
-            let line: Vec<&str> = text
-                .lines()
-                .map(str::trim)
-                .take_while(|l| !l.starts_with("Usage:") && !l.starts_with("For more information"))
-                .filter(|l| !l.is_empty())
-                .collect();
-            eprintln!("shexp-fit: {}", line.join(" "));
-            std::process::exit(2);
-        }
-    }
-}
-
 fn main() {
-    let cli = parse_args();
+    let cli = ibl_cli::parse::<Cli>("shexp-fit");
     ibl_cli::run("shexp-fit", cli.common.clone(), |ctx| {
         cli.params.validate()?;
         let env = load_environment(&cli.input, cli.params.sanitize)?;

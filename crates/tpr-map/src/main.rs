@@ -25,7 +25,7 @@ struct Cli {
 }
 
 fn main() {
-    let cli = Cli::parse();
+    let cli = ibl_cli::parse::<Cli>("tpr-map");
     ibl_cli::run(
         "tpr-map",
         cli.common.clone(),
