@@ -134,21 +134,32 @@ pub fn read_hdr_image(path: &Path, sanitize: bool) -> Result<(Image, TexelReport
 /// Loads an environment from a file or a folder of faces.
 pub fn load_environment(path: &Path, sanitize: bool) -> Result<LoadedEnvironment> {
     if path.is_dir() {
-        let mut faces = Vec::with_capacity(6);
+        // Find all six first (a missing face is reported before any decoding), then decode
+        // them in parallel: the decoders themselves run on one thread each.
+        let paths = Face::ALL
+            .iter()
+            .map(|face| {
+                find_with_stem(path, face.name())
+                    .or_else(|| find_with_stem(path, &format!("m0_{}", face.name())))
+                    .ok_or_else(|| {
+                        Error::invalid(
+                            path,
+                            format!(
+                                "folder has no face '{}' (expected px, nx, py, ny, pz, nz images)",
+                                face.name()
+                            ),
+                        )
+                    })
+            })
+            .collect::<Result<Vec<PathBuf>>>()?;
+        use rayon::prelude::*;
+        let decoded = paths
+            .par_iter()
+            .map(|p| read_hdr_image(p, sanitize))
+            .collect::<Result<Vec<_>>>()?;
         let mut report = TexelReport::default();
-        for face in Face::ALL {
-            let p = find_with_stem(path, face.name())
-                .or_else(|| find_with_stem(path, &format!("m0_{}", face.name())))
-                .ok_or_else(|| {
-                    Error::invalid(
-                        path,
-                        format!(
-                            "folder has no face '{}' (expected px, nx, py, ny, pz, nz images)",
-                            face.name()
-                        ),
-                    )
-                })?;
-            let (img, r) = read_hdr_image(&p, sanitize)?;
+        let mut faces = Vec::with_capacity(6);
+        for (img, r) in decoded {
             merge(&mut report, &r);
             faces.push(img);
         }
