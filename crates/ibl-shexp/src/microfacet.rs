@@ -1,23 +1,14 @@
 //! The Fresnel-free GGX BRDF f_DV = D·V of paper 002 eq. 8 (eq. 3: V = G2/(4 n·v n·l) with
 //! Smith's height-correlated G2), and visible-normal sampling of it.
 //!
-//! D, Smith Λ / G1 / G2, V and VNDF sampling are the shared `ibl_brdf::ggx` functions; this
-//! module adds the reflected-direction density, the mirror reflection and Schlick's tail, and
-//! its tests check the shared functions against the properties this crate relies on.
+//! D, Smith Λ / G1 / G2, V, VNDF sampling and the reflected-direction density are the shared
+//! `ibl_brdf::ggx` functions, re-exported with the mirror reflection and Schlick's tail; the
+//! tests check the shared functions against the properties this crate relies on.
 //! Tangent space has the normal on +z; `alpha` is the GGX α = roughness².
 
-use glam::Vec3;
-pub use ibl_brdf::ggx::{d_ggx, f_dv, g1, g2, lambda, pdf_vndf, sample_vndf, v_smith};
-
-/// Density of the reflected direction l = 2(v·h)h − v when h ~ [`sample_vndf`]: the Jacobian
-/// 1/(4 v·h) turns it into G1(v) D(h) / (4 n·v).
-#[inline]
-pub fn pdf_vndf_reflected(v: Vec3, h: Vec3, alpha: f32) -> f32 {
-    if v.z <= 0.0 || h.z <= 0.0 {
-        return 0.0;
-    }
-    g1(v.z, alpha) * d_ggx(h.z, alpha) / (4.0 * v.z)
-}
+pub use ibl_brdf::ggx::{
+    d_ggx, f_dv, g1, g2, lambda, pdf_vndf, pdf_vndf_reflected, sample_vndf, v_smith,
+};
 
 /// Mirror reflection 2(v·m)m − v and Schlick's tail weight (1 − v·h)⁵ (paper 002 eq. 4), shared.
 pub use ibl_brdf::fresnel::schlick_weight as schlick_tail;
@@ -26,6 +17,7 @@ pub use ibl_brdf::reflect;
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::Vec3;
     use ibl_core::sampling::{hammersley, Pcg32};
     use std::f32::consts::PI;
 
