@@ -173,6 +173,22 @@ impl Cubemap {
         cube
     }
 
+    /// A cube whose texel (face, i, j) is `f` of its centre direction (analytic test
+    /// environments, synthetic skies).
+    pub fn from_fn(size: usize, f: impl Fn(Vec3) -> Rgb) -> Self {
+        let mut cube = Cubemap::new(size);
+        for face in Face::ALL {
+            for j in 0..size {
+                for i in 0..size {
+                    cube.faces[face as usize]
+                        .texel_mut(i, j)
+                        .copy_from_slice(&f(texel_direction(face, i, j, size)));
+                }
+            }
+        }
+        cube
+    }
+
     #[inline]
     pub fn texel(&self, face: Face, i: usize, j: usize) -> Rgb {
         let o = (j * self.size + i) * 3;
@@ -319,6 +335,17 @@ mod tests {
 
     fn close(a: Vec3, b: Vec3) -> bool {
         (a - b).length() < 1e-5
+    }
+
+    #[test]
+    fn from_fn_writes_each_texel_from_its_centre_direction() {
+        let c = Cubemap::from_fn(5, |d| d.to_array());
+        for face in Face::ALL {
+            for (i, j) in [(0, 0), (4, 1), (2, 3)] {
+                let t = c.texel(face, i, j);
+                assert!(close(Vec3::from(t), texel_direction(face, i, j, 5)));
+            }
+        }
     }
 
     #[test]

@@ -44,6 +44,9 @@ pub struct Coeffs {
     /// What exp(P·Q) reconstructs: E0 itself (paper 002, the default) or E0 / (A+B).
     #[serde(default)]
     pub target: Target,
+    /// What the solve minimised.
+    #[serde(default)]
+    pub objective: Objective,
     /// Human-readable reminder of the conventions.
     #[serde(default)]
     pub convention: String,
@@ -70,6 +73,28 @@ pub enum Target {
     /// split-sum DFG table is divided out; consumers multiply by F0·A + B (with `fresnel =
     /// ratio`) instead of E0's Fresnel factor. Not in the paper (ablation).
     E0OverAlbedo,
+}
+
+/// What the least-squares solve minimised (recorded in the probe; eq. 11 reads both alike).
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    PartialEq,
+    Eq,
+    Default,
+    serde::Serialize,
+    serde::Deserialize,
+    clap::ValueEnum,
+)]
+#[serde(rename_all = "snake_case")]
+pub enum Objective {
+    /// Squared log-space error, paper 002 eq. 13 (one linear least-squares solve).
+    #[default]
+    Log,
+    /// From the eq. 13 solution, Gauss–Newton on the linear error relative per α group plus λ ×
+    /// the log-space error ([`crate::refine`]): the linear MSE the paper's log fit is a proxy of.
+    Relative,
 }
 
 /// Highest SH order (l_max) of P or Q.
@@ -175,6 +200,7 @@ mod tests {
             floor: [0.0; 3],
             fresnel: FresnelTail::Ratio,
             target: Target::E0,
+            objective: Objective::Log,
             convention: CONVENTION.into(),
         };
         // p00 · Y00 = ln 2 → E0 = 2 everywhere, at every α (the DC is not damped).

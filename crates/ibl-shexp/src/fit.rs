@@ -9,7 +9,7 @@
 //! where the lobe sees only black; 1e-3 of the mean keeps the log range to ≈ 7 nats there).
 
 use crate::basis::{self, num_unknowns, tangent_frame, Features};
-use crate::coeffs::{Coeffs, Target, CONVENTION, MAX_ORDER};
+use crate::coeffs::{Coeffs, Objective, Target, CONVENTION, MAX_ORDER};
 use crate::dfg::FresnelTail;
 use crate::estimate::Estimator;
 use crate::sampler::MipSampler;
@@ -84,6 +84,17 @@ pub struct Params {
     /// Level-of-detail bias of filtered importance sampling (texel doublings).
     #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
     pub lod_bias: f32,
+    /// What the solve minimises: eq. 13's log-space error alone (`log`, the paper), or, from that
+    /// solution, the linear error relative per α group plus `log-weight` × the log error
+    /// (`relative`, Gauss–Newton; eq. 11's form is unchanged).
+    #[arg(long, value_enum, default_value_t = Objective::Relative)]
+    pub objective: Objective,
+    /// Weight λ of the log-space error kept in the `relative` objective (0: linear error only).
+    #[arg(long, default_value_t = 0.3)]
+    pub log_weight: f64,
+    /// Gauss–Newton iterations of `objective = relative`.
+    #[arg(long, default_value_t = 20)]
+    pub refine_iterations: usize,
     /// E0 estimator: Monte Carlo from the mip chain, or exact summation.
     #[arg(long, value_enum, default_value_t = EstimatorKind::Mc)]
     pub estimator: EstimatorKind,
@@ -176,6 +187,18 @@ impl Params {
             return bad(format!(
                 "--weight-power {} is out of range [-8, 8]",
                 self.weight_power
+            ));
+        }
+        if !(self.log_weight >= 0.0 && self.log_weight <= 1e6) {
+            return bad(format!(
+                "--log-weight {} is out of range [0, 1e6]",
+                self.log_weight
+            ));
+        }
+        if self.refine_iterations > 1000 {
+            return bad(format!(
+                "--refine-iterations {} is out of range 0..=1000",
+                self.refine_iterations
             ));
         }
         if !self.lod_bias.is_finite() || self.lod_bias.abs() > 16.0 {
@@ -403,6 +426,9 @@ pub struct SolveOptions {
     pub weight_power: f32,
     pub cosine_weight: bool,
     pub target: Target,
+    pub objective: Objective,
+    pub log_weight: f64,
+    pub refine_iterations: usize,
 }
 
 /// p, q, the log-space RMS residual per channel and the condition number.
@@ -482,6 +508,35 @@ pub fn solve_rows(rows: &Rows, opts: &SolveOptions) -> Result<Solved> {
             x.push(sol.x.into_iter().next().expect("one rhs"));
         }
     }
+    if opts.objective == Objective::Relative {
+        let group: Vec<usize> = (0..m).map(|r| r % na).collect();
+        let weight: Vec<f64> = (0..m)
+            .map(|r| {
+                if opts.cosine_weight {
+                    rows.n_dot_v[r / na].max(0.0) as f64
+                } else {
+                    1.0
+                }
+            })
+            .collect();
+        x = x
+            .into_par_iter()
+            .enumerate()
+            .map(|(c, x0)| {
+                let target: Vec<f64> = (0..m).map(|r| rows.e0[r][c] / albedo[r]).collect();
+                let problem = crate::refine::RelativeProblem {
+                    a: &a,
+                    m,
+                    k,
+                    target: &target,
+                    weight: &weight,
+                    group: &group,
+                    log_weight: opts.log_weight,
+                };
+                problem.refine(&x0, opts.refine_iterations, 1e-6).0
+            })
+            .collect();
+    }
     // Unweighted log-space RMS residual per channel.
     let mut residual = [0.0f64; 3];
     for r in 0..m {
@@ -537,6 +592,9 @@ pub fn coeffs_from_rows(params: &Params, rows: &Rows, floor: [f64; 3]) -> Result
         weight_power: params.weight_power,
         cosine_weight: params.cosine_weight,
         target: params.target,
+        objective: params.objective,
+        log_weight: params.log_weight,
+        refine_iterations: params.refine_iterations,
     };
     let (p, q, residual_rgb, condition) = solve_rows(rows, &opts)?;
     let residual = (residual_rgb.iter().map(|r| r * r).sum::<f64>() / 3.0).sqrt();
@@ -558,6 +616,7 @@ pub fn coeffs_from_rows(params: &Params, rows: &Rows, floor: [f64; 3]) -> Result
         floor: floor.map(|f| f as f32),
         fresnel: params.fresnel,
         target: params.target,
+        objective: params.objective,
         convention: CONVENTION.to_string(),
     })
 }
@@ -605,7 +664,6 @@ pub fn run(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use ibl_core::cube::{texel_direction, Face};
 
     fn small_params() -> Params {
         Params {
@@ -615,20 +673,6 @@ mod tests {
             alphas: vec![0.2, 0.6, 1.0],
             ..Default::default()
         }
-    }
-
-    fn cube_from(n: usize, f: impl Fn(Vec3) -> [f32; 3]) -> Cubemap {
-        let mut c = Cubemap::new(n);
-        for face in Face::ALL {
-            for j in 0..n {
-                for i in 0..n {
-                    c.faces[face as usize]
-                        .texel_mut(i, j)
-                        .copy_from_slice(&f(texel_direction(face, i, j, n)));
-                }
-            }
-        }
-        c
     }
 
     #[test]
@@ -735,6 +779,9 @@ mod tests {
             weight_power: 0.0,
             cosine_weight: false,
             target: Target::E0,
+            objective: Objective::Log,
+            log_weight: 0.0,
+            refine_iterations: 0,
         };
         let (pc, qc, res, cond) = solve_rows(&rows, &opts).unwrap();
         let got: Vec<[f32; 3]> = pc.iter().chain(&qc).cloned().collect();
@@ -761,6 +808,7 @@ mod tests {
             floor: [0.0; 3],
             fresnel: FresnelTail::Ratio,
             target: Target::E0,
+            objective: Objective::Log,
             convention: String::new(),
         };
         let (frame, world) = row_geometry(5, params.normals, &views);
@@ -783,6 +831,7 @@ mod tests {
         let params = Params {
             estimator: EstimatorKind::Mc,
             samples: 512,
+            objective: Objective::Log,
             ..small_params()
         };
         let c = 2.5f32;
@@ -834,7 +883,7 @@ mod tests {
     fn black_hemisphere_gives_a_finite_fit_that_follows_the_bright_side() {
         // Lower hemisphere black, upper a smooth sky: the floor keeps every log finite; the
         // reconstruction must stay finite everywhere and track E0 where the lobe sees the sky.
-        let cube = cube_from(16, |d| {
+        let cube = Cubemap::from_fn(16, |d| {
             if d.y > 0.0 {
                 [1.0 + d.y, 1.0, 0.5 + 0.5 * d.x.abs()]
             } else {
@@ -869,6 +918,84 @@ mod tests {
         assert!(worst_dark < 0.2, "{worst_dark}");
     }
 
+    /// Relative linear MSE of a probe's E0 against exact summation at held-out (n, v, α),
+    /// averaged over the α values (each normalised by its Σ truth², as the fit's groups).
+    fn held_out_relative_mse(co: &Coeffs, truth: &TexelSet, alphas: &[f32]) -> f64 {
+        let mut rng = ibl_core::sampling::Pcg32::new(77, 5);
+        let mut uniform_sphere = || {
+            let z = 1.0 - 2.0 * rng.next_f32();
+            let phi = std::f32::consts::TAU * rng.next_f32();
+            let s = (1.0 - z * z).max(0.0).sqrt();
+            Vec3::new(s * phi.cos(), s * phi.sin(), z)
+        };
+        let pairs: Vec<(Vec3, Vec3)> = (0..300)
+            .map(|_| {
+                let n = uniform_sphere();
+                let mut v = uniform_sphere();
+                if v.dot(n) < 0.0 {
+                    v = -v;
+                }
+                (n, v)
+            })
+            .collect();
+        alphas
+            .iter()
+            .map(|&a| {
+                let (mut err, mut energy) = (0.0f64, 0.0f64);
+                for &(n, v) in &pairs {
+                    let e = co.e0(n, v, a);
+                    let t = truth.e0(n, v, a);
+                    for c in 0..3 {
+                        err += (e[c] as f64 - t[c]).powi(2);
+                        energy += t[c] * t[c];
+                    }
+                }
+                err / energy
+            })
+            .sum::<f64>()
+            / alphas.len() as f64
+    }
+
+    #[test]
+    fn relative_refinement_lowers_the_linear_error_at_held_out_directions() {
+        // A dim sky with a bright sun: the log-space fit spends its accuracy on the dim rows;
+        // the refinement must lower the linear error where no row was fitted, at α between and
+        // on the fitted ones, without losing the log-space fit's finiteness.
+        let sun = Vec3::new(0.4, 0.6, -0.7).normalize();
+        let cube = Cubemap::from_fn(16, |d| {
+            let s = if d.dot(sun) > 0.985 { 300.0 } else { 0.0 };
+            [0.5 + 0.3 * d.y + s, 0.6 + 0.2 * d.y + s, 0.9 + s]
+        });
+        let log = Params {
+            objective: Objective::Log,
+            ..small_params()
+        };
+        let rel = Params {
+            objective: Objective::Relative,
+            ..small_params()
+        };
+        let truth = TexelSet::from_cube(&cube);
+        let alphas = [0.25, 0.4, 0.6, 0.8, 1.0];
+        let co_log = fit_cube(&log, &cube, &NoProgress).unwrap().coeffs;
+        let co_rel = fit_cube(&rel, &cube, &NoProgress).unwrap().coeffs;
+        assert_eq!(co_rel.objective, Objective::Relative);
+        let (e_log, e_rel) = (
+            held_out_relative_mse(&co_log, &truth, &alphas),
+            held_out_relative_mse(&co_rel, &truth, &alphas),
+        );
+        eprintln!(
+            "sun sky, held-out relative linear MSE: log fit {e_log:.4}, relative refinement {e_rel:.4}; log RMS residual {:.3} → {:.3}",
+            co_log.residual, co_rel.residual
+        );
+        assert!(e_rel < 0.8 * e_log, "{e_rel} vs {e_log}");
+        assert!(co_rel
+            .p
+            .iter()
+            .chain(&co_rel.q)
+            .flatten()
+            .all(|v| v.is_finite()));
+    }
+
     #[test]
     fn black_environment_is_refused() {
         let r = fit_cube(
@@ -881,7 +1008,7 @@ mod tests {
 
     #[test]
     fn fit_is_deterministic_across_thread_counts() {
-        let cube = cube_from(16, |d| [1.0 + d.x.max(0.0) * 5.0, 1.0 + d.y, 1.0]);
+        let cube = Cubemap::from_fn(16, |d| [1.0 + d.x.max(0.0) * 5.0, 1.0 + d.y, 1.0]);
         let params = small_params();
         let one = rayon::ThreadPoolBuilder::new()
             .num_threads(1)
@@ -903,7 +1030,7 @@ mod tests {
     fn mc_targets_agree_with_exact_summation() {
         // The MC + filtered-importance-sampling E0 against exact texel summation on a smooth
         // environment (FIS blurs, so only smooth content is compared tightly).
-        let cube = cube_from(32, |d| {
+        let cube = Cubemap::from_fn(32, |d| {
             [1.0 + 0.8 * d.x, 1.0 + 0.5 * d.y * d.z, (1.5 + d.z).powi(2)]
         });
         let params = Params {

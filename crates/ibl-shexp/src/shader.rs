@@ -347,6 +347,7 @@ mod tests {
             floor: [0.0; 3],
             fresnel: FresnelTail::Ratio,
             target: crate::coeffs::Target::E0,
+            objective: crate::coeffs::Objective::Log,
             convention: String::new(),
         }
     }

@@ -7,8 +7,9 @@ use std::path::PathBuf;
 
 /// Fits the spherical-harmonic-exponential glossy probe of paper 002 (Silvennoinen et al. 2025):
 /// per colour channel, P (order --p-order, at the reflection vector) and Q (order --q-order
-/// without DC, at the half-reflection vector) by least squares on log E0. --alphas are GGX α
-/// values (α = roughness²).
+/// without DC, at the half-reflection vector) by least squares on log E0 (eq. 13), then, by
+/// default, refined on the relative linear error (--objective log skips that). --alphas are GGX
+/// α values (α = roughness²).
 #[derive(Parser)]
 #[command(version, about)]
 struct Cli {
