@@ -6,6 +6,7 @@
 //! writes ([`io`]).
 
 pub mod area;
+pub mod bordered;
 pub mod cube;
 pub mod envmap;
 pub mod equirect;

@@ -4,9 +4,9 @@
 use crate::error::{Error, Result};
 use crate::filter::filter_level;
 use crate::kernel::{reference_level, SourceTexels};
-use crate::pyramid::SourcePyramid;
 use crate::samples::SampleTable;
 use crate::tree::{tree_level, CellTree, TreeParams};
+use ibl_core::bordered::BorderedMips;
 use ibl_core::cube::{mip_sizes, texel_direction, Cubemap, Face};
 use ibl_core::envmap::{self, Environment, Layout, LoadedEnvironment};
 use ibl_core::equirect::Filter;
@@ -444,7 +444,7 @@ pub fn output_paths(params: &Params, out_dir: &Path) -> Vec<PathBuf> {
 /// What the rough levels are computed from.
 enum Engine {
     Tree(CellTree, TreeParams),
-    Fis(SourcePyramid, u32),
+    Fis(BorderedMips, u32),
     Reference,
 }
 
@@ -476,7 +476,7 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
         match params.method {
             Method::Tree => Engine::Tree(CellTree::new(&source), params.quality.tree_params()),
             Method::Fis => Engine::Fis(
-                SourcePyramid::new(&CubeMips::build(source.clone(), 1)),
+                BorderedMips::new(&CubeMips::build(source.clone(), 1)),
                 params.fis_samples(),
             ),
         }

@@ -1,9 +1,9 @@
 //! The filtered-importance-sampling kernel of one level: for each output texel, the level's
 //! sample table turned into its tangent frame and read trilinearly from the source pyramid.
 
-use crate::pyramid::SourcePyramid;
 use crate::samples::{tangent_frame, SampleTable};
 use glam::Vec3;
+use ibl_core::bordered::BorderedMips;
 use ibl_core::cube::{texel_direction, Cubemap};
 use ibl_core::progress::Progress;
 use ibl_core::traverse::map_cube_texels_with;
@@ -13,13 +13,13 @@ use ibl_core::Rgb;
 /// frame of n. Sums in f64 so a constant environment comes back to the last bit that f32
 /// output can hold.
 #[inline]
-pub fn filter_direction(pyr: &SourcePyramid, table: &SampleTable, n: Vec3) -> Rgb {
+pub fn filter_direction(pyr: &BorderedMips, table: &SampleTable, n: Vec3) -> Rgb {
     let (t, b) = tangent_frame(n);
     let mut acc = [0.0f64; 3];
     for k in 0..table.dirs.len() {
         let s = table.dirs[k];
         let d = t * s.x + b * s.y + n * s.z;
-        let c = pyr.trilinear(d, table.mips[k], table.fracs[k]);
+        let c = pyr.trilinear(d, table.mips[k] as usize, table.fracs[k]);
         let w = table.weights[k] as f64;
         acc[0] += w * c[0] as f64;
         acc[1] += w * c[1] as f64;
@@ -30,7 +30,7 @@ pub fn filter_direction(pyr: &SourcePyramid, table: &SampleTable, n: Vec3) -> Rg
 
 /// One level of the chain: an n×n cube, every texel filtered with `table`.
 pub fn filter_level(
-    pyr: &SourcePyramid,
+    pyr: &BorderedMips,
     table: &SampleTable,
     n: usize,
     progress: &dyn Progress,

@@ -3,10 +3,10 @@
 //! roughness r = l/(N−1), α = r², n = v = r (Karis 2013; Cocco et al. 2024 §3 eqs. 2–3).
 //!
 //! [`bake`] holds the `Params` and the pure `run`; [`tree`] the default method (the exact
-//! kernel summed hierarchically over the source); [`samples`], [`pyramid`] and [`filter`] the
-//! filtered importance sampling of Křivánek & Colbert 2008 / Lagarde & de Rousiers 2014 (per
-//! level sample tables, seamless trilinear source reads, the per-texel loop), kept as
-//! `--method fis`; [`kernel`] the exact kernel and the brute-force reference.
+//! kernel summed hierarchically over the source); [`samples`] and [`filter`] the filtered
+//! importance sampling of Křivánek & Colbert 2008 / Lagarde & de Rousiers 2014 (per-level
+//! sample tables and the per-texel loop, reading the source seamlessly and trilinearly through
+//! `ibl_core::bordered`), kept as `--method fis`; [`kernel`] the exact kernel and the brute-force reference.
 
 // Index loops read closer to the papers' sums than iterator chains in the numeric kernels.
 #![allow(clippy::needless_range_loop)]
@@ -15,7 +15,6 @@ pub mod bake;
 pub mod error;
 pub mod filter;
 pub mod kernel;
-pub mod pyramid;
 pub mod samples;
 pub mod tree;
 

@@ -7,8 +7,8 @@
 //! then only rotates the table into its normal's frame and reads the chain.
 
 use crate::microfacet::{g1, g2, pdf_vndf_reflected, reflect, sample_vndf};
-use crate::sampler::MipSampler;
 use glam::Vec3;
+use ibl_core::bordered::BorderedMips;
 use ibl_core::sampling::hammersley;
 
 /// One precomputed sample: reflected direction l in tangent space, its estimator weight
@@ -82,7 +82,7 @@ impl Estimator {
     #[inline]
     pub fn e0(
         &self,
-        env: &MipSampler,
+        env: &BorderedMips,
         frame: (Vec3, Vec3, Vec3),
         alpha_index: usize,
         view_index: usize,
@@ -94,7 +94,7 @@ impl Estimator {
 /// Σ weight · L(frame · l) over a table, accumulated in f64.
 #[inline]
 pub fn estimate_with_table(
-    env: &MipSampler,
+    env: &BorderedMips,
     frame: (Vec3, Vec3, Vec3),
     table: &[TableEntry],
 ) -> [f64; 3] {
@@ -114,7 +114,7 @@ pub fn estimate_with_table(
 /// E0 for an arbitrary (n, v) (world space), building the table on the fly: for tests and
 /// spot checks, not for loops.
 pub fn e0_at(
-    env: &MipSampler,
+    env: &BorderedMips,
     n: Vec3,
     v: Vec3,
     alpha: f32,
@@ -142,7 +142,7 @@ mod tests {
     #[test]
     fn constant_environment_gives_the_directional_albedo() {
         // L = 1: E0 = ∫ f_DV (n·l) dl, compared with a fine quadrature of f_DV.
-        let env = MipSampler::new(&CubeMips::build(Cubemap::constant(8, [1.0, 1.0, 1.0]), 1));
+        let env = BorderedMips::new(&CubeMips::build(Cubemap::constant(8, [1.0, 1.0, 1.0]), 1));
         for (alpha, theta) in [(0.2f32, 0.2f32), (0.5, 1.0), (1.0, 1.5)] {
             let v = Vec3::new(theta.sin(), 0.0, theta.cos());
             let mc = estimate_with_table(

@@ -12,11 +12,11 @@ use crate::basis::{self, num_unknowns, tangent_frame, Features};
 use crate::coeffs::{Coeffs, Objective, Target, CONVENTION, MAX_ORDER};
 use crate::dfg::FresnelTail;
 use crate::estimate::Estimator;
-use crate::sampler::MipSampler;
 use crate::solve::least_squares;
 use crate::truth::TexelSet;
 use crate::{Error, Result};
 use glam::Vec3;
+use ibl_core::bordered::BorderedMips;
 use ibl_core::envmap::{Environment, LoadedEnvironment};
 use ibl_core::equirect::Filter;
 use ibl_core::progress::{NoProgress, Progress};
@@ -337,7 +337,7 @@ pub fn estimate_rows(
     match params.estimator {
         EstimatorKind::Mc => {
             let t0 = Instant::now();
-            let sampler = MipSampler::new(&CubeMips::build(cube.clone(), 1));
+            let sampler = BorderedMips::new(&CubeMips::build(cube.clone(), 1));
             timings.prepare = t0.elapsed().as_secs_f64();
             let t0 = Instant::now();
             let est = Estimator::new(&views, &params.alphas, params.samples, params.lod_bias);

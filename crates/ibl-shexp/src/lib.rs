@@ -32,7 +32,6 @@ pub mod eval;
 pub mod fit;
 pub mod microfacet;
 pub mod refine;
-pub mod sampler;
 pub mod shader;
 pub mod solve;
 pub mod splitsum;

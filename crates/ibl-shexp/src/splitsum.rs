@@ -8,8 +8,8 @@
 
 use crate::dfg::Dfg;
 use crate::microfacet::{d_ggx, reflect};
-use crate::sampler::MipSampler;
 use glam::Vec3;
+use ibl_core::bordered::BorderedMips;
 use ibl_core::cube::mip_sizes;
 use ibl_core::progress::NoProgress;
 use ibl_core::sampling::hammersley;
@@ -17,7 +17,7 @@ use ibl_core::{CubeMips, Cubemap, Rgb};
 
 /// A prefiltered chain ready for lookups, with the DFG table.
 pub struct SplitSum {
-    chain: MipSampler,
+    chain: BorderedMips,
     pub dfg: Dfg,
     /// Where the chain came from (for reports).
     pub source: String,
@@ -26,7 +26,7 @@ pub struct SplitSum {
 impl SplitSum {
     pub fn new(chain: &CubeMips, dfg: Dfg, source: impl Into<String>) -> Self {
         SplitSum {
-            chain: MipSampler::new(chain),
+            chain: BorderedMips::new(chain),
             dfg,
             source: source.into(),
         }
@@ -89,7 +89,7 @@ pub fn prefilter_chain(
     use ibl_core::envmap::Environment;
     use ibl_core::equirect::Filter;
     let src_mips = CubeMips::build(source.clone(), 1);
-    let pyr = MipSampler::new(&src_mips);
+    let pyr = BorderedMips::new(&src_mips);
     let sizes = mip_sizes(size, 1);
     let mut out = Vec::with_capacity(levels);
     for l in 0..levels {
@@ -116,7 +116,7 @@ pub fn prefilter_chain(
             table.push((ldir, ldir.z, lod));
         }
         let cube = ibl_core::traverse::map_cube_texels(n, &NoProgress, |face, i, j| {
-            let nrm = crate::sampler::texel_centre(face, i, j, n);
+            let nrm = ibl_core::cube::texel_direction(face, i, j, n);
             let (t, b) = crate::basis::tangent_frame(nrm, 0.0);
             let mut acc = [0.0f64; 3];
             let mut w = 0.0f64;
@@ -148,7 +148,7 @@ mod tests {
         for face in ibl_core::Face::ALL {
             for j in 0..n {
                 for i in 0..n {
-                    let d = crate::sampler::texel_centre(face, i, j, n);
+                    let d = ibl_core::cube::texel_direction(face, i, j, n);
                     let spot =
                         (20.0 * (d.dot(Vec3::new(0.6, 0.6, 0.5).normalize()) - 1.0)).exp() * 8.0;
                     cube.faces[face as usize].texel_mut(i, j).copy_from_slice(&[
