@@ -7,6 +7,9 @@
 //! importance sampling (or exact summation, `estimator = exact`).
 //! Floor: `floor` × the environment's mean luminance, on every channel (log E0 is undefined
 //! where the lobe sees only black; 1e-3 of the mean keeps the log range to ≈ 7 nats there).
+//! Then, with `objective = relative` (the default), the log-space solution is refined on the
+//! linear error, relative per α group, plus `log_weight` × the log error ([`crate::refine`]);
+//! the linear targets need no floor.
 
 use crate::basis::{self, num_unknowns, tangent_frame, Features};
 use crate::coeffs::{Coeffs, Objective, Target, CONVENTION, MAX_ORDER};
@@ -715,6 +718,18 @@ mod tests {
             },
             Params {
                 floor: 0.0,
+                ..Default::default()
+            },
+            Params {
+                log_weight: -1.0,
+                ..Default::default()
+            },
+            Params {
+                log_weight: f64::NAN,
+                ..Default::default()
+            },
+            Params {
+                refine_iterations: 1001,
                 ..Default::default()
             },
         ] {

@@ -112,6 +112,41 @@ fn fits_and_writes_coefficients_and_shaders() {
 }
 
 #[test]
+fn the_objective_is_chosen_by_flag_and_recorded() {
+    use ibl_shexp::coeffs::Objective;
+    let dir = tempfile::tempdir().unwrap();
+    let env = dir.path().join("env.exr");
+    write_env(&env, false);
+    let mut fitted = Vec::new();
+    for (flag, want) in [(None, Objective::Relative), (Some("log"), Objective::Log)] {
+        let out = dir.path().join(format!("{want:?}.json"));
+        let mut args = vec![env.to_str().unwrap(), "-o", out.to_str().unwrap()];
+        if let Some(f) = flag {
+            args.extend(["--objective", f]);
+        }
+        args.extend(small());
+        let o = run(&args);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let c: Coeffs = ibl_core::io::data::read(&out).unwrap();
+        assert_eq!(c.objective, want);
+        fitted.push(c);
+    }
+    // The refinement moves the solution (it starts from the log fit and must change it here).
+    assert_ne!(fitted[0].p, fitted[1].p);
+    let out = dir.path().join("bad.json");
+    let o = run(&[
+        env.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--objective",
+        "linear",
+    ]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert_eq!(stderr(&o).trim().lines().count(), 1, "{}", stderr(&o));
+    assert!(!out.exists());
+}
+
+#[test]
 fn output_is_identical_for_any_thread_count_and_ron_by_extension() {
     let dir = tempfile::tempdir().unwrap();
     let env = dir.path().join("env.exr");
