@@ -294,23 +294,92 @@ fn bad_inputs_fail_with_one_line_and_write_nothing() {
 fn unwritable_output_fails_and_keeps_previous_files() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out");
-    std::fs::create_dir(&out).unwrap();
-    // A folder where px.exr should go: the write fails, other earlier files stay intact.
-    std::fs::create_dir(out.join("px.exr")).unwrap();
-    let o = run(&[
-        fixture("hdri/studio_256.exr").to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--size",
-        "8",
-    ]);
+    let bake = |input: &str| {
+        run(&[
+            fixture(input).to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--size",
+            "8",
+        ])
+    };
+    // A first bake, then a folder where the last face (nz.exr) should go: the second bake of a
+    // different environment must fail and leave every face of the first one as it was.
+    let o = bake("hdri/studio_256.exr");
+    assert!(o.status.success(), "{}", stderr(&o));
+    let faces = ["px", "nx", "py", "ny", "pz", "nz"];
+    let first: Vec<Vec<u8>> = faces
+        .iter()
+        .map(|f| std::fs::read(out.join(format!("{f}.exr"))).unwrap())
+        .collect();
+    std::fs::remove_file(out.join("nz.exr")).unwrap();
+    std::fs::create_dir(out.join("nz.exr")).unwrap();
+    let o = bake("hdri/sunset_256.exr");
     assert_eq!(o.status.code(), Some(4), "{}", stderr(&o));
+    assert_eq!(stderr(&o).trim().lines().count(), 1, "{}", stderr(&o));
+    for (f, before) in faces[..5].iter().zip(&first) {
+        assert_eq!(
+            &std::fs::read(out.join(format!("{f}.exr"))).unwrap(),
+            before,
+            "{f}"
+        );
+    }
     let leftovers: Vec<_> = std::fs::read_dir(&out)
         .unwrap()
         .filter_map(|e| e.ok())
         .filter(|e| e.file_name().to_string_lossy().contains(".tmp-"))
         .collect();
     assert!(leftovers.is_empty());
+}
+
+#[test]
+fn rotate_applies_to_the_equirect_output_too() {
+    // DESIGN.md: --rotate turns the environment before any bake, --to-equirect included. A
+    // 90° turn about +Y moves the equirect content by a quarter of its width.
+    let dir = tempfile::tempdir().unwrap();
+    let src = dir.path().join("src.exr");
+    io::write_image(&src, &direction_equirect(64), &WriteOptions::default()).unwrap();
+    let out_of = |rotate: &str| {
+        let p = dir.path().join(format!("eq{rotate}.exr"));
+        let o = run(&[
+            src.to_str().unwrap(),
+            "-o",
+            p.to_str().unwrap(),
+            "--to-equirect",
+            "--size",
+            "16",
+            "--rotate",
+            rotate,
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        io::read_image(&p, ColorSpace::Linear).unwrap()
+    };
+    let (a, b) = (out_of("0"), out_of("90"));
+    assert_eq!((a.width, a.height), (32, 16));
+    let differs = a
+        .data
+        .iter()
+        .zip(&b.data)
+        .any(|(x, y)| (x - y).abs() > 1e-3);
+    assert!(differs, "--rotate 90 left the equirect output unchanged");
+    // The turned image is the unturned one shifted by a quarter turn in longitude (either
+    // direction, per DESIGN.md's sign), up to resampling.
+    let shifted = |k: isize| -> f32 {
+        let mut worst = 0.0f32;
+        for y in 4..12 {
+            for x in 0..32isize {
+                let xs = (x + k).rem_euclid(32) as usize;
+                for c in 0..3 {
+                    let d = a.data[(y * 32 + xs) * 3 + c] - b.data[(y * 32 + x as usize) * 3 + c];
+                    worst = worst.max(d.abs());
+                }
+            }
+        }
+        worst
+    };
+    let best = shifted(8).min(shifted(-8));
+    eprintln!("--rotate 90 vs a quarter-width shift: worst difference {best:.3}");
+    assert!(best < 0.1, "{best}");
 }
 
 #[test]

@@ -4,7 +4,7 @@
 //! E0 estimator and split-sum lookups (ibl-shexp) read through; matches
 //! `Cubemap::sample_bilinear` (same border re-projection).
 
-use crate::cube::{face_texel_index, CubeMips, Cubemap, Face};
+use crate::cube::{CubeMips, Cubemap, Face};
 use crate::Rgb;
 use glam::Vec3;
 
@@ -16,8 +16,8 @@ struct BorderedLevel {
 }
 
 impl BorderedLevel {
-    /// Copies the cube and fills each border texel from the face its direction lands on: past
-    /// the edge, the tap direction's major axis names the neighbouring face.
+    /// Copies the cube and fills each border texel from the face its direction lands on
+    /// (`Cubemap::texel_wrapped`, the re-projection `Cubemap::sample_bilinear` uses).
     fn new(cube: &Cubemap) -> Self {
         let n = cube.size;
         let s = n + 2;
@@ -25,17 +25,8 @@ impl BorderedLevel {
         for face in Face::ALL {
             for y in 0..s {
                 for x in 0..s {
-                    let (i, j) = (x as isize - 1, y as isize - 1);
-                    let t = if i >= 0 && j >= 0 && (i as usize) < n && (j as usize) < n {
-                        cube.texel(face, i as usize, j as usize)
-                    } else {
-                        let sc = (2.0 * (i as f32 + 0.5)) / n as f32 - 1.0;
-                        let tc = (2.0 * (j as f32 + 0.5)) / n as f32 - 1.0;
-                        let (f2, s2, t2) = Face::from_direction(face.direction(sc, tc));
-                        let (i2, j2) = face_texel_index(s2, t2, n);
-                        cube.texel(f2, i2, j2)
-                    };
-                    data[face as usize * s * s + y * s + x] = t;
+                    data[face as usize * s * s + y * s + x] =
+                        cube.texel_wrapped(face, x as isize - 1, y as isize - 1);
                 }
             }
         }

@@ -200,7 +200,7 @@ impl Cubemap {
     /// re-projected onto the neighbouring face through their direction, which makes bilinear
     /// filtering seamless across edges and corners.
     #[inline]
-    fn texel_wrapped(&self, face: Face, i: isize, j: isize) -> Rgb {
+    pub(crate) fn texel_wrapped(&self, face: Face, i: isize, j: isize) -> Rgb {
         let n = self.size as isize;
         if i >= 0 && j >= 0 && i < n && j < n {
             return self.texel(face, i as usize, j as usize);

@@ -326,6 +326,26 @@ pub fn encode_cube_outputs(
     }
 }
 
+/// Face files of an earlier, longer chain in `dir` that a chain of `levels` levels does not
+/// overwrite (`m{l}_*` for l ≥ `levels`, or every `m{l}_*` when one level is written as `px…`):
+/// a chain writer removes them after a successful write, or a reader would take them as part
+/// of the new chain.
+pub fn stale_chain_files(dir: &Path, levels: usize) -> Vec<PathBuf> {
+    let first = if levels > 1 { levels } else { 0 };
+    let mut out = Vec::new();
+    for l in first.. {
+        let found: Vec<PathBuf> = Face::ALL
+            .iter()
+            .filter_map(|f| find_with_stem(dir, &format!("m{l}_{}", f.name())))
+            .collect();
+        if found.is_empty() {
+            break;
+        }
+        out.extend(found);
+    }
+    out
+}
+
 /// Paths [`encode_cube_outputs`] would write (for planning and cleaning).
 pub fn cube_output_paths(
     dir: &Path,
@@ -355,7 +375,13 @@ pub fn read_cube_chain(path: &Path) -> Result<CubeMips> {
         let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
         return io::ktx2::decode_cube(path, &bytes);
     }
-    let mut levels = Vec::new();
+    if find_with_stem(path, "m0_px").is_some() && find_with_stem(path, "px").is_some() {
+        return Err(Error::invalid(
+            path,
+            "holds both a single cube (px…) and a chain (m0_px…): bake into separate folders",
+        ));
+    }
+    let mut levels: Vec<Cubemap> = Vec::new();
     for l in 0.. {
         let stem = format!("m{l}_px");
         if find_with_stem(path, &stem).is_none() {
@@ -367,10 +393,26 @@ pub fn read_cube_chain(path: &Path) -> Result<CubeMips> {
                 let p = find_with_stem(path, &format!("m{l}_{}", f.name())).ok_or_else(|| {
                     Error::invalid(path, format!("missing face m{l}_{}", f.name()))
                 })?;
-                io::read_image(&p, ColorSpace::Linear)
+                let mut img = io::read_image(&p, ColorSpace::Linear)?;
+                check_texels(&mut img, &p, false)?;
+                Ok(img)
             })
             .collect::<Result<_>>()?;
-        levels.push(Cubemap::from_faces(faces.try_into().expect("six"))?);
+        let cube = Cubemap::from_faces(faces.try_into().expect("six"))?;
+        // Levels halve (cube::mip_sizes): anything else is a level left by another bake.
+        if let Some(first) = levels.first() {
+            let want = (first.size >> l).max(1);
+            if cube.size != want {
+                return Err(Error::invalid(
+                    path,
+                    format!(
+                        "level {l} is {}² but a chain from {}² needs {want}²: m{l}_* is left from another bake",
+                        cube.size, first.size
+                    ),
+                ));
+            }
+        }
+        levels.push(cube);
     }
     if levels.is_empty() {
         match load_environment(path, false)?.env {
@@ -389,6 +431,7 @@ pub fn read_cube_chain(path: &Path) -> Result<CubeMips> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::Vec3;
 
     fn labelled_cube(n: usize) -> Cubemap {
         let mut c = Cubemap::new(n);
@@ -427,15 +470,33 @@ mod tests {
                 }
             }
         }
+        // The slot table is checked independently of the reader: across every internal seam of
+        // the painted cross (nx|pz|px|nz in the middle row, py above and ny below pz) adjacent
+        // pixels must hold neighbouring directions. A wrong slot or a flipped face breaks this.
+        let dir = |x: usize, y: usize| Vec3::from_slice(img.texel(x, y)).normalize();
+        let limit = 2.0 * std::f32::consts::FRAC_PI_2 / n as f32;
+        let mut worst = 0.0f32;
+        for k in 0..n {
+            let y = n + k;
+            for col in 1..4 {
+                worst = worst.max(dir(col * n - 1, y).angle_between(dir(col * n, y)));
+            }
+            let x = n + k;
+            worst = worst.max(dir(x, n - 1).angle_between(dir(x, n)));
+            worst = worst.max(dir(x, 2 * n - 1).angle_between(dir(x, 2 * n)));
+        }
+        assert!(worst < limit, "seam jump {worst} rad (limit {limit})");
         let Environment::Cube(c) = classify_layout(Path::new("x.exr"), img).unwrap() else {
             panic!()
         };
         for face in Face::ALL {
-            let t = c.texel(face, 3, 5);
-            let d = crate::cube::texel_direction(face, 3, 5, n);
-            assert!(
-                (t[0] - d.x).abs() < 1e-6 && (t[1] - d.y).abs() < 1e-6 && (t[2] - d.z).abs() < 1e-6
-            );
+            for j in 0..n {
+                for i in 0..n {
+                    let t = Vec3::from(c.texel(face, i, j));
+                    let d = crate::cube::texel_direction(face, i, j, n);
+                    assert!((t - d).length() < 1e-6, "{face:?} {i} {j}");
+                }
+            }
         }
     }
 

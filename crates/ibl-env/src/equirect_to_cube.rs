@@ -46,8 +46,9 @@ impl Default for Params {
     }
 }
 
-/// Largest face accepted (6·n² texels must fit the image limit).
-pub const MAX_FACE_SIZE: usize = 8192;
+/// Largest face accepted: 6·n² texels must fit the image limit (`ibl_core::image::MAX_TEXELS`,
+/// 2^28) so that a KTX2 cube of that size can be read back (⌊√(2^28/6)⌋ = 6688).
+pub const MAX_FACE_SIZE: usize = 6688;
 
 impl Params {
     pub fn validate(&self) -> Result<()> {
@@ -87,13 +88,15 @@ pub fn run(
         FloatDepth::F32
     };
     if params.to_equirect {
+        // --rotate turns the environment before any bake (DESIGN.md), this one included.
         let base = match &input.env {
-            Environment::Cube(c) => c.clone(),
-            Environment::Equirect(_) => {
-                input
-                    .env
-                    .to_cube(input.env.natural_face_size(), Filter::Area, 0.0, progress)
-            }
+            Environment::Cube(c) if params.rotate == 0.0 => c.clone(),
+            _ => input.env.to_cube(
+                input.env.natural_face_size(),
+                Filter::Area,
+                params.rotate,
+                progress,
+            ),
         };
         let w = params.size.map(|s| 2 * s).unwrap_or(4 * base.size);
         let img = equirect::cube_to_equirect(&base, w, w / 2, params.filter);
@@ -134,6 +137,13 @@ pub fn run(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_largest_face_fits_the_image_limit_and_one_more_does_not() {
+        let texels = |n: usize| 6 * (n as u64) * (n as u64);
+        assert!(texels(MAX_FACE_SIZE) <= ibl_core::image::MAX_TEXELS);
+        assert!(texels(MAX_FACE_SIZE + 1) > ibl_core::image::MAX_TEXELS);
+    }
 
     #[test]
     fn defaults_agree_between_clap_serde_and_default() {

@@ -90,6 +90,14 @@ fn black_and_constant_environments() {
             let exact =
                 irradiance::convolve_cosine_exact(&Environment::Cube(cube), 2, 0, 0.0, &NoProgress);
             assert!(all_finite(&exact));
+            // E/π of a constant radiance L is L: every texel reads 3 (white furnace).
+            let worst_e = exact
+                .faces
+                .iter()
+                .flat_map(|f| f.data.iter())
+                .map(|v| (v - 3.0).abs())
+                .fold(0.0f32, f32::max);
+            assert!(worst_e < 1e-5, "w={w} n={n}: E/π off by {worst_e}");
         }
     }
 }

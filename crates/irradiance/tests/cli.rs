@@ -213,6 +213,50 @@ fn ron_output_more_bands_and_window() {
     let text = std::fs::read_to_string(dir.path().join("coeffs.ron")).unwrap();
     assert!(text.contains("bands: 5"), "{text}");
     assert!(dir.path().join("irradiance.ktx2").exists());
+    // The window scales band l of the irradiance by sinc(πl/5) (Lanczos σ factor), computed
+    // here by hand: windowed / plain = σ_l for every coefficient, and the radiance coefficients
+    // are untouched.
+    let plain_dir = dir.path().join("plain");
+    let o = run(&[
+        fixture("hdri/studio_256.hdr").to_str().unwrap(),
+        "-o",
+        plain_dir.to_str().unwrap(),
+        "--bands",
+        "5",
+        "--sh-file",
+        "coeffs.ron",
+        "--size",
+        "4",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    #[derive(serde::Deserialize)]
+    struct Sh {
+        radiance: Vec<(f64, f64, f64)>,
+        irradiance: Vec<(f64, f64, f64)>,
+    }
+    let read = |p: std::path::PathBuf| -> Sh {
+        ron::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
+    };
+    let windowed = read(dir.path().join("coeffs.ron"));
+    let plain = read(plain_dir.join("coeffs.ron"));
+    assert_eq!(windowed.irradiance.len(), 25);
+    assert_eq!(windowed.radiance, plain.radiance);
+    let mut worst = 0.0f64;
+    for (i, (w, p)) in windowed
+        .irradiance
+        .iter()
+        .zip(&plain.irradiance)
+        .enumerate()
+    {
+        let l = (i as f64).sqrt().floor();
+        let x = std::f64::consts::PI * l / 5.0;
+        let sigma = if l == 0.0 { 1.0 } else { x.sin() / x };
+        for (a, b) in [(w.0, p.0), (w.1, p.1), (w.2, p.2)] {
+            worst = worst.max((a - sigma * b).abs() / b.abs().max(1e-3));
+        }
+    }
+    eprintln!("--window vs sinc(πl/5) × unwindowed: worst relative difference {worst:.1e}");
+    assert!(worst < 1e-5, "{worst}");
 }
 
 #[test]

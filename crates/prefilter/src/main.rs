@@ -30,6 +30,16 @@ fn main() {
         env.warnings().into_iter().for_each(|w| ctx.warn(w));
         let baked = run(&cli.params, &env, &cli.output, ctx.progress())?;
         ibl_core::io::write_many_atomic(&baked.files)?;
+        if cli.params.layout == ibl_core::envmap::Layout::Faces {
+            let levels = baked.chain.mips.levels.len();
+            for stale in ibl_core::envmap::stale_chain_files(&cli.output, levels) {
+                std::fs::remove_file(&stale).map_err(|e| ibl_core::Error::io(&stale, e))?;
+                ctx.warn(format!(
+                    "removed {} (a level of an earlier, longer chain)",
+                    stale.display()
+                ));
+            }
+        }
         baked
             .chain
             .warnings

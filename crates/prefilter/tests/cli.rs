@@ -85,6 +85,84 @@ fn faces_layout_writes_every_level_and_the_report() {
 }
 
 #[test]
+fn a_shorter_chain_into_the_same_folder_removes_the_old_levels() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("chain");
+    let bake = |input: &str, levels: &str| {
+        let o = run(&[
+            fixture(input).to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--size",
+            "16",
+            "--levels",
+            levels,
+            "--method",
+            "fis",
+            "--samples",
+            "16",
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        o
+    };
+    bake("hdri/studio_256.exr", "5");
+    assert!(out.join("m4_px.exr").exists());
+    let o = bake("hdri/sunset_256.exr", "2");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("m2_px.exr"), "{err}");
+    let names = files_in(&out);
+    assert!(
+        names
+            .iter()
+            .all(|n| !n.starts_with("m2_") && !n.starts_with("m4_")),
+        "{names:?}"
+    );
+    let chain = ibl_core::envmap::read_cube_chain(&out).unwrap();
+    assert_eq!(
+        chain.levels.iter().map(|c| c.size).collect::<Vec<_>>(),
+        vec![16, 8]
+    );
+}
+
+#[test]
+fn a_chain_with_a_foreign_level_is_refused_by_the_reader() {
+    // Files copied in by hand (not through the writer): a level that does not halve.
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("chain");
+    let o = run(&[
+        fixture("hdri/studio_256.exr").to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--size",
+        "16",
+        "--levels",
+        "3",
+        "--method",
+        "fis",
+        "--samples",
+        "16",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for f in FACES {
+        std::fs::copy(
+            out.join(format!("m1_{f}.exr")),
+            out.join(format!("m2_{f}.exr")),
+        )
+        .unwrap();
+    }
+    let e = ibl_core::envmap::read_cube_chain(&out)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("level 2 is 8²"), "{e}");
+    // A single cube beside a chain is ambiguous.
+    std::fs::copy(out.join("m0_px.exr"), out.join("px.exr")).unwrap();
+    let e = ibl_core::envmap::read_cube_chain(&out)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("both a single cube"), "{e}");
+}
+
+#[test]
 fn ktx2_layout_reads_back_equal_to_the_faces() {
     let tmp = tempfile::tempdir().unwrap();
     let (a, b) = (tmp.path().join("faces"), tmp.path().join("ktx"));

@@ -19,8 +19,9 @@ fn temp_path(target: &Path) -> PathBuf {
     target.with_file_name(format!(".{name}.tmp-{}-{k}", std::process::id()))
 }
 
-/// Writes `bytes` to `path` atomically, creating parent directories.
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+/// Writes `bytes` to a flushed temporary file beside `path` (creating parent directories) and
+/// returns the temporary path; nothing is left behind on error.
+fn stage(path: &Path, bytes: &[u8]) -> Result<PathBuf> {
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     }
@@ -31,21 +32,66 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
         f.sync_data()?;
         Ok(())
     })();
-    if let Err(e) = result {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(Error::io(path, e));
+    match result {
+        Ok(()) => Ok(tmp),
+        Err(e) => {
+            let _ = std::fs::remove_file(&tmp);
+            Err(Error::io(path, e))
+        }
     }
-    std::fs::rename(&tmp, path).map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
+}
+
+/// Renames a staged file into place (removing it if the rename fails).
+fn commit(tmp: &Path, path: &Path) -> Result<()> {
+    std::fs::rename(tmp, path).map_err(|e| {
+        let _ = std::fs::remove_file(tmp);
         Error::io(path, e)
     })
 }
 
-/// Writes several encoded files, each atomically. All encoding happens before this is
-/// called, so a bad input never leaves a half-updated set behind.
+/// Writes `bytes` to `path` atomically, creating parent directories.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    let tmp = stage(path, bytes)?;
+    commit(&tmp, path)
+}
+
+/// Writes several encoded files as one set: every file is first written and flushed to a
+/// temporary beside its target, and only when all of them are on disk (and no target is a
+/// directory a rename would fail on) are they renamed into place. A full disk, an unwritable
+/// folder or a bad target therefore leaves every previous file as it was; only an interruption
+/// during the final renames (microseconds) can leave the set mixed.
 pub fn write_many_atomic(files: &[(PathBuf, Vec<u8>)]) -> Result<()> {
-    for (p, b) in files {
-        write_atomic(p, b)?;
+    let mut staged: Vec<(PathBuf, &Path)> = Vec::with_capacity(files.len());
+    let discard = |staged: &[(PathBuf, &Path)]| {
+        for (tmp, _) in staged {
+            let _ = std::fs::remove_file(tmp);
+        }
+    };
+    for (path, bytes) in files {
+        let blocked = std::fs::symlink_metadata(path).is_ok_and(|m| m.is_dir());
+        if blocked {
+            discard(&staged);
+            return Err(Error::io(
+                path,
+                std::io::Error::new(
+                    std::io::ErrorKind::IsADirectory,
+                    "a directory is in the way of this output",
+                ),
+            ));
+        }
+        match stage(path, bytes) {
+            Ok(tmp) => staged.push((tmp, path)),
+            Err(e) => {
+                discard(&staged);
+                return Err(e);
+            }
+        }
+    }
+    for (i, (tmp, path)) in staged.iter().enumerate() {
+        if let Err(e) = commit(tmp, path) {
+            discard(&staged[i + 1..]);
+            return Err(e);
+        }
     }
     Ok(())
 }
@@ -66,6 +112,37 @@ mod tests {
             .map(|e| e.unwrap().file_name())
             .collect();
         assert_eq!(names.len(), 1, "{names:?}");
+    }
+
+    #[test]
+    fn a_set_with_one_blocked_target_changes_none_of_the_previous_files() {
+        let dir = tempfile::tempdir().unwrap();
+        let names = ["a.bin", "b.bin", "c.bin"];
+        let set = |tag: &[u8]| -> Vec<(PathBuf, Vec<u8>)> {
+            names
+                .iter()
+                .map(|n| (dir.path().join(n), tag.to_vec()))
+                .collect()
+        };
+        write_many_atomic(&set(b"old")).unwrap();
+        // The last target becomes a directory: the set must fail before any rename.
+        std::fs::remove_file(dir.path().join("c.bin")).unwrap();
+        std::fs::create_dir(dir.path().join("c.bin")).unwrap();
+        assert!(write_many_atomic(&set(b"new")).is_err());
+        for n in &names[..2] {
+            assert_eq!(std::fs::read(dir.path().join(n)).unwrap(), b"old", "{n}");
+        }
+        // No temporaries are left: a.bin, b.bin and the directory c.bin.
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 3);
+        // A target folder that cannot be created fails at staging, also without renames.
+        std::fs::write(dir.path().join("file"), b"x").unwrap();
+        let mut bad = set(b"new");
+        bad.push((dir.path().join("file/sub/d.bin"), b"new".to_vec()));
+        assert!(write_many_atomic(&bad).is_err());
+        for n in &names[..2] {
+            assert_eq!(std::fs::read(dir.path().join(n)).unwrap(), b"old", "{n}");
+        }
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 4);
     }
 
     #[test]

@@ -8,11 +8,22 @@ use exr::prelude::*;
 use std::io::Cursor;
 use std::path::Path;
 
-fn channel_values(samples: &FlatSamples) -> Vec<f32> {
+fn sample_count(samples: &FlatSamples) -> usize {
     match samples {
-        FlatSamples::F16(v) => v.iter().map(|h| h.to_f32()).collect(),
-        FlatSamples::F32(v) => v.clone(),
-        FlatSamples::U32(v) => v.iter().map(|&u| u as f32).collect(),
+        FlatSamples::F16(v) => v.len(),
+        FlatSamples::F32(v) => v.len(),
+        FlatSamples::U32(v) => v.len(),
+    }
+}
+
+/// Writes one channel into every `stride`-th value of `out` (interleaving in one pass, with
+/// no per-channel copy: the decoded image already holds every sample once).
+fn interleave(samples: &FlatSamples, out: &mut [f32], stride: usize) {
+    let dst = out.iter_mut().step_by(stride);
+    match samples {
+        FlatSamples::F16(v) => dst.zip(v).for_each(|(d, h)| *d = h.to_f32()),
+        FlatSamples::F32(v) => dst.zip(v).for_each(|(d, x)| *d = *x),
+        FlatSamples::U32(v) => dst.zip(v).for_each(|(d, u)| *d = *u as f32),
     }
 }
 
@@ -87,23 +98,21 @@ pub fn decode(path: &Path, bytes: &[u8]) -> Result<Image> {
             }
         }
     };
-    let planes: Vec<Vec<f32>> = picked
-        .iter()
-        .map(|&c| channel_values(&layer.channel_data.list[c].sample_data))
-        .collect();
     let n = w * h;
-    if planes.iter().any(|p| p.len() != n) {
+    let list = &layer.channel_data.list;
+    if picked
+        .iter()
+        .any(|&c| sample_count(&list[c].sample_data) != n)
+    {
         return Err(Error::invalid(
             path,
             "EXR channels are subsampled or truncated",
         ));
     }
-    let channels = planes.len();
+    let channels = picked.len();
     let mut data = vec![0.0f32; n * channels];
-    for (c, plane) in planes.iter().enumerate() {
-        for (k, v) in plane.iter().enumerate() {
-            data[k * channels + c] = *v;
-        }
+    for (k, &c) in picked.iter().enumerate() {
+        interleave(&list[c].sample_data, &mut data[k..], channels);
     }
     Image::from_data(w, h, channels, data)
 }
@@ -123,7 +132,7 @@ pub fn encode(path: &Path, img: &Image, depth: FloatDepth) -> Result<Vec<u8>> {
             let plane = (0..n).map(|k| img.data[k * img.channels + c]);
             let samples = match depth {
                 FloatDepth::F32 => FlatSamples::F32(plane.collect()),
-                FloatDepth::F16 => FlatSamples::F16(plane.map(f16::from_f32).collect()),
+                FloatDepth::F16 => FlatSamples::F16(plane.map(super::f16_saturating).collect()),
             };
             AnyChannel::new(*name, samples)
         })

@@ -79,7 +79,7 @@ pub fn encode_cube(mips: &CubeMips, depth: FloatDepth) -> Vec<u8> {
                 for px in face.data.chunks_exact(3) {
                     for v in [px[0], px[1], px[2], 1.0] {
                         match depth {
-                            FloatDepth::F16 => b.extend(half::f16::from_f32(v).to_le_bytes()),
+                            FloatDepth::F16 => b.extend(super::f16_saturating(v).to_le_bytes()),
                             FloatDepth::F32 => b.extend(v.to_le_bytes()),
                         }
                     }

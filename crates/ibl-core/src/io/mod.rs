@@ -27,7 +27,17 @@ pub enum ColorSpace {
 pub enum FloatDepth {
     #[default]
     F32,
+    /// Half floats, saturating at ±65504 (see [`f16_saturating`]).
     F16,
+}
+
+/// f32 → half that saturates at ±65504, the largest finite half, instead of rounding to ±Inf:
+/// a sun of 10⁵ in a `--half` output stays finite (as GPU RGBA16F render targets clamp), so the
+/// file is still readable by every tool here, which refuse Inf. Energy above 65504 is lost:
+/// use float32 outputs for such environments.
+#[inline]
+pub fn f16_saturating(v: f32) -> half::f16 {
+    half::f16::from_f32(v.clamp(-65504.0, 65504.0))
 }
 
 /// Encoding choices for [`encode_image`].
@@ -162,6 +172,31 @@ mod tests {
             let back = read_image(&p, ColorSpace::Linear).unwrap();
             assert_eq!(back, img, "channels {ch}");
         }
+    }
+
+    #[test]
+    fn half_outputs_saturate_instead_of_writing_inf() {
+        assert_eq!(f16_saturating(1e5).to_f32(), 65504.0);
+        assert_eq!(f16_saturating(-1e30).to_f32(), -65504.0);
+        assert_eq!(f16_saturating(f32::INFINITY).to_f32(), 65504.0);
+        assert_eq!(f16_saturating(1.5).to_f32(), 1.5);
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("sun.exr");
+        let mut img = test_image(3);
+        img.data[0] = 1e5;
+        let opts = WriteOptions {
+            float: FloatDepth::F16,
+            ..Default::default()
+        };
+        write_image(&p, &img, &opts).unwrap();
+        let back = read_image(&p, ColorSpace::Linear).unwrap();
+        assert_eq!(back.data[0], 65504.0);
+        assert!(back.data.iter().all(|v| v.is_finite()));
+        let mut cube = crate::Cubemap::constant(2, [1.0; 3]);
+        cube.faces[0].data[0] = 1e5;
+        let k = ktx2::encode_cube(&crate::CubeMips { levels: vec![cube] }, FloatDepth::F16);
+        let back = ktx2::decode_cube(Path::new("sun.ktx2"), &k).unwrap();
+        assert_eq!(back.levels[0].faces[0].data[0], 65504.0);
     }
 
     #[test]
