@@ -21,20 +21,6 @@ const GAUSS: [(f64, f64); 3] = [
     (0.774_596_669_241_483_4, 5.0 / 9.0),
 ];
 
-/// arccos within 7e-5 rad (Abramowitz & Stegun 4.4.45): only a starting guess for
-/// [`EquirectTables::row_of_cos`], which then decides the row exactly.
-#[inline]
-fn approx_acos(x: f64) -> f64 {
-    let a = x.abs();
-    let r = (1.0 - a).sqrt()
-        * (1.570_728_8 + a * (-0.212_114_4 + a * (0.074_261_0 + a * -0.018_729_3)));
-    if x < 0.0 {
-        PI - r
-    } else {
-        r
-    }
-}
-
 /// Per-source tables shared by every texel: cos θ at each row boundary, and the source
 /// stored column-major as RGB so that a column's run of rows is contiguous in memory.
 pub struct EquirectTables {
@@ -68,7 +54,7 @@ impl EquirectTables {
     #[inline]
     fn row_of_cos(&self, c: f64) -> usize {
         let c = c.clamp(-1.0, 1.0);
-        let guess = (approx_acos(c) * self.h as f64 / PI) as usize;
+        let guess = (crate::approx::acos(c) * self.h as f64 / PI) as usize;
         let mut j = guess.min(self.h - 1);
         while j + 1 < self.h && self.cos_row[j + 1] >= c {
             j += 1;

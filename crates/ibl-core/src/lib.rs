@@ -5,6 +5,7 @@
 //! the parallel texel traversal every bake shares ([`traverse`]) and file I/O with atomic
 //! writes ([`io`]).
 
+pub mod approx;
 pub mod area;
 pub mod bordered;
 pub mod cube;

@@ -158,22 +158,15 @@ pub struct CellTree {
     levels: Vec<CellLevel>,
 }
 
-/// acos(x) to within 6.8e-5 rad (Abramowitz & Stegun 1964, eq. 4.4.45), for the cut's cone
-/// tests; callers pad by [`FAST_ACOS_ERROR`] so bounds stay bounds.
+/// Bound on the error of `ibl_core::approx::acos` plus f32 rounding: the cut's cone tests pad
+/// by it so bounds stay bounds.
+const FAST_ACOS_ERROR: f32 = 1e-4;
+
+/// acos for the cut's cone tests (Abramowitz & Stegun 4.4.45, see `ibl_core::approx`).
 #[inline]
 fn fast_acos(x: f32) -> f32 {
-    let a = x.abs().min(1.0);
-    let p =
-        (1.0 - a).sqrt() * (1.570_728_8 + a * (-0.212_114_4 + a * (0.074_261 + a * -0.018_729_3)));
-    if x >= 0.0 {
-        p
-    } else {
-        std::f32::consts::PI - p
-    }
+    ibl_core::approx::acos(x as f64) as f32
 }
-
-/// Bound on the error of [`fast_acos`] plus f32 rounding.
-const FAST_ACOS_ERROR: f32 = 1e-4;
 
 /// Largest angle from unit `centre` to the corners of the face rectangle [s0,s1]×[t0,t1] (the
 /// farthest point of a convex spherical quad from a point inside it is a corner).
