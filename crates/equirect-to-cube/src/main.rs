@@ -1,7 +1,6 @@
 //! `equirect-to-cube`: parse, call `ibl_env::equirect_to_cube`, write, report.
 
 use clap::Parser;
-use ibl_core::envmap::load_environment;
 use ibl_env::equirect_to_cube::{run, Params};
 use std::path::PathBuf;
 
@@ -25,15 +24,9 @@ fn main() {
     let cli = ibl_cli::parse::<Cli>("equirect-to-cube");
     ibl_cli::run("equirect-to-cube", cli.common.clone(), |ctx| {
         cli.params.validate()?;
-        let env = load_environment(&cli.input, cli.params.sanitize)?;
-        env.warnings().into_iter().for_each(|w| ctx.warn(w));
+        let env = ctx.load_environment(&cli.input, cli.params.sanitize)?;
         let baked = run(&cli.params, &env, &cli.output, ctx.progress())?;
-        ibl_core::io::write_many_atomic(&baked.files)?;
-        let outputs = baked
-            .files
-            .iter()
-            .map(|f| f.0.display().to_string())
-            .collect();
+        let outputs = ibl_cli::write_outputs(&baked.files)?;
         Ok::<_, ibl_core::Error>((outputs, serde_json::json!({ "face_size": baked.face_size })))
     })
 }

@@ -68,6 +68,25 @@ impl Ctx {
             eprintln!("{}", msg.as_ref());
         }
     }
+    /// Loads an environment bake's input (equirect, cross, face folder or KTX2) and reports
+    /// what the input policy did to it (sanitised or clamped texels) as warnings.
+    pub fn load_environment(
+        &self,
+        input: &std::path::Path,
+        sanitize: bool,
+    ) -> Result<ibl_core::envmap::LoadedEnvironment, ibl_core::Error> {
+        let env = ibl_core::envmap::load_environment(input, sanitize)?;
+        env.warnings().into_iter().for_each(|w| self.warn(w));
+        Ok(env)
+    }
+}
+
+/// Writes a bake's encoded files as one atomic set and returns their paths for the summary.
+pub fn write_outputs(
+    files: &[(std::path::PathBuf, Vec<u8>)],
+) -> Result<Vec<String>, ibl_core::Error> {
+    ibl_core::io::write_many_atomic(files)?;
+    Ok(files.iter().map(|f| f.0.display().to_string()).collect())
 }
 
 /// Runs a binary's body: builds the thread pool, times it, prints the summary or the error

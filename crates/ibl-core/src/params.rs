@@ -10,3 +10,14 @@ pub fn clap_defaults<P: clap::Args + clap::FromArgMatches>() -> P {
         .expect("every Params field has a default");
     P::from_arg_matches(&m).expect("defaults parse")
 }
+
+/// The `--rotate` check every environment bake shares: a finite number of degrees.
+pub fn check_rotate(degrees: f32) -> crate::Result<()> {
+    if degrees.is_finite() {
+        Ok(())
+    } else {
+        Err(crate::Error::param(
+            "--rotate must be a finite number of degrees",
+        ))
+    }
+}

@@ -59,9 +59,7 @@ impl Params {
                 )));
             }
         }
-        if !self.rotate.is_finite() {
-            return Err(Error::param("--rotate must be a finite number of degrees"));
-        }
+        ibl_core::params::check_rotate(self.rotate)?;
         Ok(())
     }
 }
@@ -82,11 +80,7 @@ pub fn run(
     progress: &dyn Progress,
 ) -> Result<Baked> {
     params.validate()?;
-    let depth = if params.half {
-        FloatDepth::F16
-    } else {
-        FloatDepth::F32
-    };
+    let depth = FloatDepth::from_half(params.half);
     if params.to_equirect {
         // --rotate turns the environment before any bake (DESIGN.md), this one included.
         let base = match &input.env {

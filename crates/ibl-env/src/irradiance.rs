@@ -88,9 +88,7 @@ impl Params {
                 self.sh_file
             )));
         }
-        if !self.rotate.is_finite() {
-            return Err(Error::param("--rotate must be a finite number of degrees"));
-        }
+        ibl_core::params::check_rotate(self.rotate)?;
         Ok(())
     }
 }
@@ -404,11 +402,7 @@ pub fn run(
     };
     let sh_path = out_dir.join(&params.sh_file);
     let mut files = vec![(sh_path.clone(), io::data::encode(&sh_path, &coefficients)?)];
-    let depth = if params.half {
-        FloatDepth::F16
-    } else {
-        FloatDepth::F32
-    };
+    let depth = FloatDepth::from_half(params.half);
     files.extend(envmap::encode_cube_outputs(
         out_dir,
         &CubeMips { levels: vec![cube] },

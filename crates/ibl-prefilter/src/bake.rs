@@ -218,11 +218,7 @@ impl Params {
                 )));
             }
         }
-        if !self.rotate.is_finite() {
-            return Err(Error::Param(
-                "--rotate must be a finite number of degrees".into(),
-            ));
-        }
+        ibl_core::params::check_rotate(self.rotate)?;
         Ok(())
     }
 
@@ -420,11 +416,7 @@ pub fn run(
     progress: &dyn Progress,
 ) -> Result<Baked> {
     let chain = bake_chain(params, &input.env, progress)?;
-    let depth = if params.half {
-        FloatDepth::F16
-    } else {
-        FloatDepth::F32
-    };
+    let depth = FloatDepth::from_half(params.half);
     let mut files =
         envmap::encode_cube_outputs(out_dir, &chain.mips, params.layout, depth, "prefilter")?;
     let json = out_dir.join(REPORT_NAME);

@@ -1,7 +1,6 @@
 //! `irradiance`: parse, call `ibl_env::irradiance`, write, report.
 
 use clap::Parser;
-use ibl_core::envmap::load_environment;
 use ibl_env::irradiance::{run, Params};
 use std::path::PathBuf;
 
@@ -25,8 +24,7 @@ fn main() {
     let cli = ibl_cli::parse::<Cli>("irradiance");
     ibl_cli::run("irradiance", cli.common.clone(), |ctx| {
         cli.params.validate()?;
-        let env = load_environment(&cli.input, cli.params.sanitize)?;
-        env.warnings().into_iter().for_each(|w| ctx.warn(w));
+        let env = ctx.load_environment(&cli.input, cli.params.sanitize)?;
         let baked = run(&cli.params, &env, &cli.output, ctx.progress())?;
         if baked.negative_clamped > 0 {
             ctx.warn(format!(
@@ -34,12 +32,7 @@ fn main() {
                 baked.negative_clamped
             ));
         }
-        ibl_core::io::write_many_atomic(&baked.files)?;
-        let outputs = baked
-            .files
-            .iter()
-            .map(|f| f.0.display().to_string())
-            .collect();
+        let outputs = ibl_cli::write_outputs(&baked.files)?;
         Ok::<_, ibl_core::Error>((
             outputs,
             serde_json::json!({ "coefficients": baked.coefficients, "negative_clamped": baked.negative_clamped }),

@@ -1,7 +1,6 @@
 //! `prefilter`: parse, call `ibl_prefilter::run`, write atomically, report.
 
 use clap::Parser;
-use ibl_core::envmap::load_environment;
 use ibl_prefilter::bake::{run, Params};
 use std::path::PathBuf;
 
@@ -26,10 +25,9 @@ fn main() {
     let cli = ibl_cli::parse::<Cli>("prefilter");
     ibl_cli::run("prefilter", cli.common.clone(), |ctx| {
         cli.params.validate()?;
-        let env = load_environment(&cli.input, cli.params.sanitize)?;
-        env.warnings().into_iter().for_each(|w| ctx.warn(w));
+        let env = ctx.load_environment(&cli.input, cli.params.sanitize)?;
         let baked = run(&cli.params, &env, &cli.output, ctx.progress())?;
-        ibl_core::io::write_many_atomic(&baked.files)?;
+        let outputs = ibl_cli::write_outputs(&baked.files)?;
         if cli.params.layout == ibl_core::envmap::Layout::Faces {
             let levels = baked.chain.mips.levels.len();
             for stale in ibl_core::envmap::stale_chain_files(&cli.output, levels) {
@@ -49,11 +47,6 @@ fn main() {
         if let Some(note) = &report.note {
             ctx.info(note);
         }
-        let outputs = baked
-            .files
-            .iter()
-            .map(|f| f.0.display().to_string())
-            .collect();
         let details = serde_json::json!({
             "report": report,
             "resample_seconds": baked.chain.resample_seconds,

@@ -2,7 +2,6 @@
 //! rendered spheres, with MSEs, win share, memory, PNG montages and a markdown report.
 
 use clap::Parser;
-use ibl_core::envmap::load_environment;
 use ibl_shexp::eval::{self, Params};
 use ibl_shexp::{fit, splitsum::SplitSum, Coeffs};
 use std::path::PathBuf;
@@ -69,9 +68,7 @@ fn main() {
         // Load every input first: a bad file fails before any work.
         let mut envs = Vec::new();
         for input in &cli.inputs {
-            let env = load_environment(input, cli.params.sanitize)?;
-            env.warnings().into_iter().for_each(|w| ctx.warn(w));
-            envs.push(env);
+            envs.push(ctx.load_environment(input, cli.params.sanitize)?);
         }
         let mut reports = Vec::new();
         let mut images = Vec::new();
@@ -106,13 +103,12 @@ fn main() {
             images.push(imgs);
         }
         let files = eval::encode_outputs(&cli.out, &cli.params, &reports, &images)?;
-        ibl_core::io::write_many_atomic(&files)?;
+        let outputs = ibl_cli::write_outputs(&files)?;
         if !cli.common.quiet && !cli.common.json {
             print!("{}", eval::markdown(&reports));
         }
         let total: usize = reports.iter().map(|r| r.cases.len()).sum();
         let wins: usize = reports.iter().map(|r| r.wins).sum();
-        let outputs = files.iter().map(|f| f.0.display().to_string()).collect();
         let details = serde_json::json!({
             "wins": wins,
             "cases": total,

@@ -1,7 +1,6 @@
 //! `shexp-fit`: parse, fit the SH-exponential probe with `ibl_shexp::fit`, write, report.
 
 use clap::Parser;
-use ibl_core::envmap::load_environment;
 use ibl_shexp::fit::{run, Params};
 use std::path::PathBuf;
 
@@ -28,10 +27,9 @@ fn main() {
     let cli = ibl_cli::parse::<Cli>("shexp-fit");
     ibl_cli::run("shexp-fit", cli.common.clone(), |ctx| {
         cli.params.validate()?;
-        let env = load_environment(&cli.input, cli.params.sanitize)?;
-        env.warnings().into_iter().for_each(|w| ctx.warn(w));
+        let env = ctx.load_environment(&cli.input, cli.params.sanitize)?;
         let baked = run(&cli.params, &env, &cli.output, ctx.progress())?;
-        ibl_core::io::write_many_atomic(&baked.files)?;
+        let outputs = ibl_cli::write_outputs(&baked.files)?;
         let c = &baked.fitted.coeffs;
         let t = &baked.fitted.timings;
         ctx.info(format!(
@@ -46,11 +44,6 @@ fn main() {
             t.estimate,
             t.solve
         ));
-        let outputs = baked
-            .files
-            .iter()
-            .map(|f| f.0.display().to_string())
-            .collect();
         let details = serde_json::json!({
             "face_size": baked.fitted.face_size,
             "rows": c.rows,
