@@ -414,3 +414,54 @@ pub fn long_run(fuzz_dir: &Path, targets: &[&str], run: &dyn Fn(&str, &[u8])) ->
     }
     report
 }
+
+/// Replays every kept regression input and corpus seed of `targets`; one line per panic.
+pub fn replay(fuzz_dir: &Path, targets: &[&str], run: &dyn Fn(&str, &[u8])) -> Vec<String> {
+    let mut failures = Vec::new();
+    for &t in targets {
+        let files: Vec<PathBuf> = ["regressions", "corpus"]
+            .iter()
+            .flat_map(|d| files_in(&fuzz_dir.join(d).join(t)))
+            .collect();
+        eprintln!("{t}: replaying {} regression and seed files", files.len());
+        for p in files {
+            let data = std::fs::read(&p).unwrap();
+            if let Some(msg) = panics(&|d| run(t, d), &data) {
+                failures.push(format!("{}: {msg}", p.display()));
+            }
+        }
+    }
+    failures
+}
+
+/// The deterministic quick run the test suites do: `iterations` mutated inputs per target from
+/// `seed`, crash inputs saved under `crash_dir/<target>/`; one line per crash.
+pub fn quick_run(
+    fuzz_dir: &Path,
+    targets: &[&str],
+    seed: u64,
+    iterations: u64,
+    crash_dir: &Path,
+    run: &dyn Fn(&str, &[u8]),
+) -> Vec<String> {
+    let mut report = Vec::new();
+    for &t in targets {
+        let corpus = seeds(fuzz_dir, t);
+        let r = fuzz(
+            t,
+            &corpus,
+            seed,
+            iterations,
+            Duration::from_secs(10),
+            &|d| run(t, d),
+        );
+        eprintln!(
+            "{t}: {} mutated inputs in {:.2} s, {} panics",
+            r.runs,
+            r.elapsed.as_secs_f64(),
+            r.crashes.len()
+        );
+        report.extend(save_crashes(&crash_dir.join(t), &r.crashes));
+    }
+    report
+}

@@ -23,9 +23,8 @@ use ibl_core::cube::{CubeMips, Cubemap};
 use ibl_core::image::Image;
 use ibl_core::io::{self, ktx2, ColorSpace, FloatDepth, WriteOptions};
 use images::{run_image_target, IMAGE_TARGETS};
-use mutate::{crc32, files_in, fuzz, panics, save_crashes, seeds};
+use mutate::{crc32, files_in};
 use std::path::{Path, PathBuf};
-use std::time::Duration;
 
 fn fuzz_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz")
@@ -37,23 +36,7 @@ fn workspace() -> PathBuf {
 
 #[test]
 fn regressions_and_seeds_do_not_panic() {
-    let root = fuzz_dir();
-    let mut failures = Vec::new();
-    for t in IMAGE_TARGETS {
-        let reg = files_in(&root.join("regressions").join(t));
-        let corpus = files_in(&root.join("corpus").join(t));
-        eprintln!(
-            "{t}: replaying {} regression files and {} seeds",
-            reg.len(),
-            corpus.len()
-        );
-        for p in reg.iter().chain(&corpus) {
-            let data = std::fs::read(p).unwrap();
-            if let Some(msg) = panics(&|d| run_image_target(t, d), &data) {
-                failures.push(format!("{}: {msg}", p.display()));
-            }
-        }
-    }
+    let failures = mutate::replay(&fuzz_dir(), &IMAGE_TARGETS, &run_image_target);
     assert!(failures.is_empty(), "panics:\n{}", failures.join("\n"));
 }
 
@@ -122,28 +105,15 @@ fn every_seed_is_a_valid_file() {
 #[test]
 fn mutation_fuzz_quick() {
     // 4000 inputs per reader: deterministic, well under a second.
-    let mut report = Vec::new();
-    for t in IMAGE_TARGETS {
-        let corpus = seeds(&fuzz_dir(), t);
-        let r = fuzz(
-            t,
-            &corpus,
-            0x1b1_f022,
-            4000,
-            Duration::from_secs(10),
-            &|d| run_image_target(t, d),
-        );
-        eprintln!(
-            "{t}: {} mutated inputs in {:.2} s, {} panics",
-            r.runs,
-            r.elapsed.as_secs_f64(),
-            r.crashes.len()
-        );
-        let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
-            .join("fuzz-crashes")
-            .join(t);
-        report.extend(save_crashes(&dir, &r.crashes));
-    }
+    let crash_dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("fuzz-crashes");
+    let report = mutate::quick_run(
+        &fuzz_dir(),
+        &IMAGE_TARGETS,
+        0x1b1_f022,
+        4000,
+        &crash_dir,
+        &run_image_target,
+    );
     assert!(
         report.is_empty(),
         "decoders panicked (copy the inputs into fuzz/regressions/<target>/):\n{}",
