@@ -68,6 +68,35 @@ pub fn sample_nearest(img: &Image, d: Vec3) -> Rgb {
     img.rgb(x, y)
 }
 
+/// The brute-force reference of the area filter, for tests and benchmarks: the mean of `src`
+/// over the footprint of cube texel (`face`, i, j) of an n² face, by a k×k grid of nearest
+/// reads weighted by the face Jacobian (1 + s² + t²)^(−3/2), in f64. It shares nothing with
+/// [`crate::area`]'s closed-form integration but the mapping, and converges to it as k grows.
+pub fn dense_footprint_mean(
+    src: &Image,
+    face: crate::cube::Face,
+    i: usize,
+    j: usize,
+    n: usize,
+    k: usize,
+) -> [f64; 3] {
+    let mut acc = [0.0f64; 3];
+    let mut ws = 0.0f64;
+    for b in 0..k {
+        for a in 0..k {
+            let s = (i as f64 + (a as f64 + 0.5) / k as f64) * 2.0 / n as f64 - 1.0;
+            let t = (j as f64 + (b as f64 + 0.5) / k as f64) * 2.0 / n as f64 - 1.0;
+            let w = (1.0 + s * s + t * t).powf(-1.5);
+            let c = sample_nearest(src, face.direction(s as f32, t as f32));
+            for q in 0..3 {
+                acc[q] += c[q] as f64 * w;
+            }
+            ws += w;
+        }
+    }
+    acc.map(|v| v / ws)
+}
+
 /// Bilinear lookup, wrapping in u and clamping in v.
 pub fn sample_bilinear(img: &Image, d: Vec3) -> Rgb {
     let (u, v) = direction_to_uv(d);
@@ -213,26 +242,6 @@ mod tests {
         assert!((d - Vec3::new(0.0, 0.0, -1.0)).length() < 1e-6);
     }
 
-    /// Reference mean over a texel footprint by a dense grid of nearest reads (f64).
-    fn dense_mean(src: &Image, face: Face, i: usize, j: usize, n: usize, k: usize) -> Rgb {
-        let step = 2.0 / n as f64;
-        let mut acc = [0.0f64; 3];
-        let mut ws = 0.0f64;
-        for b in 0..k {
-            for a in 0..k {
-                let s = i as f64 * step - 1.0 + (a as f64 + 0.5) * step / k as f64;
-                let t = j as f64 * step - 1.0 + (b as f64 + 0.5) * step / k as f64;
-                let w = (1.0 + s * s + t * t).powf(-1.5);
-                let c = sample_nearest(src, face.direction(s as f32, t as f32));
-                for c_ in 0..3 {
-                    acc[c_] += c[c_] as f64 * w;
-                }
-                ws += w;
-            }
-        }
-        acc.map(|a| (a / ws) as f32)
-    }
-
     #[test]
     fn area_filter_converges_to_dense_grid_on_worst_case_checker() {
         // A 1-pixel checker of 10:1 contrast at 4:1 down-sizing; the exact integral must
@@ -252,7 +261,7 @@ mod tests {
             for j in (0..n).step_by(5) {
                 for i in (0..n).step_by(5) {
                     let a = cube.texel(face, i, j)[0];
-                    let r = dense_mean(&src, face, i, j, n, 512)[0];
+                    let r = dense_footprint_mean(&src, face, i, j, n, 512)[0] as f32;
                     err += ((a - r) / r).abs() as f64;
                     count += 1;
                 }

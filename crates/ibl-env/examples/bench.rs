@@ -66,23 +66,6 @@ fn upscale2(img: &Image) -> Image {
     out
 }
 
-/// Dense reference of one face texel: 48×48 nearest reads weighted by the face Jacobian.
-fn dense(src: &Image, face: Face, i: usize, j: usize, n: usize) -> [f64; 3] {
-    let k = 48;
-    let (mut acc, mut ws) = ([0.0f64; 3], 0.0f64);
-    for b in 0..k {
-        for a in 0..k {
-            let s = (i as f64 + (a as f64 + 0.5) / k as f64) * 2.0 / n as f64 - 1.0;
-            let t = (j as f64 + (b as f64 + 0.5) / k as f64) * 2.0 / n as f64 - 1.0;
-            let w = (1.0 + s * s + t * t).powf(-1.5);
-            let c = equirect::sample_nearest(src, face.direction(s as f32, t as f32));
-            (0..3).for_each(|q| acc[q] += c[q] as f64 * w);
-            ws += w;
-        }
-    }
-    acc.map(|v| v / ws)
-}
-
 /// (mean over texels of |x − ref| / ref on luminance, Σ|x − ref| / Σ ref): the first is what
 /// a viewer sees, the second is dominated by the sun's texels.
 fn rel_errors(cube: &Cubemap, src: &Image) -> (f64, f64) {
@@ -92,7 +75,7 @@ fn rel_errors(cube: &Cubemap, src: &Image) -> (f64, f64) {
     for face in Face::ALL {
         for j in (0..n).step_by(stride) {
             for i in (0..n).step_by(stride) {
-                let r = dense(src, face, i, j, n);
+                let r = equirect::dense_footprint_mean(src, face, i, j, n, 48);
                 let g = cube.texel(face, i, j);
                 let lr = 0.2126 * r[0] + 0.7152 * r[1] + 0.0722 * r[2];
                 let lg = ibl_core::luminance(g) as f64;
