@@ -141,7 +141,7 @@ fn svg(rows: &[Row], path: &Path) {
         series,
         targets: vec![(0.002, "DFG goal 0.002".into())],
     };
-    std::fs::write(path, chart.to_svg()).expect("write svg");
+    ibl_core::io::write_atomic(path, chart.to_svg().as_bytes()).expect("write svg");
 }
 
 fn main() {
@@ -354,8 +354,7 @@ fn main() {
     let _ = writeln!(md, "## hv-lut\n\n256² half-vector LUT for (20000, 70): {med:.4} s in process. Its texels are the closed-form samples (tested against an independent transcription of the thesis formulas to 6e-8); the cost of reading it back is in the AS rows above (float LUT ≈ direct; an 8-bit LUT, as the thesis's PNG, quantises h in steps of 2/255 — far coarser than the (20000, 70) lobe).\n");
 
     let dir = root.join("bench");
-    std::fs::create_dir_all(&dir).unwrap();
-    std::fs::write(dir.join("brdf-lut.md"), &md).unwrap();
+    ibl_core::io::write_atomic(&dir.join("brdf-lut.md"), md.as_bytes()).unwrap();
     svg(&rows, &dir.join("brdf-lut.svg"));
     println!("{md}");
     eprintln!("wrote {}", dir.join("brdf-lut.md").display());

@@ -236,3 +236,88 @@ fn bad_parameters_are_one_line_errors_with_no_output() {
         4,
     );
 }
+
+#[test]
+fn a_blocked_sidecar_leaves_the_previous_image_untouched() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let lut = d.join("lut.exr");
+    let side = d.join("lut.json");
+    let lut_s = lut.to_str().unwrap();
+    ok(&["--nu", "10", "--nv", "10", "--size", "8", "-o", lut_s, "-q"]);
+    assert!(side.is_file(), "the first run writes the sidecar");
+    let first = std::fs::read(&lut).unwrap();
+    // A directory where the sidecar goes: the second run must fail before renaming anything.
+    std::fs::remove_file(&side).unwrap();
+    std::fs::create_dir(&side).unwrap();
+    let out = hv_lut(&["--nu", "20", "--nv", "10", "--size", "8", "-o", lut_s, "-q"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    eprintln!(
+        "blocked sidecar -> {:?}: {}",
+        out.status.code(),
+        err.trim_end()
+    );
+    assert_eq!(out.status.code(), Some(4), "{err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    assert!(err.starts_with("hv-lut: error: "), "{err}");
+    assert_eq!(std::fs::read(&lut).unwrap(), first, "lut.exr was replaced");
+    assert!(side.is_dir());
+    // The check has teeth: the second run's image differs from the first.
+    let other = dir.path().join("other");
+    std::fs::create_dir(&other).unwrap();
+    let second = other.join("lut.exr");
+    ok(&[
+        "--nu",
+        "20",
+        "--nv",
+        "10",
+        "--size",
+        "8",
+        "-o",
+        second.to_str().unwrap(),
+        "-q",
+    ]);
+    assert_ne!(std::fs::read(&second).unwrap(), first);
+    std::fs::remove_dir_all(&other).unwrap();
+    let mut names: Vec<_> = std::fs::read_dir(d)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    assert_eq!(names, ["lut.exr", "lut.json"], "no temporaries left");
+}
+
+#[test]
+fn outputs_that_are_not_images_name_the_image_formats_only() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("file"), b"x").unwrap();
+    for (name, shown) in [
+        ("a", "no extension"),
+        ("a.json", "'.json'"),
+        ("a.txt", "'.txt'"),
+    ] {
+        let out = hv_lut(&[
+            "--nu",
+            "10",
+            "--nv",
+            "10",
+            "-o",
+            d.join(name).to_str().unwrap(),
+        ]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        eprintln!("-o {name} -> {}", err.trim_end());
+        assert_eq!(out.status.code(), Some(3), "{err}");
+        assert!(
+            err.contains(&format!("unsupported output: {shown} ("))
+                && err.contains("write .exr or .png)")
+                && !err.contains(".ron"),
+            "{err}"
+        );
+        assert_eq!(
+            std::fs::read_dir(d).unwrap().count(),
+            1,
+            "-o {name} left output"
+        );
+    }
+}

@@ -276,24 +276,37 @@ mod tests {
     #[test]
     fn isotropic_free_functions_agree_with_the_struct() {
         let mut rng = ibl_core::sampling::Pcg32::new(3, 1);
-        let mut worst = 0.0f32;
+        // Worst |Δh|, relative ΔD × α² / ε_f32, ΔΛ/(1+Λ), |Δu| of the inverse.
+        let mut worst = [0.0f32; 4];
         for _ in 0..2000 {
             let alpha = 0.02 + 0.98 * rng.next_f32();
             let g = Ggx::isotropic(alpha);
             let (u1, u2) = (rng.next_f32(), rng.next_f32());
             let h = sample_ggx_d(u1, u2, alpha);
             let h2 = g.sample_d(u1, u2);
-            worst = worst.max((h - h2).length());
+            worst[0] = worst[0].max((h - h2).length());
             let rel = |a: f32, b: f32| (a - b).abs() / b.abs().max(1e-6);
-            worst = worst.max(rel(d_ggx(h.z, alpha), g.d(h)) * 1e-2);
+            // d_ggx's base (1 − (n·h)²) + α²(n·h)² ≥ α² carries the f32 rounding of (n·h)²
+            // (~ε), so D (∝ base⁻²) differs from the f64 struct by up to ~2ε/α² relative.
+            let rel_d = rel(d_ggx(h.z, alpha), g.d(h));
+            worst[1] = worst[1].max(rel_d * alpha * alpha / f32::EPSILON);
             let v = random_direction(&mut rng);
-            worst =
-                worst.max((lambda(v.z, alpha) - g.lambda(v)).abs() / (1.0 + g.lambda(v)) * 1e-2);
+            worst[2] = worst[2].max((lambda(v.z, alpha) - g.lambda(v)).abs() / (1.0 + g.lambda(v)));
             let (a, b) = invert_ggx_d(h, alpha);
-            worst = worst.max((a - u1).abs().max((b - u2).abs().min(1.0 - (b - u2).abs())) * 1e-2);
+            worst[3] = worst[3].max((a - u1).abs().max((b - u2).abs().min(1.0 - (b - u2).abs())));
         }
-        eprintln!("free functions vs Ggx struct: worst scaled difference {worst:.2e}");
-        assert!(worst < 1e-4, "{worst}");
+        eprintln!(
+            "free functions vs Ggx struct: worst |Δh| {:.2e}, rel ΔD {:.2} ε/α², \
+             ΔΛ/(1+Λ) {:.2e}, |Δu| {:.2e}",
+            worst[0], worst[1], worst[2], worst[3]
+        );
+        // Both sides are the same formulas in f32 / f64, so the differences are f32 rounding:
+        // measured |Δh| 0, ΔD 2.0 ε/α² (1.8e-4 relative at α = 0.02), ΔΛ 1.4e-7, |Δu| 6e-8.
+        assert!(
+            worst[0] < 1e-6 && worst[2] < 1e-6 && worst[3] < 1e-6,
+            "{worst:?}"
+        );
+        assert!(worst[1] < 3.0, "D differs by {} ε/α²", worst[1]);
     }
 
     #[test]

@@ -29,6 +29,16 @@ fn q(x: f64) -> f64 {
     }
 }
 
+/// ln q(x) without overflow: for x > 0, x + ln(1 − e⁻ˣ) − ln x (q itself overflows past
+/// x ≈ 710, which (1−γ) ln α² reaches for large tails, e.g. γ = 100 at α = 0.01 gives 912).
+fn ln_q(x: f64) -> f64 {
+    if x > 0.0 {
+        x + (-(-x).exp()).ln_1p() - x.ln()
+    } else {
+        q(x).ln()
+    }
+}
+
 impl Gtr {
     pub fn new(alpha: f32, gamma: f32) -> Self {
         Gtr { alpha, gamma }
@@ -123,6 +133,8 @@ impl Gtr {
 
 impl Microfacet for Gtr {
     /// Paper 001 eq. 32: D = c / (1 + (α²−1) cos²θ)^γ, the base written sin²θ + α² cos²θ.
+    /// Evaluated as exp(ln c − γ ln base), since for large γ c underflows while base^−γ
+    /// overflows (γ = 100, α = 0.01: c ≈ e⁻⁹⁰⁸, base^−γ up to e⁹²¹).
     fn d(&self, m: Vec3) -> f32 {
         if m.z <= 0.0 {
             return 0.0;
@@ -131,7 +143,9 @@ impl Microfacet for Gtr {
         let c2 = m.z as f64 * m.z as f64;
         let s2 = m.x as f64 * m.x as f64 + m.y as f64 * m.y as f64;
         let base = s2 + a2 * c2;
-        (self.normalisation() * base.powf(-(self.gamma as f64))) as f32
+        let l = self.ln_a2();
+        let ln_c = ln_q(l) - PI.ln() - ln_q((1.0 - self.gamma as f64) * l);
+        (ln_c - self.gamma as f64 * base.ln()).exp() as f32
     }
 
     /// Λ = 1/S_γ(μ) − 1 with μ = cot θ_v (eq. 34).
@@ -156,6 +170,9 @@ impl Microfacet for Gtr {
     /// Inverts the CDF of D(m)(n·m) in x = cos²θ: with s = 1 + (α²−1)x and k = 1−γ,
     /// u1 = (s^k − α^{2k}) / (1 − α^{2k}) (u1 = 0 at the normal), so
     /// ln s = ln(1 + (1−u1)(α^{2k} − 1)) / k (→ (1−u1) ln α² at k = 0); φ = 2π u2.
+    /// When kL = k ln α² > 0 (γ > 1 with α < 1) α^{2k} = e^{kL} overflows for large γ, so
+    /// there ln s = (kL + ln(1 + u1 (e^{−kL} − 1))) / k, the same number divided through by
+    /// e^{kL}; ln s is kept in [min(L, 0), max(L, 0)] (s between α² and 1).
     fn sample_d(&self, u1: f32, u2: f32) -> Vec3 {
         let u = (u1 as f64).clamp(0.0, 1.0);
         let l = self.ln_a2();
@@ -163,11 +180,15 @@ impl Microfacet for Gtr {
         let (cos2, sin2) = if l == 0.0 {
             (1.0 - u, u)
         } else {
+            let kl = k * l;
             let ln_s = if k == 0.0 {
                 (1.0 - u) * l
+            } else if kl > 0.0 {
+                (kl + (u * (-kl).exp_m1()).ln_1p()) / k
             } else {
-                ((1.0 - u) * (k * l).exp_m1()).ln_1p() / k
+                ((1.0 - u) * kl.exp_m1()).ln_1p() / k
             };
+            let ln_s = ln_s.clamp(l.min(0.0), l.max(0.0));
             // cos²θ = (1−s)/(1−α²), sin²θ = (s−α²)/(1−α²), each from expm1 without cancellation.
             let den = l.exp_m1();
             (ln_s.exp_m1() / den, l.exp() * (ln_s - l).exp_m1() / (-den))
@@ -189,10 +210,14 @@ impl Microfacet for Gtr {
             s2 / (s2 + c2)
         } else {
             let ln_s = (s2 + a2 * c2).ln() - (s2 + c2).ln();
+            let kl = k * l;
             if k == 0.0 {
                 1.0 - ln_s / l
+            } else if kl > 0.0 {
+                // The form below divided through by e^{kL} (which overflows for large γ).
+                (k * (ln_s - l)).exp_m1() / (-kl).exp_m1()
             } else {
-                (k * l).exp() * (k * (ln_s - l)).exp_m1() / -(k * l).exp_m1()
+                kl.exp() * (k * (ln_s - l)).exp_m1() / -kl.exp_m1()
             }
         };
         (
@@ -289,6 +314,38 @@ mod tests {
             );
             round_trip(&g, 10);
         }
+    }
+
+    #[test]
+    fn large_tails_sample_finite_unit_normals_with_a_normalised_pdf() {
+        // γ = 100, α = 0.01: (1−γ) ln α² = 912, past where e^x overflows (709.8). The lobe is
+        // about α/√(γ−1) wide in slope, which is the scale the quadratures use.
+        let (alpha, gamma) = (0.01f32, 100.0f32);
+        let g = Gtr::new(alpha, gamma);
+        let scale = [alpha as f64 / (gamma as f64 - 1.0).sqrt(); 2];
+        let mut rng = Pcg32::new(33, 7);
+        let ends = [0.0f32, 1e-7, 0.5, 1.0 - 1e-7, 1.0];
+        let pairs = ends
+            .iter()
+            .flat_map(|&a| ends.iter().map(move |&b| (a, b)))
+            .chain((0..10_000).map(|_| (rng.next_f32(), rng.next_f32())));
+        let mut worst_len = 0.0f32;
+        for (u1, u2) in pairs {
+            let m = g.sample_d(u1, u2);
+            assert!(m.is_finite() && m.z >= 0.0, "{u1} {u2} {m}");
+            worst_len = worst_len.max((m.length() - 1.0).abs());
+            assert!(g.pdf_d(m).is_finite(), "{u1} {u2} {m}");
+        }
+        eprintln!("GTR α={alpha} γ={gamma}: worst ||m| − 1| {worst_len:.2e}");
+        assert!(worst_len < 1e-6);
+        // u1 = 0 is the normal, u1 = 1 the horizon.
+        assert_eq!(g.sample_d(0.0, 0.3), Vec3::Z);
+        assert!(g.sample_d(1.0, 0.0).z.abs() < 1e-6);
+        let norm = normalisation(&g, scale);
+        eprintln!("GTR α={alpha} γ={gamma}: ∫D(n·m) = {norm:.6}");
+        assert!((norm - 1.0).abs() < 1e-3, "{norm}");
+        chi2_test(|u1, u2| g.sample_d(u1, u2), |m| g.pdf_d(m), scale, 11);
+        round_trip(&g, 12);
     }
 
     #[test]

@@ -78,20 +78,10 @@ pub fn normalisation(d: &dyn Microfacet, scale: [f64; 2]) -> f64 {
 
 /// Paper 001 eq. 2: (∫ D(m) G1(v,m) max(0, v·m) dm, v·n), which must agree.
 /// Λ(v) is evaluated once (G1 = χ⁺/(1+Λ(v)) depends on m only through χ⁺; some Λ are
-/// quadratures themselves); `Microfacet::g1` is checked against it on a few normals.
+/// quadratures themselves). No distribution overrides `Microfacet::g1`, so the trait's
+/// 1/(1+Λ) is what is integrated here; a type that overrides it must test it on its own.
 pub fn weak_furnace_with(d: &dyn Microfacet, v: Vec3, a: [f64; 4]) -> (f64, f64) {
     let g1v = 1.0 / (1.0 + d.lambda(v) as f64);
-    for m in [
-        Vec3::Z,
-        (v + Vec3::Z).normalize(),
-        Vec3::new(-v.x, -v.y, 0.3 * v.z).normalize(),
-    ] {
-        let want = if v.dot(m) > 0.0 { g1v } else { 0.0 };
-        assert!(
-            (d.g1(v, m) as f64 - want).abs() < 1e-6,
-            "g1 disagrees with 1/(1+Λ)"
-        );
-    }
     let got = integrate_plane(a, 1024, |m, c| {
         let vm = v.dot(m) as f64;
         if vm <= 0.0 {

@@ -20,7 +20,7 @@
 //! `--hv-size`² built in memory and read bilinearly); the tests measure their agreement.
 
 use crate::error::{Error, Result};
-use crate::hv::{self, check_exponent, thesis_file_name};
+use crate::hv;
 use crate::table::{self, map_rows, texel_centre, Baked, Describe, Format};
 use glam::DVec3;
 use ibl_brdf::AshikhminShirley;
@@ -109,12 +109,11 @@ impl Default for Params {
 
 impl Params {
     pub fn validate(&self) -> Result<AshikhminShirley> {
-        let nu = check_exponent("nu", self.nu)?;
-        let nv = check_exponent("nv", self.nv)?;
+        let a = hv::lobe(self.nu, self.nv)?;
         table::check_size("size", self.size)?;
         table::check_size("hv-size", self.hv_size)?;
         table::check_samples(self.samples)?;
-        Ok(AshikhminShirley::new(nu, nv))
+        Ok(a)
     }
 }
 
@@ -227,11 +226,7 @@ pub fn describe(params: &Params) -> Describe<'static> {
 
 /// The output path: `out`, or `out/brdfIntegration[NU,NV].png` with thesis names.
 pub fn output_path(params: &Params, a: &AshikhminShirley, out: &Path) -> Result<PathBuf> {
-    let p = if params.thesis_names {
-        out.join(thesis_file_name("brdfIntegration", a.nu, a.nv))
-    } else {
-        out.to_path_buf()
-    };
+    let p = hv::thesis_or_plain_path(out, params.thesis_names, "brdfIntegration", a);
     Format::of(&p)?;
     Ok(p)
 }

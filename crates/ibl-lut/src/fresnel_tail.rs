@@ -13,9 +13,9 @@
 //! E1 ≈ E0 ∫ f_DV (1 − v·h)⁵ (n·l) dl omits the division by E_dir (it reads E0 as if it were L);
 //! the G channel is that normalised ratio, for callers who want the self-consistent form.
 
-use crate::dfg::{alpha_of, Estimator, RowSamples};
+use crate::dfg::{map_dfg_rows, Estimator};
 use crate::error::{Error, Result};
-use crate::table::{self, map_rows, texel_centre, Baked, Describe};
+use crate::table::{self, Baked, Describe};
 use ibl_core::progress::Progress;
 use ibl_core::Image;
 use std::path::Path;
@@ -85,23 +85,10 @@ pub fn tail_table_with(
     samples: u32,
     progress: &dyn Progress,
 ) -> Image {
-    let shared = (estimator == Estimator::Vndf).then(|| RowSamples::new(estimator, 1.0, samples));
-    map_rows(size, size, 2, progress, |j, row| {
-        let alpha = alpha_of(texel_centre(j, size) as f32);
-        let own;
-        let table = match &shared {
-            Some(t) => t,
-            None => {
-                own = RowSamples::new(estimator, alpha, samples);
-                &own
-            }
-        };
-        for (i, t) in row.chunks_exact_mut(2).enumerate() {
-            let [a, b] = table.integrate(texel_centre(i, size) as f32, alpha);
-            let e = a + b;
-            t[0] = b;
-            t[1] = if e > 0.0 { b / e } else { 0.0 };
-        }
+    map_dfg_rows(estimator, size, samples, 2, progress, |[a, b], t| {
+        let e = a + b;
+        t[0] = b;
+        t[1] = if e > 0.0 { b / e } else { 0.0 };
     })
 }
 
@@ -141,8 +128,9 @@ pub fn run(params: &Params, out: &Path, progress: &dyn Progress) -> Result<Baked
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::dfg::dfg_value;
+    use crate::dfg::{alpha_of, dfg_value};
     use crate::reference::DfgReference;
+    use crate::table::texel_centre;
     use ibl_core::progress::NoProgress;
 
     #[test]

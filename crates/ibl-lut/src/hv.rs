@@ -33,6 +33,28 @@ pub fn check_exponent(name: &str, value: Option<f64>) -> Result<f64> {
     Ok(v)
 }
 
+/// The lobe of `--nu` and `--nv`, both checked against [`EXPONENT_RANGE`] (the first
+/// check of every Ashikhmin-Shirley bake).
+pub fn lobe(nu: Option<f64>, nv: Option<f64>) -> Result<AshikhminShirley> {
+    let nu = check_exponent("nu", nu)?;
+    let nv = check_exponent("nv", nv)?;
+    Ok(AshikhminShirley::new(nu, nv))
+}
+
+/// `out` itself, or with thesis names `out/STEM[NU,NV].png` (see [`thesis_file_name`]).
+pub fn thesis_or_plain_path(
+    out: &Path,
+    thesis_names: bool,
+    stem: &str,
+    a: &AshikhminShirley,
+) -> PathBuf {
+    if thesis_names {
+        out.join(thesis_file_name(stem, a.nu, a.nv))
+    } else {
+        out.to_path_buf()
+    }
+}
+
 /// Parameters of `hv-lut`: CLI flags and RON keys alike.
 #[derive(Clone, Debug, PartialEq, clap::Args, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -71,8 +93,7 @@ impl Default for Params {
 impl Params {
     /// Checks the parameters and returns the distribution.
     pub fn validate(&self) -> Result<AshikhminShirley> {
-        let nu = check_exponent("nu", self.nu)?;
-        let nv = check_exponent("nv", self.nv)?;
+        let a = lobe(self.nu, self.nv)?;
         table::check_size("size", self.size)?;
         if self.bits != 8 && self.bits != 16 {
             return Err(Error::param(format!(
@@ -80,7 +101,7 @@ impl Params {
                 self.bits
             )));
         }
-        Ok(AshikhminShirley::new(nu, nv))
+        Ok(a)
     }
 }
 
@@ -146,26 +167,17 @@ pub struct Sidecar {
     pub layout: String,
 }
 
+/// Why `-o` must name an image.
+const IMAGE_ONLY: &str = "the half-vector LUT is an image";
+
 /// Output paths: (image, sidecar).
 pub fn output_paths(
     params: &Params,
     a: &AshikhminShirley,
     out: &Path,
 ) -> Result<(PathBuf, PathBuf)> {
-    let image = if params.thesis_names {
-        out.join(thesis_file_name("halfVectorSampling", a.nu, a.nv))
-    } else {
-        out.to_path_buf()
-    };
-    match Format::of(&image)? {
-        Format::Exr | Format::Png => {}
-        _ => {
-            return Err(Error::UnsupportedOutput {
-                path: image,
-                what: "the half-vector LUT is an image: write .exr or .png".into(),
-            });
-        }
-    }
+    let image = thesis_or_plain_path(out, params.thesis_names, "halfVectorSampling", a);
+    Format::image_of(&image, IMAGE_ONLY)?;
     Ok((image.clone(), image.with_extension("json")))
 }
 
@@ -177,7 +189,7 @@ pub fn run(params: &Params, out: &Path, progress: &dyn Progress) -> Result<Baked
     if image.data.iter().any(|v| !v.is_finite()) {
         return Err(Error::param("internal error: non-finite half-vector texel"));
     }
-    let is_png = Format::of(&image_path)? == Format::Png;
+    let is_png = Format::image_of(&image_path, IMAGE_ONLY)? == Format::Png;
     let opts = WriteOptions {
         float: if params.half {
             FloatDepth::F16
@@ -290,6 +302,29 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn shared_lobe_check_and_output_path() {
+        assert_eq!(
+            lobe(Some(20000.0), Some(70.0)).unwrap(),
+            AshikhminShirley::new(20000.0, 70.0)
+        );
+        for (nu, nv, flag) in [
+            (None, Some(1.0), "--nu"),
+            (Some(1.0), Some(0.5), "--nv"),
+            (Some(2e6), Some(1.0), "--nu"),
+        ] {
+            let e = lobe(nu, nv).unwrap_err().to_string();
+            assert!(e.contains(flag), "{e}");
+        }
+        let a = AshikhminShirley::new(1.5, 70.0);
+        let out = Path::new("dir");
+        assert_eq!(thesis_or_plain_path(out, false, "x", &a), out);
+        assert_eq!(
+            thesis_or_plain_path(out, true, "x", &a),
+            out.join("x[1.5,70].png")
+        );
     }
 
     #[test]

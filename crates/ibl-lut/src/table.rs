@@ -56,17 +56,38 @@ pub enum Format {
 }
 
 impl Format {
+    /// The format of a table output: `.exr`, `.png`, `.json` or `.ron`.
     pub fn of(path: &Path) -> Result<Format> {
         match io::extension(path).as_str() {
             "exr" => Ok(Format::Exr),
             "png" => Ok(Format::Png),
             "json" => Ok(Format::Json),
             "ron" => Ok(Format::Ron),
-            other => Err(Error::UnsupportedOutput {
-                path: path.to_path_buf(),
-                what: format!("'.{other}' (write .exr, .png, .json or .ron)"),
-            }),
+            _ => Err(unsupported(path, "write .exr, .png, .json or .ron")),
         }
+    }
+
+    /// The format of an output that must be an image (`.exr` or `.png`); `what` says why,
+    /// e.g. "the half-vector LUT is an image".
+    pub fn image_of(path: &Path, what: &str) -> Result<Format> {
+        match Format::of(path) {
+            Ok(f @ (Format::Exr | Format::Png)) => Ok(f),
+            _ => Err(unsupported(path, &format!("{what}: write .exr or .png"))),
+        }
+    }
+}
+
+/// "'.ext' (hint)", or "no extension (hint)".
+fn unsupported(path: &Path, hint: &str) -> Error {
+    let ext = io::extension(path);
+    let what = if ext.is_empty() {
+        format!("no extension ({hint})")
+    } else {
+        format!("'.{ext}' ({hint})")
+    };
+    Error::UnsupportedOutput {
+        path: path.to_path_buf(),
+        what,
     }
 }
 
@@ -214,7 +235,26 @@ mod tests {
     fn formats_by_extension() {
         assert_eq!(Format::of(Path::new("a.EXR")).unwrap(), Format::Exr);
         assert_eq!(Format::of(Path::new("a.ron")).unwrap(), Format::Ron);
-        assert!(Format::of(Path::new("a.txt")).is_err());
-        assert!(Format::of(Path::new("a")).is_err());
+        let msg = |r: Result<Format>| r.unwrap_err().to_string();
+        assert_eq!(
+            msg(Format::of(Path::new("a.txt"))),
+            "a.txt: unsupported output: '.txt' (write .exr, .png, .json or .ron)"
+        );
+        assert_eq!(
+            msg(Format::of(Path::new("a"))),
+            "a: unsupported output: no extension (write .exr, .png, .json or .ron)"
+        );
+        assert_eq!(
+            Format::image_of(Path::new("a.PNG"), "x").unwrap(),
+            Format::Png
+        );
+        assert_eq!(
+            msg(Format::image_of(Path::new("a.json"), "the LUT is an image")),
+            "a.json: unsupported output: '.json' (the LUT is an image: write .exr or .png)"
+        );
+        assert_eq!(
+            msg(Format::image_of(Path::new("a"), "the LUT is an image")),
+            "a: unsupported output: no extension (the LUT is an image: write .exr or .png)"
+        );
     }
 }
