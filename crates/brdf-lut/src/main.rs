@@ -59,12 +59,7 @@ fn main() {
     };
     ibl_cli::run("brdf-lut", common.clone(), |ctx| {
         let baked = run(ctx)?;
-        ibl_core::io::write_many_atomic(&baked.files)?;
-        let outputs = baked
-            .files
-            .iter()
-            .map(|f| f.0.display().to_string())
-            .collect();
+        let outputs = ibl_cli::write_outputs(&baked.files)?;
         Ok::<_, ibl_lut::Error>((outputs, baked.details))
     })
 }

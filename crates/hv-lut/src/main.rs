@@ -23,12 +23,7 @@ fn main() {
     let cli = ibl_cli::parse::<Cli>("hv-lut");
     ibl_cli::run("hv-lut", cli.common.clone(), |ctx| {
         let baked = run(&cli.params, &cli.output, ctx.progress())?;
-        ibl_core::io::write_many_atomic(&baked.files)?;
-        let outputs = baked
-            .files
-            .iter()
-            .map(|f| f.0.display().to_string())
-            .collect();
+        let outputs = ibl_cli::write_outputs(&baked.files)?;
         Ok::<_, ibl_lut::Error>((outputs, baked.details))
     })
 }
