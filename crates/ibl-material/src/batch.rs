@@ -4,7 +4,8 @@
 //!
 //! Up-to-date rule: next to each output `NAME` a sidecar `.NAME.opts` (JSON) records the
 //! tool version, a blake3 hash of the options that change the output's bytes (and the options
-//! themselves, for people), the input's length and modification time and the output's length.
+//! themselves, for people), the input's length and modification time (taken before the input
+//! is read, so a file replaced during a conversion converts again) and the output's length.
 //! An output is skipped only when the sidecar matches all of them and the output is not
 //! older than its input; anything else (no sidecar, other options, a replaced input, an
 //! output edited or truncated by someone else) converts again. The sidecar is written after
@@ -76,8 +77,10 @@ pub enum Action {
     Convert,
     /// Up to date.
     Skip,
-    /// Cannot be converted (e.g. two files match the input name).
+    /// Cannot be converted (e.g. two files match the input name): invalid input.
     Fail(String),
+    /// A folder that could not be listed: an I/O failure.
+    Unlistable(String),
 }
 
 /// One material folder's conversion.
@@ -192,7 +195,8 @@ fn list(dir: &Path) -> std::io::Result<(Vec<PathBuf>, Vec<PathBuf>)> {
 /// whether to convert, skip or fail it. Jobs come in path order.
 pub fn plan(params: &Params, root: &Path) -> Result<Vec<Job>> {
     validate(params)?;
-    if !root.is_dir() {
+    let meta = std::fs::metadata(root).map_err(|e| Error::io(root, e))?;
+    if !meta.is_dir() {
         return Err(Error::invalid(
             root,
             "not a folder (--batch takes the folder of material folders)",
@@ -210,7 +214,7 @@ pub fn plan(params: &Params, root: &Path) -> Result<Vec<Job>> {
                 jobs.push(Job {
                     input: dir.clone(),
                     output: dir.join(&params.output_name),
-                    action: Action::Fail(format!("cannot list folder: {e}")),
+                    action: Action::Unlistable(format!("cannot list folder: {e}")),
                     reason: String::new(),
                 });
                 continue;
@@ -331,13 +335,28 @@ fn convert_one(
     input: &Path,
     output: &Path,
 ) -> Result<Converted> {
+    convert_one_with(params, key, input, output, &|| {})
+}
+
+/// [`convert_one`] with a hook run right after the input is read (tests replace the input
+/// there, as another program might while the conversion runs).
+fn convert_one_with(
+    params: &Params,
+    key: &serde_json::Value,
+    input: &Path,
+    output: &Path,
+    after_read: &dyn Fn(),
+) -> Result<Converted> {
+    // The input's metadata before reading it, so the sidecar describes at most the bytes
+    // that were converted: a file replaced while (or after) it is read then no longer
+    // matches the sidecar and converts again next time.
+    let in_meta = std::fs::metadata(input).map_err(|e| Error::io(input, e))?;
     let normal = normal::load(input)?;
+    after_read();
     let baked = quat_map::run(params, &normal, output, &NoProgress)?;
     drop(normal);
     let output_len = baked.files[0].1.len() as u64;
     io::write_many_atomic(&baked.files)?;
-    // The input's metadata after reading it: a file replaced meanwhile is caught next time.
-    let in_meta = std::fs::metadata(input).map_err(|e| Error::io(input, e))?;
     let side = Sidecar {
         tool: "quat-map".into(),
         version: ibl_core::TOOL_VERSION.into(),
@@ -374,8 +393,26 @@ fn convert_one(
 /// Plans and runs a batch over `root`: converts in parallel, reports converted / skipped /
 /// failed. A failing file never stops the others; the caller turns
 /// [`BatchReport::error`] into a non-zero exit.
+///
+/// A batch in which no folder holds a file matching the input name is an error (invalid
+/// input): a wrong `--input-name` must not pass for a batch with nothing to do.
 pub fn run(params: &Params, root: &Path, progress: &dyn Progress) -> Result<BatchReport> {
     let jobs = plan(params, root)?;
+    if jobs.is_empty() {
+        return Err(Error::invalid(
+            root,
+            format!(
+                "no file under it matches --input-name '{}' (nothing to convert)",
+                params.input_name
+            ),
+        )
+        .into());
+    }
+    Ok(run_jobs(params, root, jobs, progress))
+}
+
+/// Runs planned jobs (see [`run`]).
+fn run_jobs(params: &Params, root: &Path, jobs: Vec<Job>, progress: &dyn Progress) -> BatchReport {
     let key = params.output_key();
     let todo = jobs.iter().filter(|j| j.action == Action::Convert).count();
     progress.start("materials", todo as u64);
@@ -393,6 +430,11 @@ pub fn run(params: &Params, root: &Path, progress: &dyn Progress) -> Result<Batc
                 input: job.input.clone(),
                 error: format!("{}: {why}", job.input.display()),
                 class: ErrorClass::InvalidInput,
+            }),
+            Action::Unlistable(why) => Outcome::Failed(Failed {
+                input: job.input.clone(),
+                error: format!("{}: {why}", job.input.display()),
+                class: ErrorClass::Io,
             }),
             Action::Convert => {
                 let r = convert_one(params, &key, &job.input, &job.output);
@@ -429,7 +471,7 @@ pub fn run(params: &Params, root: &Path, progress: &dyn Progress) -> Result<Batc
             Outcome::Failed(f) => report.failed.push(f),
         }
     }
-    Ok(report)
+    report
 }
 
 /// "outer: cause" on one line (as the binaries print errors).
@@ -592,12 +634,88 @@ mod tests {
     }
 
     #[test]
-    fn a_missing_root_is_an_error() {
-        assert!(run(
+    fn an_input_replaced_while_converting_converts_again() {
+        let dir = tempfile::tempdir().unwrap();
+        let input = dir.path().join("normal.png");
+        let output = dir.path().join("quaternion.png");
+        write_normal(&input, 8, 1.0);
+        let p = Params::default();
+        let key = p.output_key();
+        // Another program replaces the input after it was read, before the sidecar is written.
+        convert_one_with(&p, &key, &input, &output, &|| write_normal(&input, 16, 2.0)).unwrap();
+        let jobs = plan(&p, dir.path()).unwrap();
+        assert_eq!(jobs.len(), 1);
+        assert_eq!(
+            (&jobs[0].action, jobs[0].reason.as_str()),
+            (&Action::Convert, "input changed"),
+            "{jobs:?}"
+        );
+        // Left alone, it is up to date after one more conversion.
+        convert_one(&p, &key, &input, &output).unwrap();
+        assert_eq!(plan(&p, dir.path()).unwrap()[0].action, Action::Skip);
+    }
+
+    #[test]
+    fn root_errors_and_empty_batches_are_classed() {
+        let e = run(
             &Params::default(),
             Path::new("/nonexistent/materials"),
-            &NoProgress
+            &NoProgress,
         )
-        .is_err());
+        .err()
+        .unwrap();
+        assert_eq!(e.class(), ErrorClass::Io, "{e}");
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("f.png");
+        write_normal(&file, 4, 1.0);
+        let e = run(&Params::default(), &file, &NoProgress).err().unwrap();
+        assert_eq!(e.class(), ErrorClass::InvalidInput, "{e}");
+        assert!(e.to_string().contains("not a folder"), "{e}");
+        // Nothing matches the input name anywhere: an error naming the pattern.
+        fs::create_dir_all(dir.path().join("m")).unwrap();
+        let e = run(&Params::default(), dir.path(), &NoProgress)
+            .err()
+            .unwrap();
+        assert_eq!(e.class(), ErrorClass::InvalidInput, "{e}");
+        assert!(e.to_string().contains("--input-name 'normal.*'"), "{e}");
+    }
+
+    #[test]
+    fn an_unlistable_folder_is_an_io_failure() {
+        let dir = tempfile::tempdir().unwrap();
+        let jobs = vec![Job {
+            input: dir.path().join("locked"),
+            output: dir.path().join("locked/quaternion.png"),
+            action: Action::Unlistable("cannot list folder: permission denied".into()),
+            reason: String::new(),
+        }];
+        let r = run_jobs(&Params::default(), dir.path(), jobs, &NoProgress);
+        assert_eq!(r.failed.len(), 1);
+        assert_eq!(r.failed[0].class, ErrorClass::Io);
+        assert!(r.failed[0].error.contains("locked: cannot list folder"));
+        assert_eq!(r.error().unwrap().class(), ErrorClass::Io);
+        // Through the planner, where permissions apply (not as root).
+        #[cfg(unix)]
+        {
+            let locked = dir.path().join("m/locked");
+            fs::create_dir_all(&locked).unwrap();
+            write_normal(&dir.path().join("m/normal.png"), 4, 1.0);
+            fs::set_permissions(&locked, std::os::unix::fs::PermissionsExt::from_mode(0o000))
+                .unwrap();
+            let listable = fs::read_dir(&locked).is_ok();
+            let r = run(&Params::default(), dir.path(), &NoProgress);
+            fs::set_permissions(&locked, std::os::unix::fs::PermissionsExt::from_mode(0o755))
+                .unwrap();
+            let r = r.unwrap();
+            if listable {
+                eprintln!(
+                    "running as root: the locked folder is listable, planner path not tested"
+                );
+                assert_eq!(r.failed.len(), 0);
+            } else {
+                assert_eq!((r.converted.len(), r.failed.len()), (1, 1));
+                assert_eq!(r.failed[0].class, ErrorClass::Io);
+            }
+        }
     }
 }

@@ -2,37 +2,13 @@
 //! (thesis 004 §3.3: a vector (x, y, z) is stored as (x, y, z)·0.5 + 0.5).
 
 use crate::quaternion::Vec3;
-use ibl_core::io::{self, ColorSpace};
+use ibl_core::traverse::ordered_row_reduce;
 use ibl_core::{Error, Image};
-use rayon::prelude::*;
-use std::path::{Path, PathBuf};
 
-/// A normal map as read from disk. Normal maps are data: decoded linearly, never as sRGB.
-#[derive(Clone, Debug)]
-pub struct NormalImage {
-    pub image: Image,
-    /// The file was a grey+alpha PNG (the reader expands it to (L, L, L, A)): the two
-    /// channels are then L and A, BC5-style maps saved as LA.
-    pub grey_alpha: bool,
-    pub path: PathBuf,
-}
+pub use crate::map::{load, png_color_type};
 
-/// PNG colour type from the IHDR chunk (0 grey, 2 RGB, 3 palette, 4 grey+alpha, 6 RGBA).
-pub fn png_color_type(bytes: &[u8]) -> Option<u8> {
-    (bytes.len() > 25 && bytes.starts_with(&[0x89, b'P', b'N', b'G']) && &bytes[12..16] == b"IHDR")
-        .then(|| bytes[25])
-}
-
-/// Reads a normal map (8/16-bit PNG, JPEG, EXR) linearly.
-pub fn load(path: &Path) -> ibl_core::Result<NormalImage> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    let image = io::decode_image(path, &bytes, ColorSpace::Linear)?;
-    Ok(NormalImage {
-        image,
-        grey_alpha: png_color_type(&bytes) == Some(4),
-        path: path.to_path_buf(),
-    })
-}
+/// A normal map as read from disk ([`load`]): the material bakes' one map type.
+pub type NormalImage = crate::map::LoadedMap;
 
 /// How texels become normals.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -80,11 +56,15 @@ impl Decoder {
         match (img.image.channels, decoding.two_channel, img.grey_alpha) {
             (1, true, _) => Err(Error::unsupported(
                 path,
-                "this file reads as a single channel (an EXR with only R and G is read as grey): save the map as RGB",
+                "a single channel: --two-channel needs x and y (R and G, or grey and alpha)",
             )),
             (1, false, _) => Err(Error::unsupported(
                 path,
                 "a normal map needs RGB channels (or two with --two-channel); this one has a single channel",
+            )),
+            (2, false, _) => Err(Error::unsupported(
+                path,
+                "two channels: use --two-channel (x from R, y from G, z reconstructed)",
             )),
             (_, false, true) => Err(Error::unsupported(
                 path,
@@ -219,34 +199,32 @@ pub fn convention_check(decoder: &Decoder, img: &Image) -> ConventionCheck {
     // Circulation of (p, q) around the k×k square with corners at texels (i, j) … (i+k, j+k)
     // (row j + k is down the image): ∮ = (q_x − p_y)·area with y up, both derivatives taken
     // by the same trapezoid stencil at the square's centre.
-    let rows: Vec<(f64, f64, u64)> = (0..h - k)
-        .step_by(stride)
-        .collect::<Vec<_>>()
-        .into_par_iter()
-        .map(|j| {
-            let mut acc = (0.0f64, 0.0f64, 0u64);
-            for i in (0..w - k).step_by(stride) {
-                let (Some(tl), Some(tr), Some(bl), Some(br)) = (
-                    slope(i, j),
-                    slope(i + k, j),
-                    slope(i, j + k),
-                    slope(i + k, j + k),
-                ) else {
-                    continue;
-                };
-                // Bottom edge minus top edge of p (= −∂p/∂y), right minus left edge of q (= ∂q/∂x).
-                let dp = 0.5 * ((bl[0] + br[0]) - (tl[0] + tr[0]));
-                let dq = 0.5 * ((tr[1] + br[1]) - (tl[1] + bl[1]));
-                acc.0 += (dp + dq).powi(2);
-                acc.1 += (dp - dq).powi(2);
-                acc.2 += 1;
-            }
-            acc
-        })
-        .collect();
-    let (a, b, n) = rows
-        .into_iter()
-        .fold((0.0, 0.0, 0), |x, y| (x.0 + y.0, x.1 + y.1, x.2 + y.2));
+    // Sampled rows j = r·stride, summed in row order.
+    let rows = (h - k).div_ceil(stride);
+    let row = |r: usize| {
+        let j = r * stride;
+        let mut acc = (0.0f64, 0.0f64, 0u64);
+        for i in (0..w - k).step_by(stride) {
+            let (Some(tl), Some(tr), Some(bl), Some(br)) = (
+                slope(i, j),
+                slope(i + k, j),
+                slope(i, j + k),
+                slope(i + k, j + k),
+            ) else {
+                continue;
+            };
+            // Bottom edge minus top edge of p (= −∂p/∂y), right minus left edge of q (= ∂q/∂x).
+            let dp = 0.5 * ((bl[0] + br[0]) - (tl[0] + tr[0]));
+            let dq = 0.5 * ((tr[1] + br[1]) - (tl[1] + bl[1]));
+            acc.0 += (dp + dq).powi(2);
+            acc.1 += (dp - dq).powi(2);
+            acc.2 += 1;
+        }
+        acc
+    };
+    let (a, b, n) = ordered_row_reduce(rows, row, (0.0, 0.0, 0), |x, y| {
+        (x.0 + y.0, x.1 + y.1, x.2 + y.2)
+    });
     let m = (n.max(1)) as f64;
     let agreement = if a + b > 0.0 { (b - a) / (a + b) } else { 0.0 };
     ConventionCheck {
@@ -265,7 +243,7 @@ mod tests {
         NormalImage {
             image: Image::new(1, 1, channels),
             grey_alpha,
-            path: PathBuf::from("n.png"),
+            path: std::path::PathBuf::from("n.png"),
         }
     }
 
@@ -353,6 +331,16 @@ mod tests {
         assert!((n[1] - 1.0).abs() < 1e-15);
         assert!(Decoder::new(D, &img(4, true)).is_err());
         assert!(Decoder::new(D, &img(1, false)).is_err());
+        assert!(Decoder::new(d2, &img(1, false)).is_err());
+        // A two-channel EXR (R, G kept as two channels): refused without --two-channel
+        // (it has no z to read), decoded from R, G with it.
+        let e = Decoder::new(D, &img(2, false)).err().unwrap().to_string();
+        assert!(e.contains("two channels: use --two-channel"), "{e}");
+        let rg = Decoder::new(d2, &img(2, false)).unwrap();
+        let Texel::Unit { n, .. } = rg.decode(&[0.5, 1.0]) else {
+            panic!()
+        };
+        assert!((n[1] - 1.0).abs() < 1e-15);
     }
 
     #[test]
@@ -390,7 +378,7 @@ mod tests {
         NormalImage {
             image: img,
             grey_alpha: false,
-            path: PathBuf::from("h.png"),
+            path: std::path::PathBuf::from("h.png"),
         }
     }
 
@@ -412,13 +400,5 @@ mod tests {
             eprintln!("made y_down {made_y_down}, read y_down {read_y_down}: {c:?}");
             assert_eq!(c.suggests_flip(), made_y_down != read_y_down);
         }
-    }
-
-    #[test]
-    fn png_color_type_is_read_from_ihdr() {
-        let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../../fixtures/normals/0008_128.png");
-        assert_eq!(png_color_type(&std::fs::read(p).unwrap()), Some(2));
-        assert_eq!(png_color_type(b"not a png at all, not at all......"), None);
     }
 }

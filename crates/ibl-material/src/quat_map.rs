@@ -10,8 +10,9 @@ use crate::quaternion::{
     orthonormality_error, quantisation_bound, quat_from_vector, storage_eps, StorageDepth,
 };
 use crate::Result;
-use ibl_core::io::{self, ColorSpace, FloatDepth, WriteOptions};
+use ibl_core::io::{self, ColorSpace, WriteOptions};
 use ibl_core::progress::Progress;
+use ibl_core::traverse::ordered_row_reduce;
 use ibl_core::{Error, Image};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -84,20 +85,7 @@ impl Params {
     /// Validation that depends on the output file's format.
     pub fn validate_output(&self, out: &Path) -> ibl_core::Result<()> {
         self.validate()?;
-        match io::extension(out).as_str() {
-            "png" if self.half => Err(Error::param(
-                "--half applies to EXR outputs; this one is a PNG",
-            )),
-            "png" => Ok(()),
-            "exr" if self.bits != 16 => Err(Error::param(
-                "--bits applies to PNG outputs; this one is an EXR (see --half)",
-            )),
-            "exr" => Ok(()),
-            other => Err(Error::unsupported(
-                out,
-                format!("quaternion maps are written as .png or .exr, not '.{other}'"),
-            )),
-        }
+        crate::output::validate(out, self.bits, self.half, "quaternion maps")
     }
 
     pub fn decoding(&self) -> Decoding {
@@ -136,16 +124,7 @@ impl Params {
     }
 
     fn write_options(&self) -> WriteOptions {
-        WriteOptions {
-            float: if self.half {
-                FloatDepth::F16
-            } else {
-                FloatDepth::F32
-            },
-            png_bits: self.bits,
-            png_tonemap: false,
-            png_srgb: false,
-        }
+        crate::output::write_options(self.bits, self.half)
     }
 }
 
@@ -165,7 +144,7 @@ pub struct ConvertStats {
     pub outside_disk: u64,
     /// Decoded length below 0.5 before renormalising (warned about above 1% of the texels).
     pub short: u64,
-    /// Range of decoded lengths of the texels with a direction.
+    /// Range of decoded lengths of the texels with a direction (both 0 when none has one).
     pub min_length: f64,
     pub max_length: f64,
     /// Whether the slopes are more integrable with green flipped (DirectX vs OpenGL).
@@ -188,12 +167,23 @@ impl ConvertStats {
         self
     }
 
+    /// The identity of [`Self::merge`] (min_length +∞: call [`Self::finish`] at the end).
     fn empty() -> ConvertStats {
         ConvertStats {
             min_length: f64::INFINITY,
             max_length: 0.0,
             ..Default::default()
         }
+    }
+
+    /// After the last merge: no length counted (no texel with a direction) gives 0..0, not
+    /// +∞..0 (which JSON cannot hold and would print as null).
+    fn finish(mut self) -> ConvertStats {
+        if self.min_length > self.max_length {
+            self.min_length = 0.0;
+            self.max_length = 0.0;
+        }
+        self
     }
 
     /// One-line warnings about unusual texels.
@@ -293,7 +283,8 @@ pub fn convert(decoder: &Decoder, img: &Image, progress: &dyn Progress) -> (Imag
     progress.finish();
     let stats = rows
         .into_iter()
-        .fold(ConvertStats::empty(), ConvertStats::merge);
+        .fold(ConvertStats::empty(), ConvertStats::merge)
+        .finish();
     (out, stats)
 }
 
@@ -343,7 +334,7 @@ impl CheckReport {
     }
 }
 
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, Default)]
 struct CheckRow {
     compared: u64,
     max_angle: f64,
@@ -351,6 +342,18 @@ struct CheckRow {
     max_ortho: f64,
     max_ortho_unit: f64,
     left_handed: u64,
+}
+
+impl CheckRow {
+    fn merge(mut self, r: CheckRow) -> CheckRow {
+        self.compared += r.compared;
+        self.max_angle = self.max_angle.max(r.max_angle);
+        self.sum_angle += r.sum_angle;
+        self.max_ortho = self.max_ortho.max(r.max_ortho);
+        self.max_ortho_unit = self.max_ortho_unit.max(r.max_ortho_unit);
+        self.left_handed += r.left_handed;
+        self
+    }
 }
 
 /// Decodes the stored map back to frames and compares them with the input normals.
@@ -366,53 +369,28 @@ pub fn check(
         ));
     }
     let (w, ich, sch) = (input.width, input.channels, stored.channels);
-    let rows: Vec<CheckRow> = input
-        .data
-        .par_chunks(w * ich)
-        .zip(stored.data.par_chunks(w * sch))
-        .map(|(irow, srow)| {
-            let mut r = CheckRow {
-                compared: 0,
-                max_angle: 0.0,
-                sum_angle: 0.0,
-                max_ortho: 0.0,
-                max_ortho_unit: 0.0,
-                left_handed: 0,
+    let row = |j: usize| {
+        let irow = &input.data[j * w * ich..(j + 1) * w * ich];
+        let srow = &stored.data[j * w * sch..(j + 1) * w * sch];
+        let mut r = CheckRow::default();
+        for (t, s) in irow.chunks_exact(ich).zip(srow.chunks_exact(sch)) {
+            let Texel::Unit { n, .. } = decoder.decode(t) else {
+                continue;
             };
-            for (t, s) in irow.chunks_exact(ich).zip(srow.chunks_exact(sch)) {
-                let Texel::Unit { n, .. } = decoder.decode(t) else {
-                    continue;
-                };
-                let q = decode_quat(s);
-                let f = frame_from_quat(q);
-                let angle = angle_between(f[2], n);
-                r.compared += 1;
-                r.max_angle = r.max_angle.max(angle);
-                r.sum_angle += angle;
-                r.max_ortho = r.max_ortho.max(orthonormality_error(&f));
-                let fu = frame_from_quat(normalize_quat(q));
-                r.max_ortho_unit = r.max_ortho_unit.max(orthonormality_error(&fu));
-                r.left_handed += (handedness(&f) <= 0.0) as u64;
-            }
-            r
-        })
-        .collect();
-    let mut total = CheckRow {
-        compared: 0,
-        max_angle: 0.0,
-        sum_angle: 0.0,
-        max_ortho: 0.0,
-        max_ortho_unit: 0.0,
-        left_handed: 0,
+            let q = decode_quat(s);
+            let f = frame_from_quat(q);
+            let angle = angle_between(f[2], n);
+            r.compared += 1;
+            r.max_angle = r.max_angle.max(angle);
+            r.sum_angle += angle;
+            r.max_ortho = r.max_ortho.max(orthonormality_error(&f));
+            let fu = frame_from_quat(normalize_quat(q));
+            r.max_ortho_unit = r.max_ortho_unit.max(orthonormality_error(&fu));
+            r.left_handed += (handedness(&f) <= 0.0) as u64;
+        }
+        r
     };
-    for r in rows {
-        total.compared += r.compared;
-        total.max_angle = total.max_angle.max(r.max_angle);
-        total.sum_angle += r.sum_angle;
-        total.max_ortho = total.max_ortho.max(r.max_ortho);
-        total.max_ortho_unit = total.max_ortho_unit.max(r.max_ortho_unit);
-        total.left_handed += r.left_handed;
-    }
+    let total = ordered_row_reduce(input.height, row, CheckRow::default(), CheckRow::merge);
     let eps = storage_eps(storage);
     Ok(CheckReport {
         compared: total.compared,
@@ -448,6 +426,7 @@ pub fn run(
     progress: &dyn Progress,
 ) -> Result<Baked> {
     params.validate_output(out)?;
+    crate::output::refuse_overwriting_input(out, [normal.path.as_path()])?;
     let decoder = Decoder::new(params.decoding(), normal)?;
     let (image, mut stats) = convert(&decoder, &normal.image, progress);
     stats.convention = Some(convention_check(&decoder, &normal.image));
@@ -613,6 +592,27 @@ mod tests {
             (img.data.as_slice(), stats.degenerate),
             (&[1.0f32, 0.5, 0.5][..], 1)
         );
+    }
+
+    #[test]
+    fn length_range_is_a_number_even_when_no_texel_has_a_direction() {
+        let dec = Decoder::new(Params::default().decoding(), &one_texel([0.0, 0.0, 1.0])).unwrap();
+        // Only mid-grey (degenerate) texels: no length counted.
+        let grey = Image::from_data(2, 1, 3, vec![0.5; 6]).unwrap();
+        let (_, stats) = convert(&dec, &grey, &NoProgress);
+        assert_eq!(
+            (stats.degenerate, stats.min_length, stats.max_length),
+            (2, 0.0, 0.0)
+        );
+        let j = serde_json::to_value(&stats).unwrap();
+        assert_eq!(
+            (j["min_length"].as_f64(), j["max_length"].as_f64()),
+            (Some(0.0), Some(0.0)),
+            "{j}"
+        );
+        // With directions: the range of their lengths.
+        let (_, stats) = convert(&dec, &one_texel([0.0, 0.0, 1.0]).image, &NoProgress);
+        assert_eq!((stats.min_length, stats.max_length), (1.0, 1.0));
     }
 
     #[test]

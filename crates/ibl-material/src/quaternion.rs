@@ -17,7 +17,8 @@ pub type Vec3 = [f64; 3];
 
 /// Shortest-arc unit quaternion with q̄·k·q = n for a unit normal n = (x, y, z),
 /// thesis 004 §3.4: a = sqrt((z+1)/2), b = y/(2a), c = −x/(2a), a ≥ 0.
-/// See [`quat_from_vector`], which this calls with n's own length.
+/// See [`quat_from_vector`], which this calls with n's own length (any length works: where
+/// the length under- or overflows, the fallback scales n by its largest component first).
 pub fn quat_from_normal(n: Vec3) -> Quat3 {
     quat_from_vector(n, length(n))
 }
@@ -32,39 +33,48 @@ pub fn quat_from_normal(n: Vec3) -> Quat3 {
 /// nothing — the b = s·y/r, c = −s·x/r with s = sqrt((1−z)/2) in other words.
 /// For v on −z exactly (r = 0) every half-turn about a tangent-plane axis is shortest; we
 /// return the half-turn about t, q = (0, 1, 0), the limit approached from the +y side, which
-/// keeps t' = t. A zero vector gives the identity.
+/// keeps t' = t. A zero vector gives the identity; NaN/∞ components give NaN.
 #[inline(always)]
 pub fn quat_from_vector(v: Vec3, len: f64) -> Quat3 {
     let [x, y, z] = v;
     let r2 = x * x + y * y;
     let w = if z >= 0.0 { len + z } else { r2 / (len - z) };
     let norm2 = w * w + r2;
-    if norm2 > 1e-280 {
+    if norm2 > 1e-280 && norm2 < f64::INFINITY {
         let inv = 1.0 / norm2.sqrt();
         [w * inv, y * inv, -x * inv]
     } else {
-        quat_from_tiny_vector(v, len)
+        quat_from_scaled_vector(v)
     }
 }
 
-/// [`quat_from_vector`] when r² (and so w²) underflowed or v is zero: works with r and the
-/// ratio t = w/r = r/(len − z) instead.
+/// [`quat_from_vector`] when w² + r² under- or overflowed (v tiny or huge, `len` possibly 0
+/// or ∞ then), or near −z where r² underflows: v is divided by its largest |component| so
+/// the length is computed on values in [−1, 1], and the z < 0 side works with r and the
+/// ratio t = w/r = r/(len − z). Not recursive.
 #[cold]
 #[inline(never)]
-fn quat_from_tiny_vector(v: Vec3, len: f64) -> Quat3 {
+fn quat_from_scaled_vector(v: Vec3) -> Quat3 {
     let [x, y, z] = v;
-    let r = x.hypot(y);
-    if r == 0.0 {
+    if !(x.is_finite() && y.is_finite() && z.is_finite()) {
+        return [f64::NAN; 3];
+    }
+    if x == 0.0 && y == 0.0 {
         return if z < 0.0 {
             [0.0, 1.0, 0.0]
         } else {
             [1.0, 0.0, 0.0]
         };
     }
+    let m = x.abs().max(y.abs()).max(z.abs());
+    let [x, y, z] = [x / m, y / m, z / m];
+    let len = (x * x + y * y + z * z).sqrt();
+    let r = x.hypot(y);
     if z >= 0.0 {
-        // Only a vector of length ~1e-140 gets here: scale it up.
-        let k = 1.0 / len;
-        return quat_from_vector([x * k, y * k, z * k], 1.0);
+        // w = len + z ≥ 1: nothing under- or overflows.
+        let w = len + z;
+        let inv = 1.0 / (w * w + r * r).sqrt();
+        return [w * inv, y * inv, -x * inv];
     }
     let t = r / (len - z);
     let inv = 1.0 / (1.0 + t * t).sqrt();
@@ -397,6 +407,50 @@ mod tests {
             assert!((length(q) - 1.0).abs() < 1e-15);
         }
         assert_eq!(quat_from_vector([0.0; 3], 0.0), [1.0, 0.0, 0.0]);
+    }
+
+    #[test]
+    fn tiny_and_huge_vectors_give_their_direction_s_rotation() {
+        // All components below ~1e-154: the squares underflow and length() gives 0. The
+        // closed form for a tilt of θ towards +x: q = (cos θ/2, 0, −sin θ/2).
+        let half = |deg: f64| {
+            let (s, c) = (deg / 2.0).to_radians().sin_cos();
+            [c, 0.0, -s]
+        };
+        let s = std::f64::consts::FRAC_1_SQRT_2;
+        for (v, deg, unit) in [
+            ([1e-200, 0.0, 1e-200], 45.0, [s, 0.0, s]),
+            ([1e-200, 0.0, -1e-200], 135.0, [s, 0.0, -s]),
+            ([1e200, 0.0, 1e200], 45.0, [s, 0.0, s]),
+            ([1e200, 0.0, -1e200], 135.0, [s, 0.0, -s]),
+        ] {
+            for q in [quat_from_normal(v), quat_from_vector(v, length(v))] {
+                assert!(dist(q, half(deg)) < 1e-15, "{v:?}: {q:?}");
+                // Independently: q̄·k·q by Hamilton products is the unit direction.
+                assert!(
+                    dist(rotate(q, [0.0, 0.0, 1.0]), unit) < 1e-15,
+                    "{v:?}: {q:?}"
+                );
+            }
+        }
+        // Random directions at every scale agree with the unit vector's quaternion.
+        let mut rng = Pcg32::new(21, 4);
+        let mut worst = 0.0f64;
+        for _ in 0..10_000 {
+            let n = random_unit(&mut rng);
+            for k in [1e-200, 1e-170, 1e-155, 1e150, 1e200, 1e300] {
+                let v = n.map(|c| c * k);
+                let q = quat_from_vector(v, length(v));
+                worst = worst.max(dist(q, quat_from_normal(n)));
+                worst = worst.max(dist(quat_from_normal(v), quat_from_normal(n)));
+            }
+        }
+        eprintln!("scaled vectors vs their direction: max |Δq| {worst:.2e}");
+        assert!(worst < 1e-14);
+        // Zero, and exactly −z however small.
+        assert_eq!(quat_from_normal([0.0; 3]), [1.0, 0.0, 0.0]);
+        assert_eq!(quat_from_normal([0.0, 0.0, -1e-300]), [0.0, 1.0, 0.0]);
+        assert_eq!(quat_from_normal([0.0, 0.0, 1e-300]), [1.0, 0.0, 0.0]);
     }
 
     #[test]

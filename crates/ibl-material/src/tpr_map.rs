@@ -8,9 +8,10 @@
 
 use crate::direction::{aspect_scale, resample_line_field, tangent_from_angle_value, taps, Preset};
 use crate::expr::{self, Program, Scratch};
-use crate::normal::png_color_type;
+pub use crate::map::LoadedMap;
 use crate::{MaterialError, Result};
-use ibl_core::io::{self, ColorSpace, FloatDepth, WriteOptions};
+use ibl_core::image::check_texels;
+use ibl_core::io;
 use ibl_core::progress::Progress;
 use ibl_core::{Error, Image};
 use rayon::prelude::*;
@@ -160,11 +161,13 @@ pub const DEFAULT_ROUGHNESS: [f64; 2] = [0.316_227_766_016_837_94, 1.0];
 )]
 #[serde(rename_all = "kebab-case")]
 pub enum AngleMapKind {
-    /// Grey images (one channel, or R = G = B everywhere) are angles; others direction maps.
+    /// Grey images (one channel, or R = G = B everywhere) are angles; others (two channels,
+    /// grey+alpha, colour) direction maps.
     Auto,
     /// value·π is the angle from +t towards +b (the red channel of a colour image).
     Angle,
-    /// (R, G) (grey and alpha for a grey+alpha PNG) hold (x, y)·0.5 + 0.5.
+    /// (R, G) (grey and alpha for a grey+alpha PNG) hold (x, y)·0.5 + 0.5; a single-channel
+    /// image is refused.
     Direction,
 }
 
@@ -220,6 +223,9 @@ pub struct Params {
     /// EXR output: 16-bit half floats instead of 32-bit.
     #[arg(long)]
     pub half: bool,
+    /// Set NaN/Inf texels of --angle-map and --roughness-map to 0 instead of refusing them.
+    #[arg(long)]
+    pub sanitize: bool,
 }
 
 impl Default for Params {
@@ -269,19 +275,7 @@ impl Params {
 
     pub fn validate_output(&self, out: &Path) -> ibl_core::Result<()> {
         self.validate()?;
-        match io::extension(out).as_str() {
-            "png" if self.half => Err(Error::param(
-                "--half applies to EXR outputs; this one is a PNG",
-            )),
-            "exr" if self.bits != 16 => Err(Error::param(
-                "--bits applies to PNG outputs; this one is an EXR (see --half)",
-            )),
-            "png" | "exr" => Ok(()),
-            other => Err(Error::unsupported(
-                out,
-                format!("TPR maps are written as .png or .exr, not '.{other}'"),
-            )),
-        }
+        crate::output::validate(out, self.bits, self.half, "TPR maps")
     }
 
     /// Compiles the expressions (errors carry the flag and the column).
@@ -316,38 +310,38 @@ impl Params {
 pub struct Inputs {
     pub angle_map: Option<LoadedMap>,
     pub roughness_map: Option<LoadedMap>,
+    /// What loading them met (negative values clamped, NaN/Inf set to 0 with `--sanitize`),
+    /// one line each; the bake's [`TprStats::warnings`] repeats them.
+    pub warnings: Vec<String>,
 }
 
-/// An input image and whether it was a grey+alpha PNG.
-#[derive(Clone, Debug)]
-pub struct LoadedMap {
-    pub image: Image,
-    pub grey_alpha: bool,
-    pub path: PathBuf,
-}
-
-fn load_map(path: &Path) -> ibl_core::Result<LoadedMap> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    let image = io::decode_image(path, &bytes, ColorSpace::Linear)?;
-    let non_finite = image.data.iter().filter(|v| !v.is_finite()).count();
-    if non_finite > 0 {
-        return Err(Error::NonFinite {
-            path: path.to_path_buf(),
-            count: non_finite,
-        });
-    }
-    Ok(LoadedMap {
-        image,
-        grey_alpha: png_color_type(&bytes) == Some(4),
-        path: path.to_path_buf(),
-    })
+/// Reads a map and applies the input policy of DESIGN.md: NaN/Inf texels are an error
+/// unless `sanitize` (then 0), negative values are clamped to 0 (both reported).
+fn load_map(
+    path: &Path,
+    sanitize: bool,
+    warnings: &mut Vec<String>,
+) -> ibl_core::Result<LoadedMap> {
+    let mut map = crate::map::load(path)?;
+    let report = check_texels(&mut map.image, path, sanitize)?;
+    warnings.extend(report.warnings(path));
+    Ok(map)
 }
 
 /// Reads the images named by the parameters.
 pub fn load_inputs(params: &Params) -> ibl_core::Result<Inputs> {
+    let mut warnings = Vec::new();
+    let mut load = |p: &Option<PathBuf>| {
+        p.as_deref()
+            .map(|p| load_map(p, params.sanitize, &mut warnings))
+            .transpose()
+    };
+    let angle_map = load(&params.angle_map)?;
+    let roughness_map = load(&params.roughness_map)?;
     Ok(Inputs {
-        angle_map: params.angle_map.as_deref().map(load_map).transpose()?,
-        roughness_map: params.roughness_map.as_deref().map(load_map).transpose()?,
+        angle_map,
+        roughness_map,
+        warnings,
     })
 }
 
@@ -365,11 +359,15 @@ pub struct TprStats {
     pub roughness_clamped: u64,
     /// The angle map was resampled to the output size.
     pub resampled: bool,
+    /// What loading the input maps met ([`Inputs::warnings`]; shown by [`Self::warnings`],
+    /// so not repeated in the JSON stats).
+    #[serde(skip)]
+    pub input_warnings: Vec<String>,
 }
 
 impl TprStats {
     pub fn warnings(&self) -> Vec<String> {
-        let mut w = Vec::new();
+        let mut w = self.input_warnings.clone();
         if self.zero_length > 0 {
             w.push(format!(
                 "{} texel(s) with a zero-length direction were given +x",
@@ -400,26 +398,42 @@ enum Field<'a> {
     Texels(Vec<[f64; 2]>),
 }
 
+/// Whether `auto` reads a map as angles: one channel, or three or more with R = G = B
+/// everywhere (within 2/255: lossy codecs leave a little chroma on grey images saved as
+/// colour). Two channels (an RG EXR) and grey+alpha PNGs are direction maps.
+fn reads_as_grey(map: &LoadedMap) -> bool {
+    let img = &map.image;
+    match img.channels {
+        1 => true,
+        2 => false,
+        _ => {
+            !map.grey_alpha
+                && img.data.chunks_exact(img.channels).all(|t| {
+                    (t[0] - t[1]).abs() <= 2.0 / 255.0 && (t[1] - t[2]).abs() <= 2.0 / 255.0
+                })
+        }
+    }
+}
+
 /// Directions from an angle or direction map, at the output size.
 fn map_directions(
     map: &LoadedMap,
     kind: AngleMapKind,
     w: usize,
     h: usize,
-) -> (Vec<[f64; 2]>, bool) {
+) -> ibl_core::Result<(Vec<[f64; 2]>, bool)> {
     let img = &map.image;
-    // Grey within 2/255: lossy codecs leave a little chroma on grey images saved as colour.
-    let grey = img.channels == 1
-        || (!map.grey_alpha
-            && img
-                .data
-                .chunks_exact(img.channels)
-                .all(|t| (t[0] - t[1]).abs() <= 2.0 / 255.0 && (t[1] - t[2]).abs() <= 2.0 / 255.0));
     let as_angle = match kind {
-        AngleMapKind::Auto => grey,
+        AngleMapKind::Auto => reads_as_grey(map),
         AngleMapKind::Angle => true,
         AngleMapKind::Direction => false,
     };
+    if !as_angle && img.channels < 2 {
+        return Err(Error::unsupported(
+            &map.path,
+            "a single channel cannot be a direction map (x, y need R and G, or grey and alpha): use --angle-map-kind angle",
+        ));
+    }
     let yi = if map.grey_alpha { 3 } else { 1 };
     let src: Vec<[f64; 2]> = img
         .data
@@ -427,15 +441,13 @@ fn map_directions(
         .map(|t| {
             if as_angle {
                 tangent_from_angle_value(t[0] as f64)
-            } else if img.channels == 1 {
-                [0.0, 0.0]
             } else {
                 [2.0 * t[0] as f64 - 1.0, 2.0 * t[yi] as f64 - 1.0]
             }
         })
         .collect();
     if (img.width, img.height) == (w, h) {
-        return (src, false);
+        return Ok((src, false));
     }
     let unit: Vec<[f64; 2]> = src
         .iter()
@@ -448,10 +460,10 @@ fn map_directions(
             }
         })
         .collect();
-    (
+    Ok((
         resample_line_field(&unit, img.width, img.height, w, h),
         true,
-    )
+    ))
 }
 
 /// Bilinear sample of channel `c` at texture coordinates (u, v), texel centres, clamped.
@@ -488,6 +500,7 @@ pub fn generate(
     let mut stats = TprStats {
         width: w,
         height: h,
+        input_warnings: inputs.warnings.clone(),
         ..Default::default()
     };
     let field = match (&params.preset, &dir_prog, &params.angle_map) {
@@ -504,7 +517,7 @@ pub fn generate(
                 .angle_map
                 .as_ref()
                 .ok_or_else(|| Error::param(format!("{}: angle map not loaded", path.display())))?;
-            let (dirs, resampled) = map_directions(map, params.angle_map_kind, w, h);
+            let (dirs, resampled) = map_directions(map, params.angle_map_kind, w, h)?;
             stats.source = format!("angle map {}", path.display());
             stats.resampled = resampled;
             Field::Texels(dirs)
@@ -612,17 +625,13 @@ pub fn generate(
 /// Generates and encodes the map for `out` (.png or .exr).
 pub fn run(params: &Params, inputs: &Inputs, out: &Path, progress: &dyn Progress) -> Result<Baked> {
     params.validate_output(out)?;
+    let maps = [&inputs.angle_map, &inputs.roughness_map];
+    crate::output::refuse_overwriting_input(
+        out,
+        maps.into_iter().flatten().map(|m| m.path.as_path()),
+    )?;
     let (image, stats) = generate(params, inputs, progress)?;
-    let opts = WriteOptions {
-        float: if params.half {
-            FloatDepth::F16
-        } else {
-            FloatDepth::F32
-        },
-        png_bits: params.bits,
-        png_tonemap: false,
-        png_srgb: false,
-    };
+    let opts = crate::output::write_options(params.bits, params.half);
     let bytes = io::encode_image(out, &image, &opts)?;
     Ok(Baked {
         files: vec![(out.to_path_buf(), bytes)],
@@ -831,7 +840,7 @@ mod tests {
         };
         let inputs = Inputs {
             angle_map: Some(map(grey.clone(), false)),
-            roughness_map: None,
+            ..Default::default()
         };
         let (img, stats) = generate(&p, &inputs, &NoProgress).unwrap();
         assert_eq!((stats.width, stats.height, stats.resampled), (4, 2, false));
@@ -844,24 +853,47 @@ mod tests {
         let rgb = grey.to_channels(3);
         let inputs = Inputs {
             angle_map: Some(map(rgb.clone(), false)),
-            roughness_map: None,
+            ..Default::default()
         };
         assert_eq!(generate(&p, &inputs, &NoProgress).unwrap().0, img);
         // Direction map (RG): (0.5, 1) is +y; grey+alpha: x from grey, y from alpha.
         let dir = Image::from_data(1, 1, 3, vec![0.5, 1.0, 0.0]).unwrap();
         let inputs = Inputs {
             angle_map: Some(map(dir, false)),
-            roughness_map: None,
+            ..Default::default()
         };
         let t = texel(&generate(&p, &inputs, &NoProgress).unwrap().0, 0, 0);
         assert!(t[0].abs() < 1e-7 && (t[1] - 1.0).abs() < 1e-7);
         let la = Image::from_data(1, 1, 4, vec![1.0, 1.0, 1.0, 0.5]).unwrap();
         let inputs = Inputs {
             angle_map: Some(map(la, true)),
-            roughness_map: None,
+            ..Default::default()
         };
         let t = texel(&generate(&p, &inputs, &NoProgress).unwrap().0, 0, 0);
         assert!((t[0] - 1.0).abs() < 1e-7 && t[1].abs() < 1e-7);
+        // Two channels (an RG EXR) are a direction map, even where R = G.
+        let rg = Image::from_data(2, 1, 2, vec![1.0, 1.0, 0.5, 0.0]).unwrap();
+        let inputs = Inputs {
+            angle_map: Some(map(rg, false)),
+            ..Default::default()
+        };
+        let img2 = generate(&p, &inputs, &NoProgress).unwrap().0;
+        let (a, b) = (texel(&img2, 0, 0), texel(&img2, 1, 0));
+        let s = std::f64::consts::FRAC_1_SQRT_2;
+        assert!((a[0] - s).abs() < 1e-7 && (a[1] - s).abs() < 1e-7, "{a:?}");
+        assert!(b[0].abs() < 1e-7 && (b[1] + 1.0).abs() < 1e-7, "{b:?}");
+        // One channel read as a direction map: an error, not +x everywhere.
+        let inputs = Inputs {
+            angle_map: Some(map(grey.clone(), false)),
+            ..Default::default()
+        };
+        let direction = Params {
+            angle_map_kind: AngleMapKind::Direction,
+            ..p.clone()
+        };
+        let e = generate(&direction, &inputs, &NoProgress).err().unwrap();
+        assert!(e.to_string().contains("single channel"), "{e}");
+        assert_eq!(e.class(), ibl_core::error::ErrorClass::Unsupported);
         // Resampled to another size: a constant angle stays that angle.
         let flat = Image::from_data(2, 2, 1, vec![0.25; 4]).unwrap();
         let p2 = Params {
@@ -873,7 +905,7 @@ mod tests {
         };
         let inputs = Inputs {
             angle_map: Some(map(flat, false)),
-            roughness_map: None,
+            ..Default::default()
         };
         let (img, stats) = generate(&p2, &inputs, &NoProgress).unwrap();
         assert!(stats.resampled);
@@ -894,6 +926,7 @@ mod tests {
         let inputs = Inputs {
             angle_map: None,
             roughness_map: Some(map(rm, false)),
+            ..Default::default()
         };
         let (img, _) = generate(&p, &inputs, &NoProgress).unwrap();
         // Output texel centres 1/8, 3/8, 5/8, 7/8 → source x = 0.25·... clamped bilinear.
@@ -911,8 +944,12 @@ mod tests {
     fn outputs_round_trip_through_png16() {
         let p = params("spiral:0.3,0.6,2");
         let baked = run(&p, &Inputs::default(), Path::new("t.png"), &NoProgress).unwrap();
-        let back =
-            io::decode_image(Path::new("t.png"), &baked.files[0].1, ColorSpace::Linear).unwrap();
+        let back = io::decode_image(
+            Path::new("t.png"),
+            &baked.files[0].1,
+            io::ColorSpace::Linear,
+        )
+        .unwrap();
         assert_eq!(back.channels, 4);
         let (img, _) = generate(&p, &Inputs::default(), &NoProgress).unwrap();
         let worst = img

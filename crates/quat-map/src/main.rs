@@ -44,9 +44,14 @@ fn main() {
         |ctx| -> Result<_, MaterialError> {
             let params = &cli.params;
             if let Some(root) = &cli.batch {
+                let start = std::time::Instant::now();
                 let report = batch::run(params, root, ctx.progress())?;
+                let mut warnings = Vec::new();
                 for c in &report.converted {
-                    c.warnings.iter().for_each(|w| ctx.warn(w.clone()));
+                    for w in &c.warnings {
+                        ctx.warn(w.clone());
+                        warnings.push(w.clone());
+                    }
                     if let Some(check) = &c.check {
                         ctx.info(format!("{}: {}", c.output.display(), check.summary()));
                     }
@@ -55,21 +60,32 @@ fn main() {
                     eprintln!("quat-map: failed: {}", f.error);
                 }
                 ctx.info(report.summary());
-                if let Some(e) = report.error() {
-                    if ctx.common.json {
-                        println!(
-                            "{}",
-                            serde_json::to_string_pretty(&report).unwrap_or_default()
-                        );
-                    }
-                    return Err(e);
-                }
-                let outputs = report
+                let outputs: Vec<String> = report
                     .converted
                     .iter()
                     .map(|c| c.output.display().to_string())
                     .collect();
-                return Ok((outputs, serde_json::to_value(&report).unwrap_or_default()));
+                let details = serde_json::to_value(&report).unwrap_or_default();
+                if let Some(e) = report.error() {
+                    // The same summary as on success (ibl_cli prints none for an error), so
+                    // scripts read converted / skipped / failed in one place either way.
+                    if ctx.common.json {
+                        let summary = ibl_cli::Summary {
+                            tool: "quat-map".into(),
+                            version: ibl_core::TOOL_VERSION.into(),
+                            outputs,
+                            seconds: start.elapsed().as_secs_f64(),
+                            warnings,
+                            details,
+                        };
+                        println!(
+                            "{}",
+                            serde_json::to_string_pretty(&summary).unwrap_or_default()
+                        );
+                    }
+                    return Err(e);
+                }
+                return Ok((outputs, details));
             }
             if !params.batch_fields_are_default() {
                 return Err(ibl_core::Error::param(

@@ -203,12 +203,15 @@ fn batch_json(root: &Path, extra: &[&str]) -> (Output, serde_json::Value) {
     (o, j)
 }
 
+/// (converted, skipped, failed) from the `--json` summary, which has the same wrapper
+/// whether the batch succeeded or not.
 fn counts(j: &serde_json::Value) -> [usize; 3] {
-    let r = if j.get("details").is_some() {
-        &j["details"]
-    } else {
-        j
-    };
+    assert_eq!(j["tool"], "quat-map", "not the summary wrapper: {j}");
+    assert!(
+        j["version"].is_string() && j["outputs"].is_array() && j["warnings"].is_array(),
+        "not the summary wrapper: {j}"
+    );
+    let r = &j["details"];
     ["converted", "skipped", "failed"]
         .map(|k| r[k].as_array().map(|a| a.len()).unwrap_or(usize::MAX))
 }
@@ -302,12 +305,36 @@ fn batch_converts_skips_and_isolates_a_broken_file() {
 
 #[test]
 fn batch_root_errors() {
+    // A missing root is the file system's answer: I/O (4), one line naming it.
     let (o, _) = batch_json(Path::new("/nonexistent/textures"), &[]);
-    assert_eq!(o.status.code(), Some(2));
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(4), "{e}");
+    assert_eq!(e.trim().lines().count(), 1, "{e}");
+    assert!(e.contains("/nonexistent/textures"), "{e}");
+    // A file given as the root: invalid input (2).
+    let (o, _) = batch_json(&fixture("0000.png"), &[]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     assert!(stderr(&o).contains("not a folder"));
     let dir = tempfile::tempdir().unwrap();
     let (o, _) = batch_json(dir.path(), &["--output-name", "q.tga"]);
     assert_eq!(o.status.code(), Some(3), "{}", stderr(&o));
+}
+
+#[test]
+fn a_batch_where_nothing_matches_fails_naming_the_input_name() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::create_dir_all(dir.path().join("brick")).unwrap();
+    std::fs::copy(fixture("0000.png"), dir.path().join("brick/brick_n.png")).unwrap();
+    let (o, _) = batch_json(dir.path(), &[]);
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert_eq!(e.trim().lines().count(), 1, "{e}");
+    assert!(e.contains("--input-name") && e.contains("normal.*"), "{e}");
+    assert!(!dir.path().join("brick/quaternion.png").exists());
+    // With the right pattern the same folder converts.
+    let (o, j) = batch_json(dir.path(), &["--input-name", "*_n.png"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(counts(&j), [1, 0, 0]);
 }
 
 #[test]
@@ -361,5 +388,88 @@ fn every_fixture_is_byte_identical_with_one_and_two_threads() {
             })
             .collect();
         assert!(outs[0] == outs[1], "{name}");
+    }
+}
+
+/// A two-channel EXR (R, G only: ibl-core keeps both channels), a 45° tilt towards +y.
+fn write_two_channel_exr(path: &Path) {
+    let s = std::f32::consts::FRAC_1_SQRT_2;
+    let img = ibl_core::Image::from_data(2, 1, 2, vec![0.5, s * 0.5 + 0.5, 0.5, 0.5]).unwrap();
+    ibl_core::io::write_image(path, &img, &Default::default()).unwrap();
+    assert_eq!(read_image(path, ColorSpace::Linear).unwrap().channels, 2);
+}
+
+#[test]
+fn two_channel_exr_needs_the_flag_and_never_panics() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("rg.exr");
+    write_two_channel_exr(&input);
+    let out = dir.path().join("q.exr");
+    let o = run(&[input.to_str().unwrap(), "-o", out.to_str().unwrap()]);
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(3), "{e}");
+    assert!(!e.contains("panicked"), "{e}");
+    assert_eq!(e.trim().lines().count(), 1, "{e}");
+    assert!(e.contains("rg.exr") && e.contains("--two-channel"), "{e}");
+    assert!(!out.exists());
+    let o = run(&[
+        input.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--two-channel",
+        "-q",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let q = read_image(&out, ColorSpace::Linear).unwrap();
+    let q = [0, 1, 2].map(|k| 2.0 * q.data[k] as f64 - 1.0);
+    let (sn, cs) = 22.5f64.to_radians().sin_cos();
+    assert!(
+        (q[0] - cs).abs() < 1e-6 && (q[1] - sn).abs() < 1e-6 && q[2].abs() < 1e-6,
+        "{q:?}"
+    );
+}
+
+#[test]
+fn batch_records_a_two_channel_exr_as_one_failure() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("textures");
+    std::fs::create_dir_all(root.join("a_good")).unwrap();
+    std::fs::copy(fixture("0008_128.png"), root.join("a_good/normal.png")).unwrap();
+    std::fs::create_dir_all(root.join("b_rg")).unwrap();
+    write_two_channel_exr(&root.join("b_rg/normal.exr"));
+    let (o, j) = batch_json(&root, &[]);
+    let e = stderr(&o);
+    assert!(!e.contains("panicked"), "{e}");
+    assert_eq!(o.status.code(), Some(3), "{e}");
+    assert_eq!(counts(&j), [1, 0, 1], "{j}");
+    assert!(
+        e.contains("b_rg/normal.exr") && e.contains("--two-channel"),
+        "{e}"
+    );
+    assert!(root.join("a_good/quaternion.png").is_file());
+    assert!(!root.join("b_rg/quaternion.png").exists());
+}
+
+#[test]
+fn refuses_to_overwrite_its_input() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::create_dir_all(dir.path().join("sub")).unwrap();
+    let input = dir.path().join("n.png");
+    std::fs::copy(fixture("0008_128.png"), &input).unwrap();
+    let before = std::fs::read(&input).unwrap();
+    let same = input.to_str().unwrap().to_string();
+    // The same file spelt differently: through "sub/..", and relative to the working folder.
+    let dotted = dir.path().join("sub/../n.png");
+    for out in [same.as_str(), dotted.to_str().unwrap(), "n.png"] {
+        let o = Command::new(BIN)
+            .current_dir(dir.path())
+            .args([same.as_str(), "-o", out])
+            .output()
+            .unwrap();
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "{out}: {e}");
+        assert_eq!(e.trim().lines().count(), 1, "{e}");
+        assert!(e.contains("is the input") && !e.contains("panicked"), "{e}");
+        assert_eq!(std::fs::read(&input).unwrap(), before, "{out}");
     }
 }

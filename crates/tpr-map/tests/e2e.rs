@@ -214,6 +214,7 @@ fn fallbacks_are_reported_and_errors_are_one_line() {
         eprintln!("{args:?} → {} {}", r.status.code().unwrap_or(-1), e.trim());
         assert_eq!(r.status.code(), Some(code), "{args:?}: {e}");
         assert!(e.contains(needle), "{args:?}: {e}");
+        assert_eq!(e.trim().lines().count(), 1, "{args:?}: {e}");
         assert!(!e.contains("panicked"));
     }
 }
@@ -246,4 +247,153 @@ fn presets_and_expressions_are_byte_identical_with_one_and_two_threads() {
             .collect();
         assert!(outs[0] == outs[1], "{source:?}");
     }
+}
+
+#[test]
+fn two_channel_exr_is_a_direction_map_and_grey_is_not() {
+    let dir = tempfile::tempdir().unwrap();
+    // R, G only (ibl-core keeps both channels of such an EXR): (1, 1) is the diagonal (R = G,
+    // as a grey texel would be), (0.5, 1) is +y.
+    let rg = dir.path().join("rg.exr");
+    write_image(
+        &rg,
+        &Image::from_data(2, 1, 2, vec![1.0, 1.0, 0.5, 1.0]).unwrap(),
+        &WriteOptions::default(),
+    )
+    .unwrap();
+    assert_eq!(read_image(&rg, ColorSpace::Linear).unwrap().channels, 2);
+    let out = dir.path().join("t.exr");
+    for kind in ["auto", "direction"] {
+        let o = run(&[
+            "-o",
+            out.to_str().unwrap(),
+            "--angle-map",
+            rg.to_str().unwrap(),
+            "--angle-map-kind",
+            kind,
+            "-q",
+        ]);
+        let e = stderr(&o);
+        assert!(o.status.success() && !e.contains("panicked"), "{kind}: {e}");
+        let img = read_image(&out, ColorSpace::Linear).unwrap();
+        let (a, b) = (tangent(&img, 0, 0), tangent(&img, 1, 0));
+        let s = std::f64::consts::FRAC_1_SQRT_2;
+        assert!(
+            (a[0] - s).abs() < 1e-6 && (a[1] - s).abs() < 1e-6,
+            "{kind}: {a:?}"
+        );
+        assert!(
+            b[0].abs() < 1e-6 && (b[1] - 1.0).abs() < 1e-6,
+            "{kind}: {b:?}"
+        );
+    }
+    // A single channel has no (x, y): as a direction map it is an error, not +x everywhere.
+    let grey = dir.path().join("grey.exr");
+    write_image(
+        &grey,
+        &Image::from_data(2, 1, 1, vec![0.25, 0.5]).unwrap(),
+        &WriteOptions::default(),
+    )
+    .unwrap();
+    let bad = dir.path().join("bad.exr");
+    let o = run(&[
+        "-o",
+        bad.to_str().unwrap(),
+        "--angle-map",
+        grey.to_str().unwrap(),
+        "--angle-map-kind",
+        "direction",
+    ]);
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(3), "{e}");
+    assert_eq!(e.trim().lines().count(), 1, "{e}");
+    assert!(
+        e.contains("grey.exr") && e.contains("single channel"),
+        "{e}"
+    );
+    assert!(!bad.exists());
+}
+
+#[test]
+fn non_finite_maps_are_refused_unless_sanitized_and_inputs_are_not_overwritten() {
+    let dir = tempfile::tempdir().unwrap();
+    let angles = dir.path().join("angles.exr");
+    write_image(
+        &angles,
+        &Image::from_data(2, 1, 1, vec![f32::NAN, 0.5]).unwrap(),
+        &WriteOptions::default(),
+    )
+    .unwrap();
+    let rough = dir.path().join("rough.exr");
+    write_image(
+        &rough,
+        &Image::from_data(1, 1, 3, vec![-0.25, 0.5, 0.0]).unwrap(),
+        &WriteOptions::default(),
+    )
+    .unwrap();
+    let out = dir.path().join("t.exr");
+    let args = |extra: &[&'static str]| {
+        let mut a = vec![
+            "-o".to_string(),
+            out.to_str().unwrap().to_string(),
+            "--angle-map".into(),
+            angles.to_str().unwrap().into(),
+            "--roughness-map".into(),
+            rough.to_str().unwrap().into(),
+        ];
+        a.extend(extra.iter().map(|s| s.to_string()));
+        a
+    };
+    let o = Command::new(BIN).args(args(&[])).output().unwrap();
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert_eq!(e.trim().lines().count(), 1, "{e}");
+    assert!(e.contains("angles.exr") && e.contains("1 NaN/Inf"), "{e}");
+    assert!(!out.exists());
+    let o = Command::new(BIN)
+        .args(args(&["--sanitize", "--json"]))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let warnings: Vec<&str> = j["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|w| w.as_str().unwrap())
+        .collect();
+    assert!(
+        warnings
+            .iter()
+            .any(|w| w.contains("angles.exr") && w.contains("1 NaN/Inf")),
+        "{warnings:?}"
+    );
+    assert!(
+        warnings
+            .iter()
+            .any(|w| w.contains("rough.exr") && w.contains("clamped 1 negative")),
+        "{warnings:?}"
+    );
+    // The NaN angle became 0 (+x); the negative roughness 0.
+    let img = read_image(&out, ColorSpace::Linear).unwrap();
+    let t = tangent(&img, 0, 0);
+    assert!((t[0] - 1.0).abs() < 1e-6 && t[1].abs() < 1e-6, "{t:?}");
+    assert_eq!(img.texel(0, 0)[2], 0.0);
+    // Writing over an input map is refused and leaves it as it was.
+    let before = std::fs::read(&rough).unwrap();
+    let o = run(&[
+        "-o",
+        rough.to_str().unwrap(),
+        "--preset",
+        "wave",
+        "--size",
+        "4",
+        "--roughness-map",
+        rough.to_str().unwrap(),
+    ]);
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert_eq!(e.trim().lines().count(), 1, "{e}");
+    assert!(e.contains("is the input"), "{e}");
+    assert_eq!(std::fs::read(&rough).unwrap(), before);
 }
