@@ -97,3 +97,47 @@ impl Classify for Error {
         Error::class(self)
     }
 }
+
+/// An error and its causes on one line, "outer: cause: root cause", skipping a cause whose
+/// text the line already holds (thiserror's `#[error(transparent)]` and "{0}" wrappers repeat
+/// their source). What every binary prints and what batch reports record.
+pub fn chain(e: &dyn std::error::Error) -> String {
+    let mut s = e.to_string();
+    let mut src = e.source();
+    while let Some(c) = src {
+        let t = c.to_string();
+        if !s.contains(&t) {
+            s.push_str(": ");
+            s.push_str(&t);
+        }
+        src = c.source();
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn chain_joins_causes_on_one_line_without_repeats() {
+        #[derive(Debug)]
+        struct E(&'static str, Option<Box<E>>);
+        impl std::fmt::Display for E {
+            fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str(self.0)
+            }
+        }
+        impl std::error::Error for E {
+            fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+                self.1.as_deref().map(|e| e as _)
+            }
+        }
+        let root = E("disk full", None);
+        let mid = E("writing a.exr", Some(Box::new(root)));
+        // A transparent wrapper repeats its source's text: shown once.
+        let top = E("writing a.exr", Some(Box::new(mid)));
+        assert_eq!(chain(&top), "writing a.exr: disk full");
+        assert!(!chain(&top).contains('\n'));
+    }
+}

@@ -442,7 +442,7 @@ fn run_jobs(params: &Params, root: &Path, jobs: Vec<Job>, progress: &dyn Progres
                 match r {
                     Ok(c) => Outcome::Done(Box::new(c)),
                     Err(e) => {
-                        let mut msg = ibl_core_error_chain(&e);
+                        let mut msg = ibl_core::error::chain(&e);
                         let shown = job.input.display().to_string();
                         if !msg.contains(&shown) {
                             msg = format!("{shown}: {msg}");
@@ -472,21 +472,6 @@ fn run_jobs(params: &Params, root: &Path, jobs: Vec<Job>, progress: &dyn Progres
         }
     }
     report
-}
-
-/// "outer: cause" on one line (as the binaries print errors).
-fn ibl_core_error_chain(e: &dyn std::error::Error) -> String {
-    let mut s = e.to_string();
-    let mut src = e.source();
-    while let Some(c) = src {
-        let t = c.to_string();
-        if !s.contains(&t) {
-            s.push_str(": ");
-            s.push_str(&t);
-        }
-        src = c.source();
-    }
-    s
 }
 
 #[cfg(test)]
