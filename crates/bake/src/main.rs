@@ -194,9 +194,13 @@ fn run(cli: Cli) -> Result<i32, Error> {
             Ok(if report.failed() { 1 } else { 0 })
         }
         Cmd::Clean { file, json } => {
-            let graph = ibl_pipeline::load(&file)?;
-            let session = exec::Session::open(&graph)?;
-            let report = exec::clean(session, &graph)?;
+            // Cleaning needs the output folder and its manifest, not the inputs: the graph
+            // (which checks them) only adds the files a ninja run would have written.
+            let pipeline = ibl_pipeline::schema::load(&file)?;
+            let output = pipeline.output.clone();
+            let graph = ibl_pipeline::graph::build(pipeline).ok();
+            let session = exec::Session::open_output(&output)?;
+            let report = exec::clean_output(session, graph.as_ref())?;
             if json {
                 println!(
                     "{}",
@@ -211,7 +215,7 @@ fn run(cli: Cli) -> Result<i32, Error> {
                     } else {
                         ""
                     },
-                    graph.pipeline.output.display()
+                    output.display()
                 );
             }
             Ok(0)
@@ -321,7 +325,7 @@ fn plan_json(graph: &Graph, plan: &Plan) -> serde_json::Value {
                 "origin": format!("{:?}", s.origin).to_lowercase(),
                 "needed": s.needed(),
                 "need": match &s.need { Need::Needed(w) | Need::NotNeeded(w) => w.clone() },
-                "action": match p.decision { Decision::Run(_) => "run", Decision::Restore(_) => "restore", Decision::UpToDate => "up-to-date", Decision::Skip(_) => "skip" },
+                "action": p.decision.word(),
                 "reason": p.decision.reason(),
                 "key": p.key,
                 "params": s.params.as_ref().map(|p| p.canonical()),

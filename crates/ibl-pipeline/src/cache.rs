@@ -1,8 +1,9 @@
 //! The content-addressed cache: stage keys, the manifest of what is built, and the object store.
 //!
-//! A stage's key is the blake3 hash of the tool version, its kind, its canonical parameters and,
-//! for each source it reads in order, the digest of that input's bytes (file names too for
-//! folders and globs) or the key of the upstream stage. Keys of upstream stages (not the bytes
+//! A stage's key is the blake3 hash of the tool (its version and the fingerprint of the sources
+//! it was built from, see [`tool`]), its kind, its canonical parameters and,
+//! for each source it reads in order, the digest of that input's bytes and names (see
+//! [`input_digest`]) or the key of the upstream stage. Keys of upstream stages (not the bytes
 //! of their outputs) make every key known before anything runs; bakes are deterministic, so a
 //! key names its outputs' bytes.
 //!
@@ -37,6 +38,18 @@ pub struct FileStamp {
     pub hash: String,
 }
 
+/// The `tool` part of every key: the package version and a fingerprint of the workspace
+/// sources this build was compiled from (`build.rs`). The version alone stays the same across
+/// commits that change what a bake computes; with the fingerprint, results baked by other code
+/// are never reused (they are rebuilt once after such a change).
+pub fn tool() -> String {
+    format!(
+        "{}+{}",
+        ibl_core::TOOL_VERSION,
+        env!("IBL_BUILD_FINGERPRINT")
+    )
+}
+
 /// What a stage key is made of.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct KeyParts {
@@ -49,8 +62,9 @@ pub struct KeyParts {
 }
 
 impl KeyParts {
-    /// The key: a hash of everything above (names of sources excluded: renaming an input or a
-    /// stage does not invalidate what reads it).
+    /// The key: a hash of everything above, the labels of the sources excluded: renaming a
+    /// declared input or a stage does not invalidate what reads it (the names of the files an
+    /// input holds are part of its digest).
     pub fn key(&self) -> String {
         let mut h = blake3::Hasher::new();
         for part in ["ibl-bake/key/v1", &self.tool, &self.kind, &self.params] {
@@ -68,10 +82,7 @@ impl KeyParts {
     pub fn diff(&self, now: &KeyParts) -> String {
         let mut why = Vec::new();
         if self.tool != now.tool {
-            why.push(format!(
-                "tool version changed ({} -> {})",
-                self.tool, now.tool
-            ));
+            why.push(format!("bake tool changed ({} -> {})", self.tool, now.tool));
         }
         if self.kind != now.kind {
             why.push(format!("kind changed ({} -> {})", self.kind, now.kind));
@@ -140,6 +151,30 @@ pub struct OutputRecord {
     pub stamp: FileStamp,
 }
 
+/// True for a digest as the runner writes them (keys, object hashes): 64 lowercase hex
+/// characters. Anything else read back from `.bake/` is damaged, and is never made into a path.
+pub fn is_digest(s: &str) -> bool {
+    s.len() == 64
+        && s.bytes()
+            .all(|b| b.is_ascii_digit() || (b'a'..=b'f').contains(&b))
+}
+
+/// True for a relative path of plain names only (no `..`, `.`, root or drive): joined to a
+/// folder, it stays inside it.
+pub fn is_inside_rel(rel: &str) -> bool {
+    let p = Path::new(rel);
+    !rel.is_empty()
+        && p.components()
+            .all(|c| matches!(c, std::path::Component::Normal(_)))
+}
+
+impl OutputRecord {
+    /// Its path stays in the stage folder and its hash is a digest.
+    pub fn is_sound(&self) -> bool {
+        is_inside_rel(&self.rel) && is_digest(&self.stamp.hash)
+    }
+}
+
 /// A built stage.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct StageRecord {
@@ -152,6 +187,18 @@ pub struct StageRecord {
     /// Earlier keys whose outputs the object store keeps (most recent first).
     #[serde(default)]
     pub history: Vec<String>,
+}
+
+impl StageRecord {
+    /// Its keys are digests and its paths stay in the output folder, out of `.bake/`: a record
+    /// read back that is not sound is damaged and is dropped (its stage is rebuilt).
+    pub fn is_sound(&self) -> bool {
+        is_digest(&self.key)
+            && self.history.iter().all(|k| is_digest(k))
+            && is_inside_rel(&self.dir)
+            && !Path::new(&self.dir).starts_with(".bake")
+            && self.outputs.iter().all(OutputRecord::is_sound)
+    }
 }
 
 /// What is built under an output folder.
@@ -181,11 +228,13 @@ impl CacheDir {
     pub fn manifest_path(&self) -> PathBuf {
         self.root.join("manifest.json")
     }
-    pub fn entry_path(&self, key: &str) -> PathBuf {
-        self.root.join("cache").join(format!("{key}.json"))
+    /// The cache entry file of `key`; `None` unless `key` is a digest.
+    pub fn entry_path(&self, key: &str) -> Option<PathBuf> {
+        is_digest(key).then(|| self.root.join("cache").join(format!("{key}.json")))
     }
-    pub fn object_path(&self, hash: &str) -> PathBuf {
-        self.root.join("objects").join(&hash[..2]).join(hash)
+    /// The object file of `hash`; `None` unless `hash` is a digest.
+    pub fn object_path(&self, hash: &str) -> Option<PathBuf> {
+        is_digest(hash).then(|| self.root.join("objects").join(&hash[..2]).join(hash))
     }
     pub fn tmp(&self) -> PathBuf {
         self.root.join("tmp")
@@ -198,11 +247,15 @@ impl CacheDir {
     }
 
     /// The manifest, or an empty one when there is none (or it is from another version).
+    /// Damaged records (see [`StageRecord::is_sound`]) are left out.
     pub fn load_manifest(&self) -> Result<Manifest> {
         let path = self.manifest_path();
         match std::fs::read(&path) {
             Ok(bytes) => match serde_json::from_slice::<Manifest>(&bytes) {
-                Ok(m) if m.version == MANIFEST_VERSION => Ok(m),
+                Ok(mut m) if m.version == MANIFEST_VERSION => {
+                    m.stages.retain(|_, r| r.is_sound());
+                    Ok(m)
+                }
                 // An unreadable or older manifest only costs a rebuild.
                 _ => Ok(Manifest {
                     version: MANIFEST_VERSION,
@@ -226,20 +279,35 @@ impl CacheDir {
         write_atomic(&self.manifest_path(), &bytes)
     }
 
-    /// The cache entry of `key`, if present and all its objects exist.
+    /// The cache entry of `key`, if present, sound (digests, paths inside the stage folder)
+    /// and all its objects exist; a damaged entry is a miss.
     pub fn entry(&self, key: &str) -> Option<CacheEntry> {
-        let bytes = std::fs::read(self.entry_path(key)).ok()?;
+        let bytes = std::fs::read(self.entry_path(key)?).ok()?;
         let e: CacheEntry = serde_json::from_slice(&bytes).ok()?;
         e.files
             .iter()
-            .all(|f| self.object_path(&f.stamp.hash).is_file())
+            .all(|f| f.is_sound() && self.object_path(&f.stamp.hash).is_some_and(|o| o.is_file()))
             .then_some(e)
     }
 
     /// Keeps `files` (already in place in `dir`) as the outputs of `key`.
     pub fn put(&self, key: &str, dir: &Path, files: &[OutputRecord]) -> Result<()> {
+        let damaged = |what: String| {
+            Error::io(
+                &self.root,
+                std::io::Error::new(std::io::ErrorKind::InvalidData, what),
+            )
+        };
+        let entry_path = self
+            .entry_path(key)
+            .ok_or_else(|| damaged(format!("'{key}' is not a cache key")))?;
         for f in files {
-            let obj = self.object_path(&f.stamp.hash);
+            let Some(obj) = self.object_path(&f.stamp.hash).filter(|_| f.is_sound()) else {
+                return Err(damaged(format!(
+                    "output record '{}' ({}) is damaged",
+                    f.rel, f.stamp.hash
+                )));
+            };
             if obj.is_file() {
                 continue;
             }
@@ -256,13 +324,14 @@ impl CacheDir {
             files: files.to_vec(),
         };
         write_atomic(
-            &self.entry_path(key),
+            &entry_path,
             &serde_json::to_vec_pretty(&entry).expect("entry serialises"),
         )
     }
 
     /// Links (or copies) the objects of `entry` into `staging`, checking their hashes first.
-    /// Returns (staged file, path relative to the stage folder); `None` if an object is damaged.
+    /// Returns (staged file, path relative to the stage folder); `None` if an object or the
+    /// entry is damaged.
     pub fn stage_entry(
         &self,
         entry: &CacheEntry,
@@ -271,7 +340,9 @@ impl CacheDir {
         std::fs::create_dir_all(staging).map_err(|e| Error::io(staging, e))?;
         let mut out = Vec::new();
         for (n, f) in entry.files.iter().enumerate() {
-            let obj = self.object_path(&f.stamp.hash);
+            let Some(obj) = self.object_path(&f.stamp.hash).filter(|_| f.is_sound()) else {
+                return Ok(None);
+            };
             match hash_file(&obj) {
                 Ok((h, size)) if h == f.stamp.hash && size == f.stamp.size => {}
                 _ => {
@@ -401,20 +472,31 @@ impl<'a> Hasher<'a> {
     }
 }
 
-/// The digest of an input from its files' hashes: `kind` and names matter, as bakes read
-/// folder layouts and choose decoders by extension.
+/// The digest of an input from its files' hashes and the names a bake sees: a file's own name
+/// (not its folder), a folder's own name and its files' paths inside it, a glob's matches'
+/// paths from `base`. Names matter: bakes choose decoders by extension, read folder layouts, and
+/// name outputs after their inputs (quat-map writes `<input name>/...` when it reads several);
+/// so renaming an input re-runs what reads it, while the same bytes under the same name found
+/// somewhere else still hit the cache.
 pub fn input_digest(kind: &str, base: &Path, files: &[(PathBuf, String)]) -> String {
     let mut h = blake3::Hasher::new();
     h.update(kind.as_bytes());
     h.update(&[0]);
+    if kind == "folder" {
+        let own = base.file_name().unwrap_or_default().to_string_lossy();
+        h.update(own.as_bytes());
+        h.update(&[0]);
+    }
     for (path, hash) in files {
-        let name = path.strip_prefix(base).unwrap_or(path);
         let name = if kind == "file" {
-            path.extension()
-                .map(|e| e.to_string_lossy().to_ascii_lowercase())
+            path.file_name()
+                .map(|n| n.to_string_lossy().into_owned())
                 .unwrap_or_default()
         } else {
-            name.to_string_lossy().into_owned()
+            path.strip_prefix(base)
+                .unwrap_or(path)
+                .to_string_lossy()
+                .into_owned()
         };
         h.update(name.as_bytes());
         h.update(&[0]);
@@ -482,6 +564,73 @@ mod tests {
     }
 
     #[test]
+    fn the_tool_part_of_keys_is_the_version_and_the_build_fingerprint() {
+        let t = tool();
+        let (version, fp) = t.split_once('+').unwrap();
+        assert_eq!(version, ibl_core::TOOL_VERSION);
+        assert!(
+            fp.len() == 16 && fp.bytes().all(|b| b.is_ascii_hexdigit()),
+            "{t}"
+        );
+    }
+
+    mod fingerprint {
+        include!(concat!(env!("CARGO_MANIFEST_DIR"), "/build/fingerprint.rs"));
+    }
+
+    #[test]
+    fn the_build_fingerprint_follows_contents_and_names_not_mtimes_or_places() {
+        let write = |root: &Path, rel: &str, text: &str| {
+            let p = root.join(rel);
+            std::fs::create_dir_all(p.parent().unwrap()).unwrap();
+            std::fs::write(p, text).unwrap();
+        };
+        let make = |root: &Path, files: &[(&str, &str)]| {
+            for (rel, text) in files {
+                write(root, rel, text);
+            }
+            fingerprint::fingerprint(root).unwrap()
+        };
+        let files = [
+            ("Cargo.toml", "[workspace]"),
+            ("Cargo.lock", "lock"),
+            ("crates/a/Cargo.toml", "[package] a"),
+            ("crates/a/src/lib.rs", "pub fn f() -> f32 { 1.0 }"),
+            ("crates/a/src/deep/m.rs", "// m"),
+            ("crates/b/Cargo.toml", "[package] b"),
+            ("crates/b/src/main.rs", "fn main() {}"),
+            ("crates/b/tests/t.rs", "// not part of a bake"),
+        ];
+        let (d1, d2) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+        let (fp, watch) = make(d1.path(), &files);
+        assert!(watch.contains(&d1.path().join("crates/a/src")), "{watch:?}");
+        // Another place, files created in another order, later mtimes: the same fingerprint.
+        let mut reversed = files;
+        reversed.reverse();
+        assert_eq!(make(d2.path(), &reversed).0, fp);
+        // Code changes change it; files outside src do not.
+        write(d2.path(), "crates/a/src/deep/m.rs", "// m2");
+        let changed = fingerprint::fingerprint(d2.path()).unwrap().0;
+        assert_ne!(changed, fp);
+        write(d2.path(), "crates/a/src/deep/m.rs", "// m");
+        write(d2.path(), "crates/b/tests/t.rs", "// edited");
+        assert_eq!(fingerprint::fingerprint(d2.path()).unwrap().0, fp);
+        // So do renames, new files and dependency versions.
+        std::fs::rename(
+            d2.path().join("crates/a/src/deep/m.rs"),
+            d2.path().join("crates/a/src/deep/n.rs"),
+        )
+        .unwrap();
+        assert_ne!(fingerprint::fingerprint(d2.path()).unwrap().0, fp);
+        write(d1.path(), "crates/b/src/extra.rs", "");
+        assert_ne!(fingerprint::fingerprint(d1.path()).unwrap().0, fp);
+        std::fs::remove_file(d1.path().join("crates/b/src/extra.rs")).unwrap();
+        assert_eq!(fingerprint::fingerprint(d1.path()).unwrap().0, fp);
+        write(d1.path(), "Cargo.lock", "lock2");
+        assert_ne!(fingerprint::fingerprint(d1.path()).unwrap().0, fp);
+    }
+
+    #[test]
     fn stamps_skip_rehashing_until_the_file_changes() {
         let dir = tempfile::tempdir().unwrap();
         let f = dir.path().join("a.bin");
@@ -502,12 +651,18 @@ mod tests {
     }
 
     #[test]
-    fn input_digests_see_names_for_folders_and_only_extensions_for_files() {
+    fn input_digests_see_the_names_bakes_see_but_not_where_the_input_lies() {
         let base = Path::new("/b");
         let f = |n: &str| (PathBuf::from(n), "h".to_string());
+        // The same bytes under the same name elsewhere: a cache hit.
         assert_eq!(
             input_digest("file", base, &[f("/b/x.exr")]),
-            input_digest("file", base, &[f("/c/y.exr")])
+            input_digest("file", base, &[f("/c/x.exr")])
+        );
+        // Renamed: quat-map names the output folder after it, so the key changes.
+        assert_ne!(
+            input_digest("file", base, &[f("/b/x.png")]),
+            input_digest("file", base, &[f("/b/y.png")])
         );
         assert_ne!(
             input_digest("file", base, &[f("/b/x.exr")]),
@@ -517,12 +672,23 @@ mod tests {
             input_digest("folder", base, &[f("/b/m/normal.png")]),
             input_digest("folder", base, &[f("/b/n/normal.png")])
         );
+        // A folder's own name counts too; where it lies does not.
+        let folder = |b: &str, n: &str| input_digest("folder", Path::new(b), &[f(n)]);
+        assert_ne!(
+            folder("/w/mats", "/w/mats/a/normal.png"),
+            folder("/w/other", "/w/other/a/normal.png")
+        );
+        assert_eq!(
+            folder("/w/mats", "/w/mats/a/normal.png"),
+            folder("/v/mats", "/v/mats/a/normal.png")
+        );
     }
 
     #[test]
     fn store_keeps_and_restores_outputs_and_collects_garbage() {
         let dir = tempfile::tempdir().unwrap();
         let cache = CacheDir::new(dir.path());
+        let k1 = hash_bytes(b"k1");
         let stage = dir.path().join("s");
         std::fs::create_dir_all(&stage).unwrap();
         std::fs::write(stage.join("a.exr"), b"AAA").unwrap();
@@ -534,9 +700,9 @@ mod tests {
                 hash: hash_bytes(b"AAA"),
             },
         };
-        cache.put("k1", &stage, std::slice::from_ref(&rec)).unwrap();
+        cache.put(&k1, &stage, std::slice::from_ref(&rec)).unwrap();
         std::fs::remove_file(stage.join("a.exr")).unwrap();
-        let entry = cache.entry("k1").unwrap();
+        let entry = cache.entry(&k1).unwrap();
         let staged = cache
             .stage_entry(&entry, &dir.path().join("tmp"))
             .unwrap()
@@ -545,15 +711,104 @@ mod tests {
         assert_eq!(staged[0].1, "a.exr");
         // A damaged object is refused (and dropped).
         std::fs::remove_file(&staged[0].0).unwrap();
-        std::fs::write(cache.object_path(&rec.stamp.hash), b"AAB").unwrap();
+        std::fs::write(cache.object_path(&rec.stamp.hash).unwrap(), b"AAB").unwrap();
         assert!(cache
             .stage_entry(&entry, &dir.path().join("tmp2"))
             .unwrap()
             .is_none());
-        assert!(cache.entry("k1").is_none());
+        assert!(cache.entry(&k1).is_none());
         // Entries of keys no stage keeps go, with their objects.
-        cache.put("k1", &dir.path().join("tmp"), &[]).unwrap();
+        cache.put(&k1, &dir.path().join("tmp"), &[]).unwrap();
         cache.collect_garbage(&Manifest::default()).unwrap();
-        assert!(!cache.entry_path("k1").exists());
+        assert!(!cache.entry_path(&k1).unwrap().exists());
+    }
+
+    #[test]
+    fn a_damaged_cache_entry_is_a_miss_and_touches_nothing_outside_the_cache() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("out");
+        let cache = CacheDir::new(&out);
+        // A file outside the output folder that a crafted hash would name.
+        let victim = dir.path().join("victim");
+        std::fs::write(&victim, b"keep me").unwrap();
+        let key = hash_bytes(b"key");
+        let write_entry = |hash: &str, rel: &str| {
+            let json = format!(
+                r#"{{"files": [{{"rel": "{rel}", "size": 7, "mtime_ns": 0, "hash": "{hash}"}}]}}"#
+            );
+            let path = cache.root.join("cache").join(format!("{key}.json"));
+            std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+            std::fs::write(path, json).unwrap();
+        };
+        let good = hash_bytes(b"keep me");
+        for (hash, rel) in [
+            ("", "a.exr"),
+            ("a", "a.exr"),
+            ("é", "a.exr"),
+            ("../../victim", "a.exr"),
+            (good.to_uppercase().as_str(), "a.exr"),
+            (good.as_str(), "../../victim"),
+            (good.as_str(), "/etc/passwd"),
+        ] {
+            write_entry(hash, rel);
+            assert!(cache.entry(&key).is_none(), "{hash:?} {rel:?}");
+            let entry: CacheEntry = serde_json::from_slice(
+                &std::fs::read(cache.root.join("cache").join(format!("{key}.json"))).unwrap(),
+            )
+            .unwrap();
+            assert!(
+                cache.stage_entry(&entry, &cache.tmp()).unwrap().is_none(),
+                "{hash:?} {rel:?}"
+            );
+            assert!(cache.put(&key, &out, &entry.files).is_err());
+            assert_eq!(std::fs::read(&victim).unwrap(), b"keep me");
+        }
+        // Keys that are not digests name no file.
+        assert!(cache.entry("../../victim").is_none());
+        assert!(cache.entry_path("../x").is_none() && cache.object_path("ab").is_none());
+        assert!(cache.put("../../victim", &out, &[]).is_err());
+    }
+
+    #[test]
+    fn damaged_manifest_records_are_dropped_on_load() {
+        let dir = tempfile::tempdir().unwrap();
+        let cache = CacheDir::new(dir.path());
+        let record = |key: &str, dir: &str, rel: &str| StageRecord {
+            key: key.into(),
+            parts: parts(),
+            dir: dir.into(),
+            outputs: vec![OutputRecord {
+                rel: rel.into(),
+                stamp: FileStamp {
+                    size: 1,
+                    mtime_ns: 0,
+                    hash: hash_bytes(b"x"),
+                },
+            }],
+            seconds: 0.0,
+            history: vec![],
+        };
+        let k = hash_bytes(b"k");
+        let mut m = Manifest {
+            version: MANIFEST_VERSION,
+            ..Default::default()
+        };
+        for (id, r) in [
+            ("ok", record(&k, "a/b", "c/d.exr")),
+            ("bad-key", record("k", "a", "d.exr")),
+            ("bad-dir", record(&k, "../x", "d.exr")),
+            ("in-cache", record(&k, ".bake/objects", "d.exr")),
+            ("bad-rel", record(&k, "a", "../../d.exr")),
+            ("abs-rel", record(&k, "a", "/d.exr")),
+        ] {
+            m.stages.insert(id.into(), r);
+        }
+        let mut bad_history = record(&k, "h", "d.exr");
+        bad_history.history = vec!["../k".into()];
+        m.stages.insert("bad-history".into(), bad_history);
+        std::fs::create_dir_all(&cache.root).unwrap();
+        std::fs::write(cache.manifest_path(), serde_json::to_vec(&m).unwrap()).unwrap();
+        let loaded = cache.load_manifest().unwrap();
+        assert_eq!(loaded.stages.keys().collect::<Vec<_>>(), ["ok"]);
     }
 }

@@ -153,20 +153,8 @@ impl Classify for Error {
     }
 }
 
-/// "outer: cause: root cause" on one line.
-pub fn error_chain(e: &dyn std::error::Error) -> String {
-    let mut s = e.to_string();
-    let mut src = e.source();
-    while let Some(c) = src {
-        let t = c.to_string();
-        if !s.contains(&t) {
-            s.push_str(": ");
-            s.push_str(&t);
-        }
-        src = c.source();
-    }
-    s
-}
+/// "outer: cause: root cause" on one line (`ibl_core::error::chain`).
+pub use ibl_core::error::chain as error_chain;
 
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 

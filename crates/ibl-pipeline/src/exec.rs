@@ -172,6 +172,19 @@ impl Session {
                 let _ = std::fs::remove_file(&path);
                 continue;
             };
+            // A damaged journal (or one naming files outside this output folder's staging
+            // and stage folders) is dropped: its stage is rebuilt, nothing else is touched.
+            let (output, root) = (&self.cache.output, &self.cache.root);
+            let sound = j.record.is_sound()
+                && j.renames.iter().all(|(staged, target)| {
+                    paths::is_within(staged, &self.cache.tmp())
+                        && paths::is_within(target, output)
+                        && !paths::is_within(target, root)
+                });
+            if !sound {
+                let _ = std::fs::remove_file(&path);
+                continue;
+            }
             for (staged, target) in &j.renames {
                 if staged.exists() {
                     if let Some(d) = target.parent() {
@@ -222,42 +235,105 @@ fn pid_alive(pid: u32, lock: &Path) -> bool {
     true
 }
 
+/// Takes the lock at `path`: a file holding our pid, which appears whole or not at all (written
+/// to a temporary file, then hard-linked to the lock's name, which fails if the lock exists).
+/// A lock naming a dead process is taken over; one that cannot be read as a pid is someone
+/// else's (it is never removed here).
 fn take_lock(path: &Path) -> Result<()> {
-    use std::io::Write;
+    let pid = std::process::id();
+    let tmp = cache::temp_beside(path);
+    std::fs::write(&tmp, pid.to_string()).map_err(|e| Error::io(&tmp, e))?;
+    let result = take_lock_with(path, &tmp, pid);
+    let _ = std::fs::remove_file(&tmp);
+    result
+}
+
+fn take_lock_with(path: &Path, tmp: &Path, pid: u32) -> Result<()> {
     for _ in 0..2 {
-        match std::fs::OpenOptions::new()
-            .write(true)
-            .create_new(true)
-            .open(path)
-        {
-            Ok(mut f) => {
-                let _ = write!(f, "{}", std::process::id());
-                HELD.lock().unwrap().push(path.to_path_buf());
-                return Ok(());
-            }
-            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
-                let pid = std::fs::read_to_string(path)
-                    .ok()
-                    .and_then(|s| s.trim().parse::<u32>().ok());
-                match pid {
-                    Some(pid) if pid_alive(pid, path) => {
-                        return Err(Error::Busy {
-                            path: path.to_path_buf(),
-                            why: format!("another bake (pid {pid}) is using this output folder"),
-                        });
-                    }
-                    _ => {
-                        let _ = std::fs::remove_file(path);
-                    }
+        // Listed first, so another thread of ours seeing the new lock knows it is live.
+        HELD.lock().unwrap().push(path.to_path_buf());
+        match std::fs::hard_link(tmp, path) {
+            Ok(()) => return Ok(()),
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => unhold(path),
+            // No hard links here: create the lock in place, with the pid written at once.
+            Err(_) => {
+                unhold(path);
+                match create_lock(path, pid) {
+                    Ok(true) => return Ok(()),
+                    Ok(false) => {}
+                    Err(e) => return Err(Error::io(path, e)),
                 }
             }
+        }
+        let text = match std::fs::read_to_string(path) {
+            Ok(t) => t,
+            // Gone in between: try again.
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => continue,
             Err(e) => return Err(Error::io(path, e)),
+        };
+        match text.trim().parse::<u32>() {
+            Ok(other) if pid_alive(other, path) => {
+                return Err(Error::Busy {
+                    path: path.to_path_buf(),
+                    why: format!("another bake (pid {other}) is using this output folder"),
+                });
+            }
+            Ok(_) => {
+                // Left by a dead process.
+                let _ = std::fs::remove_file(path);
+            }
+            Err(_) => {
+                return Err(Error::Busy {
+                    path: path.to_path_buf(),
+                    why: format!(
+                        "the lock holds {:?}, not a process id; if no bake is using this output \
+                         folder, remove the lock file",
+                        text.trim()
+                    ),
+                });
+            }
         }
     }
     Err(Error::Busy {
         path: path.to_path_buf(),
         why: "could not take the lock".into(),
     })
+}
+
+/// The fallback where hard links are impossible: `Ok(false)` when the lock exists.
+fn create_lock(path: &Path, pid: u32) -> std::io::Result<bool> {
+    use std::io::Write;
+    HELD.lock().unwrap().push(path.to_path_buf());
+    let created = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(path);
+    match created {
+        Ok(mut f) => match f.write_all(pid.to_string().as_bytes()) {
+            Ok(()) => Ok(true),
+            Err(e) => {
+                let _ = std::fs::remove_file(path);
+                unhold(path);
+                Err(e)
+            }
+        },
+        Err(e) => {
+            unhold(path);
+            if e.kind() == std::io::ErrorKind::AlreadyExists {
+                Ok(false)
+            } else {
+                Err(e)
+            }
+        }
+    }
+}
+
+/// Forgets one hold of `path` (taken by [`take_lock_with`] or [`create_lock`]).
+fn unhold(path: &Path) {
+    let mut held = HELD.lock().unwrap();
+    if let Some(k) = held.iter().position(|p| p == path) {
+        held.remove(k);
+    }
 }
 
 fn install_interrupt_handler() {
@@ -291,7 +367,8 @@ fn install_interrupt_handler() {
 /// Records `record` for stage `id`: keeps the previous key in its history (for the object
 /// store) and removes the previous outputs that the new ones do not replace.
 fn apply_record(m: &mut Manifest, output: &Path, id: &str, mut record: StageRecord) {
-    if let Some(old) = m.stages.remove(id) {
+    // Only the outputs of a sound record are removed: they lie in the output folder.
+    if let Some(old) = m.stages.remove(id).filter(StageRecord::is_sound) {
         let new_files: std::collections::HashSet<PathBuf> = record
             .outputs
             .iter()
@@ -354,7 +431,7 @@ pub fn run(
     // Save the refreshed input stamps now, so even an interrupted run keeps them.
     {
         let _g = commit_lock();
-        session.cache.save_manifest(&manifest.lock().unwrap())?;
+        session.cache.save_manifest(&lock(&manifest))?;
     }
 
     let mut results: Vec<Option<StageResult>> = vec![None; n];
@@ -365,7 +442,7 @@ pub fn run(
         }
         let (status, outputs) = match &p.decision {
             Decision::UpToDate => {
-                let rec = manifest.lock().unwrap().stages.get(&s.id).cloned();
+                let rec = lock(&manifest).stages.get(&s.id).cloned();
                 (
                     Status::UpToDate,
                     rec.map(|r| r.outputs.iter().map(|o| s.dir.join(&o.rel)).collect())
@@ -410,7 +487,12 @@ pub fn run(
                 let tx = tx.clone();
                 let (manifest, plan_stage) = (&manifest, &plan.stages[i]);
                 scope.spawn(move || {
-                    let result = run_stage(session, graph, i, plan_stage, manifest, delay_ms, obs);
+                    // Whatever happens in the stage, the loop below hears of it (it waits for
+                    // one report per stage started, and holds a sender itself).
+                    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                        run_stage(session, graph, i, plan_stage, manifest, delay_ms, obs)
+                    }))
+                    .unwrap_or_else(|panic| panicked(session, graph, i, panic_message(&*panic)));
                     let _ = tx.send(Done { index: i, result });
                 });
             }
@@ -447,7 +529,7 @@ pub fn run(
 
     {
         let _g = commit_lock();
-        let m = manifest.lock().unwrap();
+        let m = lock(&manifest);
         session.cache.save_manifest(&m)?;
         let _ = session.cache.collect_garbage(&m);
     }
@@ -460,6 +542,41 @@ pub fn run(
             .collect(),
         seconds: start.elapsed().as_secs_f64(),
     })
+}
+
+/// The manifest, even if a thread panicked while holding it (it is only ever replaced whole
+/// record by record).
+fn lock(m: &Mutex<Manifest>) -> std::sync::MutexGuard<'_, Manifest> {
+    m.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// The text of a panic's payload.
+fn panic_message(panic: &(dyn std::any::Any + Send)) -> String {
+    panic
+        .downcast_ref::<String>()
+        .cloned()
+        .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
+        .unwrap_or_default()
+}
+
+/// The result of stage `i` whose run panicked outside the bake: failed, its staging removed.
+fn panicked(session: &Session, graph: &Graph, i: usize, msg: String) -> StageResult {
+    let s = &graph.stages[i];
+    let _ = std::fs::remove_dir_all(staging_dir(session, i, &s.id));
+    StageResult {
+        id: s.id.clone(),
+        kind: s.kind_name.clone(),
+        status: Status::Failed,
+        reason: format!("the runner panicked: {msg}"),
+        seconds: 0.0,
+        outputs: vec![],
+        warnings: vec![],
+    }
+}
+
+/// The staging folder of stage `i`.
+fn staging_dir(session: &Session, i: usize, id: &str) -> PathBuf {
+    session.tmp.join(format!("{i}-{}", paths::slug(id)))
 }
 
 /// Runs (or restores) one stage and commits its outputs.
@@ -477,7 +594,7 @@ fn run_stage(
     obs.started(&s.id, &planned.decision);
     let key = planned.key.clone().expect("work has a key");
     let parts = planned.parts.clone().expect("work has key parts");
-    let staging = session.tmp.join(format!("{i}-{}", paths::slug(&s.id)));
+    let staging = staging_dir(session, i, &s.id);
     let mut result = StageResult {
         id: s.id.clone(),
         kind: s.kind_name.clone(),
@@ -529,12 +646,7 @@ fn run_stage(
             Ok(Ok(b)) => b,
             Ok(Err(BakeError { message, .. })) => return Err(message),
             Err(panic) => {
-                let msg = panic
-                    .downcast_ref::<String>()
-                    .cloned()
-                    .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
-                    .unwrap_or_default();
-                return Err(format!("the bake panicked: {msg}"));
+                return Err(format!("the bake panicked: {}", panic_message(&*panic)));
             }
         };
         result.warnings = warnings;
@@ -666,7 +778,7 @@ fn commit(
     // The object store is a convenience: failing to link into it must not fail the stage.
     let _ = session.cache.put(&key, &s.dir, &record.outputs);
     {
-        let mut m = manifest.lock().unwrap();
+        let mut m = lock(manifest);
         apply_record(&mut m, output, &s.id, record);
         session.cache.save_manifest(&m)?;
     }
@@ -685,7 +797,14 @@ pub struct CleanReport {
 
 /// Removes every output the pipeline recorded or would write, and its cache folder.
 pub fn clean(session: Session, graph: &Graph) -> Result<CleanReport> {
-    let output = graph.pipeline.output.clone();
+    clean_output(session, Some(graph))
+}
+
+/// Removes every output the manifest of the session's output folder records, and the cache
+/// folder; with the pipeline's graph, also what a ninja run of it would have written. Only the
+/// output folder is needed: a pipeline whose inputs are gone can still be cleaned.
+pub fn clean_output(session: Session, graph: Option<&Graph>) -> Result<CleanReport> {
+    let output = session.cache.output.clone();
     let manifest = session.cache.load_manifest()?;
     let mut files: Vec<PathBuf> = manifest
         .stages
@@ -698,10 +817,12 @@ pub fn clean(session: Session, graph: &Graph) -> Result<CleanReport> {
         })
         .collect();
     // Also what a ninja run of the same pipeline wrote (same files, not in the manifest).
-    for (i, s) in graph.stages.iter().enumerate() {
-        if let (true, Some((kind, params))) = (s.needed(), s.runnable()) {
-            if let Ok(outs) = kind.outputs(params, &graph.input_args(i), &s.dir) {
-                files.extend(outs);
+    if let Some(graph) = graph {
+        for (i, s) in graph.stages.iter().enumerate() {
+            if let (true, Some((kind, params))) = (s.needed(), s.runnable()) {
+                if let Ok(outs) = kind.outputs(params, &graph.input_args(i), &s.dir) {
+                    files.extend(outs);
+                }
             }
         }
     }
@@ -802,6 +923,134 @@ mod tests {
         drop(session);
         assert!(!cache.lock_path().exists());
         drop(Session::open_output(&out).unwrap());
+    }
+
+    #[test]
+    fn damaged_records_and_journals_touch_nothing_outside_the_output() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("out");
+        let cache = CacheDir::new(&out);
+        let victim = dir.path().join("victim.exr");
+        std::fs::write(&victim, b"keep me").unwrap();
+        // A record whose output climbs out of the output folder, replaced by a new one.
+        let mut m = Manifest::default();
+        let mut bad = record("s", &[("x.exr", b"x")]);
+        bad.outputs[0].rel = "../../victim.exr".into();
+        m.stages.insert("s".into(), bad);
+        apply_record(&mut m, &out, "s", record("s", &[("y.exr", b"y")]));
+        assert!(victim.is_file());
+        // A journal renaming a file outside the output folder is not rolled forward.
+        let staged = cache.tmp().join("4242");
+        std::fs::create_dir_all(&staged).unwrap();
+        std::fs::write(staged.join("0"), b"evil").unwrap();
+        for (from, to) in [
+            (staged.join("0"), victim.clone()),
+            (victim.clone(), out.join("s/a.exr")),
+            (staged.join("0"), out.join(".bake/manifest.json")),
+        ] {
+            let j = Journal {
+                id: "s".into(),
+                record: record("s", &[("a.exr", b"evil")]),
+                renames: vec![(from, to)],
+            };
+            cache::write_atomic(
+                &cache.journal().join("s.json"),
+                &serde_json::to_vec(&j).unwrap(),
+            )
+            .unwrap();
+            drop(Session::open_output(&out).unwrap());
+            assert_eq!(std::fs::read(&victim).unwrap(), b"keep me");
+            assert!(!out.join("s/a.exr").exists());
+            assert!(cache.load_manifest().unwrap().stages.is_empty());
+            std::fs::create_dir_all(&staged).unwrap();
+            std::fs::write(staged.join("0"), b"evil").unwrap();
+        }
+    }
+
+    #[test]
+    fn a_panic_in_the_runner_fails_the_stage_instead_of_hanging_the_run() {
+        let dir = tempfile::tempdir().unwrap();
+        let src = r#"(output: "out", stages: [
+            (id: "a", kind: "equirect-to-cube", reads: ["b"]),
+            (id: "b", kind: "dfg", params: (size: 4, samples: 8)),
+        ])"#;
+        let file = dir.path().join("p.ron");
+        std::fs::write(&file, src).unwrap();
+        let graph = crate::load(&file).unwrap();
+        let session = Session::open(&graph).unwrap();
+        let mut plan = crate::plan::plan(&graph, false).unwrap();
+        let b = graph.index("b").unwrap();
+        // Work without a key: `run_stage` panics before the bake is called.
+        plan.stages[b].key = None;
+        // A thread of its own (not scoped): before the fix the run never ended.
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let report = run(&session, &graph, plan, 2, &Quiet);
+            let _ = tx.send((report, graph, session));
+        });
+        let (report, graph, session) = rx
+            .recv_timeout(std::time::Duration::from_secs(60))
+            .expect("the run ends");
+        let report = report.unwrap();
+        let status = |id: &str| report.stages[graph.index(id).unwrap()].status;
+        assert_eq!(status("b"), Status::Failed);
+        assert!(report.stages[b].reason.contains("the runner panicked"));
+        assert_eq!(status("a"), Status::Blocked);
+        drop(session);
+        assert!(!dir.path().join("out/.bake/tmp").exists());
+    }
+
+    #[test]
+    fn an_unreadable_lock_is_busy_not_stale() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("out");
+        let cache = CacheDir::new(&out);
+        std::fs::create_dir_all(&cache.root).unwrap();
+        // What a lock being created by another process may look like for an instant.
+        for text in ["", "12ab"] {
+            std::fs::write(cache.lock_path(), text).unwrap();
+            match Session::open_output(&out) {
+                Err(Error::Busy { why, .. }) => assert!(why.contains("remove the lock"), "{why}"),
+                Err(e) => panic!("{e}"),
+                Ok(_) => panic!("took a lock holding {text:?}"),
+            }
+            assert_eq!(std::fs::read_to_string(cache.lock_path()).unwrap(), text);
+        }
+        std::fs::remove_file(cache.lock_path()).unwrap();
+        let session = Session::open_output(&out).unwrap();
+        assert_eq!(
+            std::fs::read_to_string(cache.lock_path()).unwrap(),
+            std::process::id().to_string()
+        );
+        let names: Vec<String> = std::fs::read_dir(&cache.root)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        assert!(
+            names.iter().all(|n| !n.contains(".tmp")),
+            "no temporary lock left: {names:?}"
+        );
+        drop(session);
+    }
+
+    #[test]
+    fn of_threads_racing_for_a_lock_exactly_one_gets_it() {
+        for _ in 0..20 {
+            let dir = tempfile::tempdir().unwrap();
+            let lock = dir.path().join("lock");
+            let won = std::sync::atomic::AtomicUsize::new(0);
+            std::thread::scope(|s| {
+                for _ in 0..8 {
+                    s.spawn(|| {
+                        if take_lock(&lock).is_ok() {
+                            won.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+                        }
+                    });
+                }
+            });
+            assert_eq!(won.into_inner(), 1);
+            HELD.lock().unwrap().retain(|p| *p != lock);
+        }
     }
 
     #[test]

@@ -217,7 +217,10 @@ pub fn build(pipeline: Pipeline) -> Result<Graph> {
     }
     for s in &stages {
         let output = paths::normalize(&p.output);
-        if !paths::is_within(&s.dir, &output) || s.dir == output {
+        if !paths::is_within(&s.dir, &output)
+            || s.dir == output
+            || paths::is_within(&s.dir, &output.join(".bake"))
+        {
             diags.push(p.diag(
                 s.offset,
                 format!(
@@ -355,6 +358,23 @@ pub fn build(pipeline: Pipeline) -> Result<Graph> {
                     s.id, s.kind_name
                 ),
             ));
+        }
+        // Parameters are checked once it is known what is needed: the scene's parameters of a
+        // stage the scene does not need are not checked unless the outputs or a stage need it.
+        // (Declared stages were checked as they were parsed; checking them again is harmless.)
+        if let (true, Some((kind, params))) = (s.needed(), s.runnable()) {
+            if let Err(e) = kind.validate(params) {
+                let msg = match s.origin {
+                    Origin::Scene => format!(
+                        "scene: parameters of '{}' (stage '{}'): {}",
+                        s.kind_name, s.id, e.message
+                    ),
+                    Origin::Declared => {
+                        format!("stage '{}' ({}): {}", s.id, s.kind_name, e.message)
+                    }
+                };
+                diags.push(p.diag(s.offset, msg));
+            }
         }
     }
 
@@ -697,6 +717,7 @@ mod tests {
             ("../elsewhere", "not a folder inside the output"),
             (".", "not a folder inside the output"),
             ("b", "write to the same folder"),
+            (".bake/objects", "not a folder inside the output"),
         ] {
             let src = format!("(stages: [(id: \"a\", {E2C}, out: \"{out}\"), (id: \"b\", {E2C})])");
             let d = diags(&src);

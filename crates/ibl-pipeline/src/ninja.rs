@@ -49,10 +49,11 @@ pub fn emit(graph: &Graph, ninja_file: &Path, bin_dir: &Path) -> Result<String> 
     );
     let _ = writeln!(out, "# Each edge is a bake's own CLI; paths are relative to this file's folder: run `ninja -C <folder>`.");
     let _ = writeln!(out, "ninja_required_version = 1.3\n");
+    // Quoted for the shell (`'/a b'/quat-map` is one word), then escaped for ninja.
     let _ = writeln!(
         out,
         "bindir = {}\n",
-        bin_dir.to_string_lossy().replace('$', "$$")
+        shell_quote(&bin_dir.to_string_lossy()).replace('$', "$$")
     );
     let _ = writeln!(out, "rule bake\n  command = $cmd\n  description = $desc\n");
     let mut defaults = Vec::new();
@@ -138,5 +139,31 @@ mod tests {
         assert_eq!(shell_quote("it's"), "'it'\\''s'");
         assert_eq!(shell_quote(""), "''");
         assert_eq!(esc_path(Path::new("a b/c:d$")), "a$ b/c$:d$$");
+    }
+
+    #[test]
+    fn a_bin_dir_with_spaces_quotes_and_dollars_is_one_shell_word() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("p.ron");
+        let src = r#"(stages: [(id: "dfg", kind: "dfg", params: (size: 8))])"#;
+        let graph = crate::graph::build(crate::schema::parse(&file, src.into()).unwrap()).unwrap();
+        for bin_dir in ["/tmp/a b", "/tmp/it's $HOME"] {
+            let text = emit(&graph, &dir.path().join("build.ninja"), Path::new(bin_dir)).unwrap();
+            let value = text
+                .lines()
+                .find_map(|l| l.strip_prefix("bindir = "))
+                .unwrap();
+            // What ninja hands the shell for `$bindir/brdf-lut`: `$$` is `$`.
+            let cmd = format!("{}/brdf-lut", value.replace("$$", "$"));
+            let out = std::process::Command::new("sh")
+                .args(["-c", &format!("printf '%s\\n' {cmd}")])
+                .output()
+                .unwrap();
+            assert_eq!(
+                String::from_utf8_lossy(&out.stdout),
+                format!("{bin_dir}/brdf-lut\n"),
+                "{value}"
+            );
+        }
     }
 }

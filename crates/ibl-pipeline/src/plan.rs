@@ -24,11 +24,12 @@ pub enum Decision {
 }
 
 impl Decision {
+    /// The action in one word, as `plan --json` writes it.
     pub fn word(&self) -> &'static str {
         match self {
             Decision::Run(_) => "run",
             Decision::Restore(_) => "restore",
-            Decision::UpToDate => "skip",
+            Decision::UpToDate => "up-to-date",
             Decision::Skip(_) => "skip",
         }
     }
@@ -158,17 +159,17 @@ pub fn plan(graph: &Graph, force: bool) -> Result<Plan> {
 
     let mut stages: Vec<PlannedStage> = Vec::with_capacity(graph.stages.len());
     for s in &graph.stages {
-        let Need::Needed(_) = &s.need else {
-            let Need::NotNeeded(why) = &s.need else {
-                unreachable!()
-            };
-            stages.push(PlannedStage {
-                key: None,
-                parts: None,
-                decision: Decision::Skip(why.clone()),
-            });
-            continue;
-        };
+        match &s.need {
+            Need::Needed(_) => {}
+            Need::NotNeeded(why) => {
+                stages.push(PlannedStage {
+                    key: None,
+                    parts: None,
+                    decision: Decision::Skip(why.clone()),
+                });
+                continue;
+            }
+        }
         let (kind, params) = s
             .runnable()
             .expect("needed stages are runnable (checked by the graph)");
@@ -190,7 +191,7 @@ pub fn plan(graph: &Graph, force: bool) -> Result<Plan> {
             })
             .collect();
         let parts = KeyParts {
-            tool: ibl_core::TOOL_VERSION.to_string(),
+            tool: crate::cache::tool(),
             kind: kind.name().to_string(),
             params: canonical_text(params),
             reads,

@@ -53,11 +53,6 @@ pub const SCENE_KINDS: [&str; 10] = [
     "tpr-map",
 ];
 
-/// Compact text of an exponent for ids and messages (100 → "100", 0.5 → "0.5").
-fn num(x: impl std::fmt::Display) -> String {
-    format!("{x}")
-}
-
 struct Builder<'a> {
     pipeline: &'a Pipeline,
     scene: &'a Scene,
@@ -66,20 +61,21 @@ struct Builder<'a> {
 }
 
 impl Builder<'_> {
-    /// The scene's parameters for `kind` (or `base`) with `overrides` applied, checked by the
-    /// bake when the stage is needed; `None` if the kind is not in this build.
+    /// The scene's parameters for `kind` with `overrides` applied; `None` if the
+    /// kind is not in this build. They are validated by the graph once it knows which stages
+    /// are needed (a stage the scene does not need may be needed by the pipeline's outputs).
     fn params(
         &mut self,
         kind: &str,
-        base: Option<&AnyParams>,
         overrides: &[(&str, serde_json::Value)],
-        needed: bool,
         offset: usize,
     ) -> Option<AnyParams> {
         let k = kinds::find(kind)?;
-        let mut p = base
+        let mut p = self
+            .scene
+            .params
+            .get(kind)
             .cloned()
-            .or_else(|| self.scene.params.get(kind).cloned())
             .unwrap_or_else(|| k.default_params());
         for (key, value) in overrides {
             match k.with(&p, key, value.clone()) {
@@ -91,34 +87,19 @@ impl Builder<'_> {
                 }
             }
         }
-        // Scene parameters are checked once the scene's own values are in, and only where used.
-        if let (true, Err(e)) = (needed, k.validate(&p)) {
-            self.diags.push(self.pipeline.diag(
-                offset,
-                format!("scene: parameters of '{kind}': {}", e.message),
-            ));
-        }
         Some(p)
     }
 
-    #[allow(clippy::too_many_arguments)]
     fn stage(
         &mut self,
         id: String,
         kind: &'static str,
-        base: Option<&AnyParams>,
         reads: Vec<String>,
         need: Need,
         overrides: &[(&str, serde_json::Value)],
         offset: usize,
     ) {
-        let params = self.params(
-            kind,
-            base,
-            overrides,
-            matches!(need, Need::Needed(_)),
-            offset,
-        );
+        let params = self.params(kind, overrides, offset);
         self.out.push(Derived {
             id,
             kind,
@@ -179,7 +160,6 @@ pub fn derive(
         b.stage(
             cube.clone(),
             "equirect-to-cube",
-            None,
             vec![env],
             Needed(format!("environment of probe '{}'", probe.id)),
             &[],
@@ -188,7 +168,6 @@ pub fn derive(
         b.stage(
             format!("{}/irradiance", probe.id),
             "irradiance",
-            None,
             vec![cube.clone()],
             Needed(format!("diffuse lighting of probe '{}'", probe.id)),
             &[],
@@ -198,8 +177,7 @@ pub fn derive(
             Serving::SplitSum => (
                 Needed(format!(
                     "probe '{}' is served by split-sum up to roughness {}",
-                    probe.id,
-                    num(probe.max_roughness)
+                    probe.id, probe.max_roughness
                 )),
                 NotNeeded(format!(
                     "not needed by the scene: probe '{}' is served by split-sum",
@@ -217,7 +195,6 @@ pub fn derive(
         b.stage(
             format!("{}/prefilter", probe.id),
             "prefilter",
-            None,
             vec![cube.clone()],
             pre,
             &[("max_roughness", serde_json::json!(probe.max_roughness))],
@@ -226,7 +203,6 @@ pub fn derive(
         b.stage(
             format!("{}/shexp", probe.id),
             "shexp-fit",
-            None,
             vec![cube],
             fit,
             &[],
@@ -250,7 +226,7 @@ pub fn derive(
             quoted(&split_sum)
         ))
     };
-    b.stage("dfg".into(), "dfg", None, vec![], dfg, &[], scene.offset);
+    b.stage("dfg".into(), "dfg", vec![], dfg, &[], scene.offset);
     let tail = if sh_exp.is_empty() {
         NotNeeded("not needed by the scene: no probe is served by SH-exp".into())
     } else {
@@ -262,7 +238,6 @@ pub fn derive(
     b.stage(
         "fresnel-tail".into(),
         "fresnel-tail",
-        None,
         vec![],
         tail,
         &[],
@@ -287,7 +262,6 @@ pub fn derive(
             b.stage(
                 kind.into(),
                 kind,
-                None,
                 vec![],
                 NotNeeded("not needed by the scene: no anisotropic material".into()),
                 &[],
@@ -296,18 +270,13 @@ pub fn derive(
         }
     }
     for ((nu, nv), users, at) in &pairs {
-        let why = format!(
-            "anisotropic (n_u, n_v) = ({}, {}) of {}",
-            num(*nu),
-            num(*nv),
-            quoted(users)
-        );
+        // f64's Display is compact: 100 → "100", 0.5 → "0.5".
+        let why = format!("anisotropic (n_u, n_v) = ({nu}, {nv}) of {}", quoted(users));
         let over = [("nu", serde_json::json!(nu)), ("nv", serde_json::json!(nv))];
         for kind in ["hv-lut", "as-size-bias"] {
             b.stage(
-                format!("{kind}/{}x{}", num(*nu), num(*nv)),
+                format!("{kind}/{nu}x{nv}"),
                 kind,
-                None,
                 vec![],
                 Needed(why.clone()),
                 &over,
@@ -335,7 +304,6 @@ pub fn derive(
         b.stage(
             format!("{}/quat-map", m.id),
             "quat-map",
-            None,
             vec![folder],
             quat,
             &[],
@@ -349,13 +317,23 @@ pub fn derive(
                 m.id
             ))
         };
+        // The material's own keys override the scene's tpr-map parameters one by one.
+        let own = m
+            .tpr_params
+            .as_ref()
+            .map(|p| p.canonical())
+            .unwrap_or_default();
+        let over: Vec<(&str, serde_json::Value)> = m
+            .tpr_keys
+            .iter()
+            .filter_map(|k| Some((k.as_str(), own.get(k)?.clone())))
+            .collect();
         b.stage(
             format!("{}/tpr-map", m.id),
             "tpr-map",
-            m.tpr_params.as_ref(),
             vec![],
             tpr,
-            &[],
+            &over,
             m.offset,
         );
     }
@@ -494,19 +472,64 @@ mod tests {
     }
 
     #[test]
-    fn scene_parameters_are_checked_only_where_used() {
-        // 12-bit TPR maps are invalid, but no material uses a TPR map.
-        derive_from(
-            r#"(materials: [(id: "a", folder: "f", model: Ggx)], params: {"tpr-map": (size: 8, bits: 12)})"#,
+    fn a_materials_tpr_params_override_the_scenes_key_by_key() {
+        let d = derive_from(
+            r#"(materials: [
+                (id: "a", folder: "f", model: Ggx, tpr_map: true, tpr_params: (preset: "spiral:0.5,0.5,2", bits: 16)),
+                (id: "b", folder: "g", model: Ggx, tpr_map: true),
+            ], params: {"tpr-map": (size: 8, preset: "radial", bits: 8, y_down: true)})"#,
         );
-        let p = schema::parse(Path::new("s.ron"), r#"(scene: (materials: [(id: "a", folder: "f", model: Ggx, tpr_map: true)], params: {"tpr-map": (size: 8, bits: 12)}))"#.into()).unwrap();
-        let mut diags = vec![];
-        derive(&p, p.scene.as_ref().unwrap(), &mut diags);
-        assert_eq!(diags.len(), 1);
+        let tpr = |id: &str| crate::kinds::canonical_text(find(&d, id).params.as_ref().unwrap());
+        let a = tpr("a/tpr-map");
+        // Given keys win (even one set to its default: bits 16), the others are the scene's.
         assert!(
-            diags[0].message.contains("tpr-map") && diags[0].message.contains("bits"),
+            a.contains("\"preset\":\"spiral:0.5,0.5,2\"") && a.contains("\"bits\":16"),
+            "{a}"
+        );
+        assert!(
+            a.contains("\"size\":")
+                && !a.contains("\"size\":null")
+                && a.contains("\"y_down\":true"),
+            "the scene's size and y_down are kept: {a}"
+        );
+        let b = tpr("b/tpr-map");
+        assert!(
+            b.contains("\"preset\":\"radial") && b.contains("\"bits\":8"),
+            "{b}"
+        );
+    }
+
+    #[test]
+    fn scene_parameters_are_checked_only_where_used() {
+        let check = |src: &str| match crate::graph::build(
+            schema::parse(Path::new("s.ron"), src.into()).unwrap_or_else(|e| panic!("{e}")),
+        ) {
+            Ok(_) => vec![],
+            Err(crate::Error::Invalid(d)) => d,
+            Err(e) => panic!("{e}"),
+        };
+        // 12-bit TPR maps are invalid, but no material uses a TPR map.
+        let d = check(
+            r#"(scene: (materials: [(id: "a", folder: "f", model: Ggx)], params: {"tpr-map": (size: 8, bits: 12)}))"#,
+        );
+        assert!(d.is_empty(), "{d:?}");
+        let d = check(
+            r#"(scene: (materials: [(id: "a", folder: "f", model: Ggx, tpr_map: true)], params: {"tpr-map": (size: 8, bits: 12)}))"#,
+        );
+        assert_eq!(d.len(), 1, "{d:?}");
+        assert!(
+            d[0].message.contains("tpr-map") && d[0].message.contains("bits"),
             "{}",
-            diags[0]
+            d[0]
+        );
+        // A stage the scene does not need, needed by the outputs: checked too.
+        let d =
+            check(r#"(outputs: ["as-size-bias"], scene: (params: {"as-size-bias": (nu: -5)}))"#);
+        assert_eq!(d.len(), 1, "{d:?}");
+        assert!(
+            d[0].message.contains("as-size-bias") && d[0].message.contains("nu"),
+            "{}",
+            d[0]
         );
     }
 }

@@ -91,8 +91,11 @@ pub struct Material {
     pub model: Model,
     pub bump_mapped: bool,
     pub tpr_map: bool,
-    /// The material's own `tpr-map` parameters (its preset), over the scene's defaults.
+    /// The material's own `tpr-map` parameters (its preset): the keys it gives (`tpr_keys`)
+    /// override the scene's `tpr-map` parameters one by one, the others are the scene's.
     pub tpr_params: Option<AnyParams>,
+    /// The keys `tpr_params` gives, in the order written.
+    pub tpr_keys: Vec<String>,
     pub offset: usize,
 }
 
@@ -208,6 +211,33 @@ struct RawMaterial<'a> {
     tpr_map: bool,
     #[serde(default, borrow)]
     tpr_params: Option<&'a RawValue>,
+}
+
+/// The keys of a RON struct `(key: value, ...)`, in the order written (values not parsed).
+struct Keys(Vec<String>);
+
+impl<'de> Deserialize<'de> for Keys {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        struct V;
+        impl<'de> serde::de::Visitor<'de> for V {
+            type Value = Keys;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("parameters `(key: value, ...)`")
+            }
+            fn visit_map<A: serde::de::MapAccess<'de>>(
+                self,
+                mut m: A,
+            ) -> std::result::Result<Keys, A::Error> {
+                let mut keys = Vec::new();
+                while let Some(k) = m.next_key::<String>()? {
+                    m.next_value::<serde::de::IgnoredAny>()?;
+                    keys.push(k);
+                }
+                Ok(Keys(keys))
+            }
+        }
+        d.deserialize_struct("Params", &[], V)
+    }
 }
 
 /// Byte offset of `part` (a slice of `src`) in `src`.
@@ -464,6 +494,11 @@ fn parse_scene(
                 ));
             }
         }
+        let tpr_keys = rm
+            .tpr_params
+            .and_then(|raw| ron_options().from_str::<Keys>(raw.get_ron()).ok())
+            .map(|k| k.0)
+            .unwrap_or_default();
         let tpr_params = match rm.tpr_params {
             None => None,
             Some(raw) => {
@@ -495,6 +530,7 @@ fn parse_scene(
             bump_mapped: rm.bump_mapped,
             tpr_map: rm.tpr_map,
             tpr_params,
+            tpr_keys,
             offset: at,
         });
     }

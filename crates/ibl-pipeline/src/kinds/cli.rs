@@ -260,6 +260,13 @@ impl ValueSer {
     }
 }
 
+/// Serializer methods whose value is one `Display`ed value.
+macro_rules! as_one {
+    ($($f:ident($t:ty)),*) => {
+        $(fn $f(self, v: $t) -> Result<CliValue, SerError> { Self::one(v) })*
+    };
+}
+
 impl ser::Serializer for ValueSer {
     type Ok = CliValue;
     type Error = SerError;
@@ -274,42 +281,20 @@ impl ser::Serializer for ValueSer {
     fn serialize_bool(self, v: bool) -> Result<CliValue, SerError> {
         Ok(CliValue::Bool(v))
     }
-    fn serialize_i8(self, v: i8) -> Result<CliValue, SerError> {
-        Self::one(v)
-    }
-    fn serialize_i16(self, v: i16) -> Result<CliValue, SerError> {
-        Self::one(v)
-    }
-    fn serialize_i32(self, v: i32) -> Result<CliValue, SerError> {
-        Self::one(v)
-    }
-    fn serialize_i64(self, v: i64) -> Result<CliValue, SerError> {
-        Self::one(v)
-    }
-    fn serialize_u8(self, v: u8) -> Result<CliValue, SerError> {
-        Self::one(v)
-    }
-    fn serialize_u16(self, v: u16) -> Result<CliValue, SerError> {
-        Self::one(v)
-    }
-    fn serialize_u32(self, v: u32) -> Result<CliValue, SerError> {
-        Self::one(v)
-    }
-    fn serialize_u64(self, v: u64) -> Result<CliValue, SerError> {
-        Self::one(v)
-    }
-    fn serialize_f32(self, v: f32) -> Result<CliValue, SerError> {
-        Self::one(v)
-    }
-    fn serialize_f64(self, v: f64) -> Result<CliValue, SerError> {
-        Self::one(v)
-    }
-    fn serialize_char(self, v: char) -> Result<CliValue, SerError> {
-        Self::one(v)
-    }
-    fn serialize_str(self, v: &str) -> Result<CliValue, SerError> {
-        Self::one(v)
-    }
+    as_one!(
+        serialize_i8(i8),
+        serialize_i16(i16),
+        serialize_i32(i32),
+        serialize_i64(i64),
+        serialize_u8(u8),
+        serialize_u16(u16),
+        serialize_u32(u32),
+        serialize_u64(u64),
+        serialize_f32(f32),
+        serialize_f64(f64),
+        serialize_char(char),
+        serialize_str(&str)
+    );
     fn serialize_bytes(self, _: &[u8]) -> Result<CliValue, SerError> {
         unsupported("byte string")
     }
@@ -403,36 +388,27 @@ impl ListCollector {
     }
 }
 
-impl ser::SerializeSeq for ListCollector {
-    type Ok = CliValue;
-    type Error = SerError;
-    fn serialize_element<T: ?Sized + Serialize>(&mut self, v: &T) -> Result<(), SerError> {
-        self.push(v)
-    }
-    fn end(self) -> Result<CliValue, SerError> {
-        Ok(CliValue::List(self.0))
-    }
+/// The list-collecting traits: every element is pushed, the end is the list.
+macro_rules! list_collector {
+    ($($tr:ident::$f:ident),*) => {
+        $(impl ser::$tr for ListCollector {
+            type Ok = CliValue;
+            type Error = SerError;
+            fn $f<T: ?Sized + Serialize>(&mut self, v: &T) -> Result<(), SerError> {
+                self.push(v)
+            }
+            fn end(self) -> Result<CliValue, SerError> {
+                Ok(CliValue::List(self.0))
+            }
+        })*
+    };
 }
-impl ser::SerializeTuple for ListCollector {
-    type Ok = CliValue;
-    type Error = SerError;
-    fn serialize_element<T: ?Sized + Serialize>(&mut self, v: &T) -> Result<(), SerError> {
-        self.push(v)
-    }
-    fn end(self) -> Result<CliValue, SerError> {
-        Ok(CliValue::List(self.0))
-    }
-}
-impl ser::SerializeTupleStruct for ListCollector {
-    type Ok = CliValue;
-    type Error = SerError;
-    fn serialize_field<T: ?Sized + Serialize>(&mut self, v: &T) -> Result<(), SerError> {
-        self.push(v)
-    }
-    fn end(self) -> Result<CliValue, SerError> {
-        Ok(CliValue::List(self.0))
-    }
-}
+
+list_collector!(
+    SerializeSeq::serialize_element,
+    SerializeTuple::serialize_element,
+    SerializeTupleStruct::serialize_field
+);
 
 /// Parses `args` with clap into `P` (the other half of the round trip).
 pub fn from_args<P: clap::Args + clap::FromArgMatches>(args: &[String]) -> Result<P, String> {

@@ -60,8 +60,10 @@ pub static AS_SIZE_BIAS: Adapter<sb::Params> = Adapter {
     package: "brdf-lut",
     reads: Arity::NONE,
     out: |p, dir| table_out(dir, "as-size-bias.exr", p.thesis_names),
+    // Invalid parameters never reach a run (the graph checks them); the folder is a fallback.
     product: |p, out| {
-        sb::output_path(p, &p.validate().expect("validated"), out)
+        p.validate()
+            .and_then(|a| sb::output_path(p, &a, out))
             .unwrap_or_else(|_| out.to_path_buf())
     },
     outputs: |p, _, out| Ok(vec![sb::output_path(p, &p.validate()?, out)?]),
@@ -84,7 +86,8 @@ pub static HV_LUT: Adapter<hv::Params> = Adapter {
     reads: Arity::NONE,
     out: |p, dir| table_out(dir, "hv.exr", p.thesis_names),
     product: |p, out| {
-        hv::output_paths(p, &p.validate().expect("validated"), out)
+        p.validate()
+            .and_then(|a| hv::output_paths(p, &a, out))
             .map(|o| o.0)
             .unwrap_or_else(|_| out.to_path_buf())
     },

@@ -463,12 +463,76 @@ mod tests {
         }
     }
 
+    /// Values to try for a field that currently holds `v` (the example's value first).
+    fn other_values(
+        v: &serde_json::Value,
+        example: Option<&serde_json::Value>,
+    ) -> Vec<serde_json::Value> {
+        use serde_json::{json, Value};
+        let mut out: Vec<Value> = example.into_iter().cloned().collect();
+        match v {
+            Value::Bool(b) => out.push(json!(!b)),
+            Value::Number(n) => {
+                let x = n.as_f64().unwrap_or(0.0);
+                out.extend([json!(x as i64 + 1), json!(x * 2.0 + 1.0), json!(x / 2.0)]);
+            }
+            Value::String(t) => out.extend([json!(format!("{t}x")), json!("1")]),
+            Value::Array(a) => {
+                out.push(json!([]));
+                if let Some(first) = a.first() {
+                    out.push(Value::Array(vec![first.clone()]));
+                }
+            }
+            _ => {}
+        }
+        // Options that are unset, and anything else: common shapes.
+        out.extend([
+            json!(1),
+            json!(0.5),
+            json!("x"),
+            json!(true),
+            json!("8x8"),
+            json!("radial"),
+            Value::Null,
+        ]);
+        out
+    }
+
     #[test]
     fn canonical_text_is_stable_and_changes_with_any_field() {
         for k in all() {
             let (d, e) = (k.default_params(), k.example_params());
             assert_eq!(canonical_text(&d), canonical_text(&k.default_params()));
             assert_ne!(canonical_text(&d), canonical_text(&e), "{}", k.name());
+            let (dv, ev) = (d.canonical(), e.canonical());
+            for name in k.param_names() {
+                let current = &dv[&name];
+                // For an enum, serde's refusal of "x" lists its variants.
+                let variants: Vec<serde_json::Value> = match k.with(&d, &name, "x".into()) {
+                    Err(e) => e.split('`').skip(3).step_by(2).map(|v| v.into()).collect(),
+                    Ok(_) => vec![],
+                };
+                let changed = other_values(current, ev.get(&name))
+                    .into_iter()
+                    .chain(variants)
+                    .filter(|v| v != current)
+                    .find_map(|v| k.with(&d, &name, v).ok())
+                    .unwrap_or_else(|| {
+                        panic!("{}: no other value for '{name}' (now {current})", k.name())
+                    });
+                assert_ne!(
+                    canonical_text(&changed),
+                    canonical_text(&d),
+                    "{}: changing '{name}' does not change the canonical text",
+                    k.name()
+                );
+                assert_ne!(
+                    changed.canonical()[&name],
+                    *current,
+                    "{}: '{name}'",
+                    k.name()
+                );
+            }
         }
     }
 }
