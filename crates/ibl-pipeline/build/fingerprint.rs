@@ -1,4 +1,4 @@
-// The build fingerprint of `build.rs`, in a file of its own so the crate's tests check it too.
+//! The build fingerprint of `build.rs`, in a file of its own so the crate's tests check it too.
 
 use std::path::{Path, PathBuf};
 
