@@ -1,4 +1,5 @@
-//! The build fingerprint of `build.rs`, in a file of its own so the crate's tests check it too.
+// The build fingerprint of `build.rs`, in a file of its own so the crate's tests check it too
+// (included with `include!` there, so it cannot open with an inner `//!` doc comment).
 
 use std::path::{Path, PathBuf};
 
