@@ -84,30 +84,32 @@ fn faces_layout_writes_every_level_and_the_report() {
     }
 }
 
+/// A quick FIS chain of `levels` levels from 16² faces into `out` (for the folder tests).
+fn quick_chain(input: &str, out: &Path, levels: &str) -> Output {
+    let o = run(&[
+        fixture(input).to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--size",
+        "16",
+        "--levels",
+        levels,
+        "--method",
+        "fis",
+        "--samples",
+        "16",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    o
+}
+
 #[test]
 fn a_shorter_chain_into_the_same_folder_removes_the_old_levels() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("chain");
-    let bake = |input: &str, levels: &str| {
-        let o = run(&[
-            fixture(input).to_str().unwrap(),
-            "-o",
-            out.to_str().unwrap(),
-            "--size",
-            "16",
-            "--levels",
-            levels,
-            "--method",
-            "fis",
-            "--samples",
-            "16",
-        ]);
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        o
-    };
-    bake("hdri/studio_256.exr", "5");
+    quick_chain("hdri/studio_256.exr", &out, "5");
     assert!(out.join("m4_px.exr").exists());
-    let o = bake("hdri/sunset_256.exr", "2");
+    let o = quick_chain("hdri/sunset_256.exr", &out, "2");
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("m2_px.exr"), "{err}");
     let names = files_in(&out);
@@ -129,20 +131,7 @@ fn a_chain_with_a_foreign_level_is_refused_by_the_reader() {
     // Files copied in by hand (not through the writer): a level that does not halve.
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("chain");
-    let o = run(&[
-        fixture("hdri/studio_256.exr").to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--size",
-        "16",
-        "--levels",
-        "3",
-        "--method",
-        "fis",
-        "--samples",
-        "16",
-    ]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    quick_chain("hdri/studio_256.exr", &out, "3");
     for f in FACES {
         std::fs::copy(
             out.join(format!("m1_{f}.exr")),
