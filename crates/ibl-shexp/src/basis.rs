@@ -26,6 +26,21 @@ pub fn vmf_band(l: usize, alpha: f32) -> f32 {
     (-((l * (l + 1)) as f32) * alpha * 0.5).exp()
 }
 
+/// Linear ("hat") interpolation weights of the α knots of the piecewise-linear extension
+/// (`coeffs::AlphaKnots`, not in paper 002): coefficients(α) = w₀·c[s] + w₁·c[s+1] with the
+/// segment s whose knots bracket α, α clamped to the knot range. Returns ((s, w₀), (s+1, w₁));
+/// one knot gives ((0, 1), (0, 0)). `knots` must be non-empty and strictly increasing.
+pub fn knot_weights(knots: &[f32], alpha: f32) -> ((usize, f32), (usize, f32)) {
+    let k = knots.len();
+    if k < 2 {
+        return ((0, 1.0), (0, 0.0));
+    }
+    let a = alpha.clamp(knots[0], knots[k - 1]);
+    let s = (0..k - 2).find(|&s| a <= knots[s + 1]).unwrap_or(k - 2);
+    let t = ((a - knots[s]) / (knots[s + 1] - knots[s])).clamp(0.0, 1.0);
+    ((s, 1.0 - t), (s + 1, t))
+}
+
 /// Band l of SH index i = l(l+1)+m.
 #[inline]
 pub fn band_of(i: usize) -> usize {
@@ -134,6 +149,28 @@ mod tests {
             }
         }
         assert_eq!(vmf_band(0, 1.0), 1.0);
+    }
+
+    #[test]
+    fn knot_weights_interpolate_and_clamp() {
+        let knots = [0.2f32, 0.5, 1.0];
+        // Exact at the knots, a partition of unity in between, clamped outside.
+        assert_eq!(knot_weights(&knots, 0.2), ((0, 1.0), (1, 0.0)));
+        assert_eq!(knot_weights(&knots, 0.5).1, (1, 1.0));
+        assert_eq!(knot_weights(&knots, 1.0), ((1, 0.0), (2, 1.0)));
+        assert_eq!(knot_weights(&knots, 0.05), ((0, 1.0), (1, 0.0)));
+        assert_eq!(knot_weights(&knots, 3.0), ((1, 0.0), (2, 1.0)));
+        let ((s, w0), (s1, w1)) = knot_weights(&knots, 0.75);
+        assert_eq!((s, s1), (1, 2));
+        assert!((w0 - 0.5).abs() < 1e-6 && (w1 - 0.5).abs() < 1e-6);
+        // Linear in α: interpolating the knot positions themselves returns α.
+        for i in 0..=100 {
+            let a = 0.2 + 0.8 * i as f32 / 100.0;
+            let ((s, w0), (s1, w1)) = knot_weights(&knots, a);
+            assert!((w0 * knots[s] + w1 * knots[s1] - a).abs() < 1e-6, "{a}");
+            assert!((w0 + w1 - 1.0).abs() < 1e-6);
+        }
+        assert_eq!(knot_weights(&[0.4], 0.9), ((0, 1.0), (0, 0.0)));
     }
 
     #[test]

@@ -147,6 +147,8 @@ pub struct Memory {
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct EnvReport {
     pub name: String,
+    /// The SH-exp representation scored ([`Coeffs::describe`]).
+    pub representation: String,
     pub face_size: usize,
     pub fresnel: FresnelTail,
     pub split_sum_source: String,
@@ -430,6 +432,7 @@ pub fn score(
     };
     let report = EnvReport {
         name: name.to_string(),
+        representation: coeffs.describe(),
         face_size: truth.face_size,
         fresnel: coeffs.fresnel,
         split_sum_source: ss.source.clone(),
@@ -595,10 +598,11 @@ pub fn markdown(reports: &[EnvReport]) -> String {
         let _ = writeln!(s, "## {}\n", r.name);
         let _ = writeln!(
             s,
-            "environment cube {}², split-sum chain {:?} ({}), SH-exp Fresnel tail `{:?}`; wins {}/{} (on display-referred values {}/{}); worst truth error share {:.2e}\n",
+            "environment cube {}², split-sum chain {:?} ({}), SH-exp {} with Fresnel tail `{:?}`; wins {}/{} (on display-referred values {}/{}); worst truth error share {:.2e}\n",
             r.face_size,
             r.memory.split_sum_sizes,
             r.split_sum_source,
+            r.representation,
             r.fresnel,
             r.wins,
             r.cases.len(),

@@ -10,6 +10,8 @@
 //! Then, with `objective = relative` (the default), the log-space solution is refined on the
 //! linear error, relative per α group, plus `log_weight` × the log error ([`crate::refine`]);
 //! the linear targets need no floor.
+//! With `alpha_knots` (beyond the paper), the same rows are also solved for one coefficient set
+//! per α knot, linear in α between knots ([`solve_rows_knots`]); `p` and `q` stay eq. 11's.
 
 use crate::basis::{self, num_unknowns, tangent_frame, Features};
 use crate::coeffs::{Coeffs, Objective, Target, CONVENTION, MAX_ORDER};
@@ -110,6 +112,12 @@ pub struct Params {
     /// What exp(P·Q) reconstructs: E0 (paper 002) or E0 divided by the DFG albedo A+B (ablation).
     #[arg(long, value_enum, default_value_t = Target::E0)]
     pub target: Target,
+    /// Beyond eq. 11 (not in paper 002): also fit coefficient sets at these GGX α knots,
+    /// interpolated linearly in α (2–8 increasing values, e.g. 0.2,1), written as
+    /// `alpha_knots` beside the eq. 11 `p` and `q`. Best measured with `--cosine-weight
+    /// --log-weight 0` (bench/shexp.md); every knot needs a value of --alphas beside it.
+    #[arg(long, value_delimiter = ',')]
+    pub alpha_knots: Vec<f32>,
     /// Also write a GLSL and an HLSL snippet of eq. 11 beside the output (.glsl, .hlsl).
     #[arg(long)]
     pub emit_shader: bool,
@@ -149,6 +157,35 @@ impl Params {
             return bad(format!(
                 "--alphas value {a} is out of range (0, 1] (GGX α = roughness²)"
             ));
+        }
+        if !self.alpha_knots.is_empty() {
+            let k = &self.alpha_knots;
+            if k.len() < 2 || k.len() > crate::coeffs::MAX_KNOTS {
+                return bad(format!(
+                    "--alpha-knots needs 2..={} values (got {}); without it the probe is eq. 11",
+                    crate::coeffs::MAX_KNOTS,
+                    k.len()
+                ));
+            }
+            if k.iter().any(|a| !(*a > 0.0 && *a <= 1.0)) || k.windows(2).any(|w| w[1] <= w[0]) {
+                return bad(format!(
+                    "--alpha-knots {k:?} must increase strictly within (0, 1] (GGX α)"
+                ));
+            }
+            // Every knot's coefficients need rows where its hat weight is non-zero.
+            for (i, knot) in k.iter().enumerate() {
+                let lo = if i == 0 { f32::NEG_INFINITY } else { k[i - 1] };
+                let hi = if i + 1 == k.len() {
+                    f32::INFINITY
+                } else {
+                    k[i + 1]
+                };
+                if !self.alphas.iter().any(|a| *a > lo && *a < hi) {
+                    return bad(format!(
+                        "--alpha-knots {knot} has no --alphas value between its neighbours; add one"
+                    ));
+                }
+            }
         }
         if self.views == 0 || self.normals == 0 {
             return bad("--views and --normals must be at least 1".into());
@@ -437,10 +474,24 @@ pub struct SolveOptions {
 /// p, q, the log-space RMS residual per channel and the condition number.
 pub type Solved = (Vec<[f32; 3]>, Vec<[f32; 3]>, [f64; 3], f64);
 
+/// Per knot p and q, the log-space RMS residual per channel and the condition number.
+pub type SolvedKnots = (Vec<Vec<[f32; 3]>>, Vec<Vec<[f32; 3]>>, [f64; 3], f64);
+
 /// Least squares of eq. 14 for each channel; returns (p, q, residual per channel, condition).
 pub fn solve_rows(rows: &Rows, opts: &SolveOptions) -> Result<Solved> {
+    let (mut p, mut q, residual, condition) = solve_rows_knots(rows, opts, &[])?;
+    Ok((p.remove(0), q.remove(0), residual, condition))
+}
+
+/// Eq. 14 with one block of unknowns per α knot: row (pair, α) is w₀·[eq. 14 row] in block s
+/// and w₁·[eq. 14 row] in block s+1 (the hat weights of [`basis::knot_weights`]), so the
+/// coefficients are piecewise linear in α and the problem stays linear in log space. No knots
+/// is eq. 14 itself (one block).
+pub fn solve_rows_knots(rows: &Rows, opts: &SolveOptions, knots: &[f32]) -> Result<SolvedKnots> {
     let (p, q) = (rows.p_order, rows.q_order);
-    let k = num_unknowns(p, q);
+    let k1 = num_unknowns(p, q);
+    let blocks = knots.len().max(1);
+    let k = k1 * blocks;
     let na = rows.alphas.len();
     let m = rows.e0.len();
     let vmfs: Vec<Vec<f32>> = rows
@@ -449,10 +500,20 @@ pub fn solve_rows(rows: &Rows, opts: &SolveOptions) -> Result<Solved> {
         .map(|&a| basis::vmf_factors(p.max(q), a))
         .collect();
     let mut a = vec![0.0f64; m * k];
+    let mut one = vec![0.0f64; k1];
     for (pair, f) in rows.features.iter().enumerate() {
         for (ai, vmf) in vmfs.iter().enumerate() {
             let r = pair * na + ai;
-            f.row(vmf, &mut a[r * k..(r + 1) * k]);
+            f.row(vmf, &mut one);
+            let ((s0, w0), (s1, w1)) = basis::knot_weights(knots, rows.alphas[ai]);
+            for (s, w) in [(s0, w0), (s1, w1)] {
+                if w != 0.0 {
+                    let block = &mut a[r * k + s * k1..r * k + (s + 1) * k1];
+                    for (dst, v) in block.iter_mut().zip(&one) {
+                        *dst += w as f64 * v;
+                    }
+                }
+            }
         }
     }
     // E0/(A+B) target: the albedo at each row's (n·v, α) from the shared DFG table.
@@ -551,11 +612,12 @@ pub fn solve_rows(rows: &Rows, opts: &SolveOptions) -> Result<Solved> {
     }
     let residual = residual.map(|s| (s / m as f64).sqrt());
     let np = basis::coeffs_of_order(p);
-    let pc: Vec<[f32; 3]> = (0..np)
-        .map(|i| [x[0][i] as f32, x[1][i] as f32, x[2][i] as f32])
+    let coeff = |i: usize| [x[0][i] as f32, x[1][i] as f32, x[2][i] as f32];
+    let pc = (0..blocks)
+        .map(|b| (b * k1..b * k1 + np).map(coeff).collect())
         .collect();
-    let qc: Vec<[f32; 3]> = (np..k)
-        .map(|i| [x[0][i] as f32, x[1][i] as f32, x[2][i] as f32])
+    let qc = (0..blocks)
+        .map(|b| (b * k1 + np..(b + 1) * k1).map(coeff).collect())
         .collect();
     Ok((pc, qc, residual, condition))
 }
@@ -600,7 +662,19 @@ pub fn coeffs_from_rows(params: &Params, rows: &Rows, floor: [f64; 3]) -> Result
         refine_iterations: params.refine_iterations,
     };
     let (p, q, residual_rgb, condition) = solve_rows(rows, &opts)?;
-    let residual = (residual_rgb.iter().map(|r| r * r).sum::<f64>() / 3.0).sqrt();
+    let rms = |rgb: [f64; 3]| (rgb.iter().map(|r| r * r).sum::<f64>() / 3.0).sqrt();
+    let residual = rms(residual_rgb);
+    let alpha_knots = if params.alpha_knots.is_empty() {
+        None
+    } else {
+        let (p, q, res, _) = solve_rows_knots(rows, &opts, &params.alpha_knots)?;
+        Some(crate::coeffs::AlphaKnots {
+            alphas: params.alpha_knots.clone(),
+            p,
+            q,
+            residual: rms(res),
+        })
+    };
     Ok(Coeffs {
         p_order: rows.p_order,
         q_order: rows.q_order,
@@ -621,6 +695,7 @@ pub fn coeffs_from_rows(params: &Params, rows: &Rows, floor: [f64; 3]) -> Result
         target: params.target,
         objective: params.objective,
         convention: CONVENTION.to_string(),
+        alpha_knots,
     })
 }
 
@@ -732,30 +807,52 @@ mod tests {
                 refine_iterations: 1001,
                 ..Default::default()
             },
+            Params {
+                alpha_knots: vec![0.5],
+                ..Default::default()
+            },
+            Params {
+                alpha_knots: vec![0.6, 0.3],
+                ..Default::default()
+            },
+            Params {
+                alpha_knots: vec![0.2, 1.5],
+                ..Default::default()
+            },
+            Params {
+                alpha_knots: vec![0.2, f32::NAN],
+                ..Default::default()
+            },
+            Params {
+                // No --alphas value between 0.25 and 0.3 for the knot 0.28.
+                alpha_knots: vec![0.25, 0.28, 0.3, 1.0],
+                ..Default::default()
+            },
         ] {
             assert!(p.validate().is_err(), "{p:?}");
         }
     }
 
-    #[test]
-    fn span_reconstruction_is_exact() {
-        // Solver correctness: a target log E0 that lies in the model's span (built from known
-        // p, q through the same features) is recovered to round-off.
-        let params = small_params();
+    /// Known coefficients for span tests, varied by `seed`.
+    fn known_coefficients(k: usize, seed: f64) -> Vec<[f64; 3]> {
+        (0..k)
+            .map(|i| {
+                [
+                    (i as f64 * 0.37 + seed).sin() * 0.5,
+                    (i as f64 * 0.11 - seed).cos() * 0.3,
+                    0.05 * (i as f64 + seed) / k as f64,
+                ]
+            })
+            .collect()
+    }
+
+    /// Rows of `params`' geometry whose log E0 is exactly eq. 14's row · `x_at(α)`.
+    fn span_rows(params: &Params, x_at: &dyn Fn(f32) -> Vec<[f64; 3]>) -> Rows {
         let views: Vec<Vec3> = (0..params.views)
             .map(|k| basis::fibonacci_hemisphere(k, params.views))
             .collect();
         let (p, q) = (params.p_order, params.q_order);
         let k = num_unknowns(p, q);
-        let x_true: Vec<[f64; 3]> = (0..k)
-            .map(|i| {
-                [
-                    (i as f64 * 0.37).sin() * 0.5,
-                    (i as f64 * 0.11).cos() * 0.3,
-                    0.05 * i as f64 / k as f64,
-                ]
-            })
-            .collect();
         let mut rows = Rows {
             p_order: p,
             q_order: q,
@@ -774,14 +871,10 @@ mod tests {
                 f.eval(frame.2, v);
                 for &alpha in &params.alphas {
                     f.row(&basis::vmf_factors(p, alpha), &mut row);
+                    let x = x_at(alpha);
                     let mut e = [0.0; 3];
                     for (c, ec) in e.iter_mut().enumerate() {
-                        *ec = row
-                            .iter()
-                            .zip(&x_true)
-                            .map(|(a, x)| a * x[c])
-                            .sum::<f64>()
-                            .exp();
+                        *ec = row.iter().zip(&x).map(|(a, x)| a * x[c]).sum::<f64>().exp();
                     }
                     rows.e0.push(e);
                 }
@@ -789,7 +882,11 @@ mod tests {
                 rows.features.push(f);
             }
         }
-        let opts = SolveOptions {
+        rows
+    }
+
+    fn log_only() -> SolveOptions {
+        SolveOptions {
             floor: [1e-30; 3],
             weight_power: 0.0,
             cosine_weight: false,
@@ -797,8 +894,21 @@ mod tests {
             objective: Objective::Log,
             log_weight: 0.0,
             refine_iterations: 0,
-        };
-        let (pc, qc, res, cond) = solve_rows(&rows, &opts).unwrap();
+        }
+    }
+
+    #[test]
+    fn span_reconstruction_is_exact() {
+        // Solver correctness: a target log E0 that lies in the model's span (built from known
+        // p, q through the same features) is recovered to round-off.
+        let params = small_params();
+        let views: Vec<Vec3> = (0..params.views)
+            .map(|k| basis::fibonacci_hemisphere(k, params.views))
+            .collect();
+        let (p, q) = (params.p_order, params.q_order);
+        let x_true = known_coefficients(num_unknowns(p, q), 0.0);
+        let rows = span_rows(&params, &|_| x_true.clone());
+        let (pc, qc, res, cond) = solve_rows(&rows, &log_only()).unwrap();
         let got: Vec<[f32; 3]> = pc.iter().chain(&qc).cloned().collect();
         let err = got
             .iter()
@@ -810,21 +920,11 @@ mod tests {
         assert!(res.iter().all(|r| *r < 1e-9));
         // And the reconstruction of eq. 11 through `Coeffs::e0` reproduces the targets.
         let c = Coeffs {
-            p_order: p,
-            q_order: q,
-            alphas: params.alphas.clone(),
             p: pc,
             q: qc,
-            residual: 0.0,
             residual_rgb: res,
             condition_number: cond,
-            rows: 0,
-            samples: 0,
-            floor: [0.0; 3],
-            fresnel: FresnelTail::Ratio,
-            target: Target::E0,
-            objective: Objective::Log,
-            convention: String::new(),
+            ..Coeffs::zeros(p, q, params.alphas.clone())
         };
         let (frame, world) = row_geometry(5, params.normals, &views);
         let e = c.e0(frame.2, world[3], params.alphas[1]);
@@ -835,6 +935,136 @@ mod tests {
                 "{e:?} {want:?}"
             );
         }
+    }
+
+    #[test]
+    fn knot_span_reconstruction_is_exact() {
+        // Coefficients that are piecewise linear in α between three knots (known sets at the
+        // knots, hat-interpolated between): the knot solve recovers every set to round-off,
+        // and `Coeffs::e0` with those knots reproduces E0 at an α no row was fitted at.
+        let params = Params {
+            alphas: vec![0.2, 0.35, 0.5, 0.75, 1.0],
+            ..small_params()
+        };
+        let knots = [0.2f32, 0.5, 1.0];
+        let k = num_unknowns(params.p_order, params.q_order);
+        let sets: Vec<Vec<[f64; 3]>> = (0..3).map(|s| known_coefficients(k, s as f64)).collect();
+        let x_at = |alpha: f32| -> Vec<[f64; 3]> {
+            let ((s0, w0), (s1, w1)) = basis::knot_weights(&knots, alpha);
+            (0..k)
+                .map(|i| {
+                    std::array::from_fn(|c| w0 as f64 * sets[s0][i][c] + w1 as f64 * sets[s1][i][c])
+                })
+                .collect()
+        };
+        let rows = span_rows(&params, &x_at);
+        let (pk, qk, res, _) = solve_rows_knots(&rows, &log_only(), &knots).unwrap();
+        assert_eq!((pk.len(), qk.len()), (3, 3));
+        let mut err = 0.0f64;
+        for s in 0..3 {
+            for (g, t) in pk[s].iter().chain(&qk[s]).zip(&sets[s]) {
+                for c in 0..3 {
+                    err = err.max((g[c] as f64 - t[c]).abs());
+                }
+            }
+        }
+        eprintln!("knot span test: max coefficient error {err:.2e}, residual {res:?}");
+        assert!(err < 1e-5, "{err}");
+        // Eq. 11 alone (one set) cannot hold it.
+        let (_, _, res1, _) = solve_rows(&rows, &log_only()).unwrap();
+        assert!(res1[0] > 1e-2 && res1[1] > 1e-2, "{res1:?}");
+        // Reconstruction at α = 0.62 (between knots 0.5 and 1, no row there).
+        let mut co = Coeffs::zeros(params.p_order, params.q_order, params.alphas.clone());
+        co.alpha_knots = Some(crate::coeffs::AlphaKnots {
+            alphas: knots.to_vec(),
+            p: pk,
+            q: qk,
+            residual: 0.0,
+        });
+        let views: Vec<Vec3> = (0..params.views)
+            .map(|k| basis::fibonacci_hemisphere(k, params.views))
+            .collect();
+        let (frame, world) = row_geometry(7, params.normals, &views);
+        let (n, v) = (frame.2, world[4]);
+        let mut f = Features::new(params.p_order, params.q_order);
+        f.eval(n, v);
+        let mut row = vec![0.0f64; k];
+        f.row(&basis::vmf_factors(params.p_order, 0.62), &mut row);
+        let x = x_at(0.62);
+        let e = co.e0(n, v, 0.62);
+        for c in 0..3 {
+            let want: f64 = row.iter().zip(&x).map(|(a, x)| a * x[c]).sum::<f64>().exp();
+            assert!((e[c] as f64 / want - 1.0).abs() < 1e-4, "{e:?} vs {want}");
+        }
+    }
+
+    #[test]
+    fn knots_follow_the_albedo_that_eq_11_cannot() {
+        // L = c: E0 = c·(A+B)(n·v, α). Eq. 11's only α dependence is the vMF damping of bands
+        // ≥ 1, so its DC cannot follow the albedo's fall with α; knots let the DC move with α.
+        let params = Params {
+            samples: 256,
+            objective: Objective::Log,
+            alphas: vec![0.2, 0.4, 0.6, 0.8, 1.0],
+            alpha_knots: vec![0.2, 0.6, 1.0],
+            ..small_params()
+        };
+        let c = 2.5f32;
+        let co = fit_cube(&params, &Cubemap::constant(16, [c; 3]), &NoProgress)
+            .unwrap()
+            .coeffs;
+        let knots = co.alpha_knots.as_ref().unwrap();
+        eprintln!(
+            "constant env: log RMS residual eq. 11 {:.4}, with knots {:.4}",
+            co.residual, knots.residual
+        );
+        assert!(
+            knots.residual < 0.75 * co.residual,
+            "{} vs {}",
+            knots.residual,
+            co.residual
+        );
+        // Mean level at n = v (where A+B is largest) follows the albedo at both ends.
+        for alpha in [0.2f32, 1.0] {
+            let (a, b) = crate::dfg::dfg_integrals(1.0, alpha, 1 << 14);
+            let e = co.e0(Vec3::Z, Vec3::Z, alpha)[0] as f64 / c as f64;
+            let e11 = co.eq11().e0(Vec3::Z, Vec3::Z, alpha)[0] as f64 / c as f64;
+            eprintln!(
+                "α = {alpha}: albedo {:.3}, knots {e:.3}, eq. 11 {e11:.3}",
+                a + b
+            );
+            assert!((e - (a + b)).abs() < (e11 - (a + b)).abs() + 1e-3);
+        }
+    }
+
+    #[test]
+    fn knots_lower_the_held_out_error_on_a_sun_sky() {
+        let sun = Vec3::new(0.4, 0.6, -0.7).normalize();
+        let cube = Cubemap::from_fn(16, |d| {
+            let s = if d.dot(sun) > 0.985 { 300.0 } else { 0.0 };
+            [0.5 + 0.3 * d.y + s, 0.6 + 0.2 * d.y + s, 0.9 + s]
+        });
+        let truth = TexelSet::from_cube(&cube);
+        let alphas = [0.25, 0.4, 0.6, 0.8, 1.0];
+        let plain = fit_cube(&small_params(), &cube, &NoProgress)
+            .unwrap()
+            .coeffs;
+        let knotted = Params {
+            alpha_knots: vec![0.2, 1.0],
+            cosine_weight: true,
+            log_weight: 0.0,
+            ..small_params()
+        };
+        let co = fit_cube(&knotted, &cube, &NoProgress).unwrap().coeffs;
+        let (e_plain, e_knots) = (
+            held_out_relative_mse(&plain, &truth, &alphas),
+            held_out_relative_mse(&co, &truth, &alphas),
+        );
+        eprintln!(
+            "sun sky, held-out relative linear MSE: eq. 11 {e_plain:.4}, knots 0.2,1 {e_knots:.4}"
+        );
+        assert!(e_knots < 0.8 * e_plain, "{e_knots} vs {e_plain}");
+        assert_eq!(co.bytes(), 2 * plain.bytes());
     }
 
     #[test]

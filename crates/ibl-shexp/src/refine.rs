@@ -8,7 +8,7 @@
 //! on the §5.1 spheres; the log-space solution is the starting point (the objective is non-convex
 //! in x, and log space is where exp(A·x) is well behaved). The output keeps eq. 11's form.
 
-use crate::solve::least_squares;
+use crate::solve::{least_squares, solve_spd};
 
 /// The objective and its inputs for one colour channel.
 pub struct RelativeProblem<'a> {
@@ -89,6 +89,74 @@ impl RelativeProblem<'_> {
             .sum()
     }
 
+    /// The Gauss–Newton step at `x`: the least-squares solution of J·δ = −res over the linear
+    /// rows (J_r = √ω_r · exp(a_r·x) · a_r, res_r = √ω_r · (exp(a_r·x) − E_r)) and, with
+    /// `lw` > 0, the log rows (lw · a_r, lw · (a_r·x − log E_r)). Solved from the normal
+    /// equations, accumulated row by row ([`solve_spd`]); QR of J when they are not positive
+    /// definite. `None` when fewer than k rows are live or J is rank deficient.
+    fn gauss_newton_step(&self, w: &[f64], x: &[f64], lw: f64) -> Option<Vec<f64>> {
+        let (m, k) = (self.m, self.k);
+        let mut gram = vec![0.0f64; k * k];
+        let mut grad = vec![0.0f64; k];
+        let mut live = 0usize;
+        let mut add = |row: &[f64], scale: f64, res: f64| {
+            for i in 0..k {
+                let gi = scale * row[i];
+                if gi == 0.0 {
+                    continue;
+                }
+                grad[i] -= gi * res;
+                for (g, rj) in gram[i * k + i..(i + 1) * k].iter_mut().zip(&row[i..]) {
+                    *g += gi * scale * rj;
+                }
+            }
+        };
+        for (r, wr) in w.iter().enumerate().take(m) {
+            let row = &self.a[r * k..(r + 1) * k];
+            let sw = wr.sqrt();
+            let e = self.fitted(x, r);
+            let scale = sw * e;
+            live += usize::from(scale > 0.0);
+            add(row, scale, sw * (e - self.target[r]));
+            if lw > 0.0 && self.target[r] > 0.0 {
+                let s: f64 = row.iter().zip(x).map(|(a, b)| a * b).sum();
+                add(row, lw, lw * (s - self.target[r].ln()));
+            }
+        }
+        if live < k {
+            return None;
+        }
+        for i in 0..k {
+            for j in 0..i {
+                gram[i * k + j] = gram[j * k + i];
+            }
+        }
+        if let Some(step) = solve_spd(&gram, &grad, k) {
+            return Some(step);
+        }
+        // Fallback: QR of the stacked Jacobian.
+        let rows = if lw > 0.0 { 2 * m } else { m };
+        let mut jac = vec![0.0f64; rows * k];
+        let mut rhs = vec![0.0f64; rows];
+        for r in 0..m {
+            let row = &self.a[r * k..(r + 1) * k];
+            let sw = w[r].sqrt();
+            let e = self.fitted(x, r);
+            for (j, v) in jac[r * k..(r + 1) * k].iter_mut().zip(row) {
+                *j = sw * e * v;
+            }
+            rhs[r] = -sw * (e - self.target[r]);
+            if rows > m && self.target[r] > 0.0 {
+                let s: f64 = row.iter().zip(x).map(|(a, b)| a * b).sum();
+                for (j, v) in jac[(m + r) * k..(m + r + 1) * k].iter_mut().zip(row) {
+                    *j = lw * v;
+                }
+                rhs[m + r] = -lw * (s - self.target[r].ln());
+            }
+        }
+        least_squares(&jac, rows, k, std::slice::from_ref(&rhs)).map(|s| s.x[0].clone())
+    }
+
     /// Gauss–Newton with a backtracking line search from `x0`; never returns a point worse than
     /// `x0`. Stops after `max_iterations`, when a step gains less than `tolerance` (relative),
     /// or when the linearised system is rank deficient.
@@ -98,7 +166,7 @@ impl RelativeProblem<'_> {
         max_iterations: usize,
         tolerance: f64,
     ) -> (Vec<f64>, RefineReport) {
-        let (m, k) = (self.m, self.k);
+        let m = self.m;
         let w = self.normalised_weights();
         let mut x = x0.to_vec();
         let mut f = self.objective_with(&w, &x);
@@ -110,48 +178,15 @@ impl RelativeProblem<'_> {
         if !f.is_finite() {
             return (x, report);
         }
-        // Rows 0..m: the linear residuals; m..2m: the log-space ones (zero when λ = 0).
         let lw = (self.log_weight / m as f64).sqrt();
-        let rows = if lw > 0.0 { 2 * m } else { m };
-        let mut jac = vec![0.0f64; rows * k];
-        let mut rhs = vec![0.0f64; rows];
         for it in 0..max_iterations {
-            // J_r = √ω_r · exp(a_r·x) · a_r, residual √ω_r · (exp(a_r·x) − E_r).
-            let mut live = 0usize;
-            for r in 0..m {
-                let sw = w[r].sqrt();
-                let e = self.fitted(&x, r);
-                let row = &self.a[r * k..(r + 1) * k];
-                let scale = sw * e;
-                for (j, v) in jac[r * k..(r + 1) * k].iter_mut().zip(row) {
-                    *j = scale * v;
-                }
-                rhs[r] = -sw * (e - self.target[r]);
-                live += usize::from(scale > 0.0);
-                if rows > m {
-                    let ok = self.target[r] > 0.0;
-                    let s: f64 = row.iter().zip(&x).map(|(a, b)| a * b).sum();
-                    for (j, v) in jac[(m + r) * k..(m + r + 1) * k].iter_mut().zip(row) {
-                        *j = if ok { lw * v } else { 0.0 };
-                    }
-                    rhs[m + r] = if ok {
-                        -lw * (s - self.target[r].ln())
-                    } else {
-                        0.0
-                    };
-                }
-            }
-            if live < k {
-                break;
-            }
-            let Some(step) = least_squares(&jac, rows, k, std::slice::from_ref(&rhs)) else {
+            let Some(step) = self.gauss_newton_step(&w, &x, lw) else {
                 break;
             };
-            let step = &step.x[0];
             let mut t = 1.0f64;
             let mut accepted = None;
             for _ in 0..30 {
-                let trial: Vec<f64> = x.iter().zip(step).map(|(a, d)| a + t * d).collect();
+                let trial: Vec<f64> = x.iter().zip(&step).map(|(a, d)| a + t * d).collect();
                 let ft = self.objective_with(&w, &trial);
                 if ft.is_finite() && ft < f {
                     accepted = Some((trial, ft));

@@ -206,8 +206,33 @@ fn emit(c: &Coeffs, lang: Lang) -> String {
             Lang::Hlsl => format!("static const {v3} {name}[{n}] = {{\n    {body}}};\n"),
         }
     };
-    s.push_str(&arr("SHEXP_P", &c.p));
-    s.push_str(&arr("SHEXP_Q", &c.q));
+    // With alpha knots the arrays hold every knot's set, knot-major, and shexp_e0 lerps them.
+    let knots = c.alpha_knots.as_ref();
+    match knots {
+        None => {
+            s.push_str(&arr("SHEXP_P", &c.p));
+            s.push_str(&arr("SHEXP_Q", &c.q));
+        }
+        Some(k) => {
+            let _ = writeln!(s, "// Beyond eq. 11: one coefficient set per alpha knot, interpolated linearly in alpha.");
+            let vals: Vec<String> = k.alphas.iter().map(|a| lit(*a as f64)).collect();
+            let n = k.alphas.len();
+            let _ = match lang {
+                Lang::Glsl => writeln!(
+                    s,
+                    "const float SHEXP_KNOTS[{n}] = float[{n}]({});",
+                    vals.join(", ")
+                ),
+                Lang::Hlsl => writeln!(
+                    s,
+                    "static const float SHEXP_KNOTS[{n}] = {{ {} }};",
+                    vals.join(", ")
+                ),
+            };
+            s.push_str(&arr("SHEXP_P", &k.p.concat()));
+            s.push_str(&arr("SHEXP_Q", &k.q.concat()));
+        }
+    }
     for (fname, order) in [("shexp_sh_p", c.p_order), ("shexp_sh_q", c.q_order)] {
         let n = coeffs_of_order(order);
         let _ = writeln!(s, "\nvoid {fname}({v3} d, out {f} y[{n}]) {{");
@@ -244,18 +269,56 @@ fn emit(c: &Coeffs, lang: Lang) -> String {
         );
     }
     let _ = writeln!(s, "    {v3} e = {v3}(0.0, 0.0, 0.0);");
+    // Segment and weight of the knots bracketing alpha (as ibl_shexp::basis::knot_weights).
+    if let Some(k) = knots {
+        let n = k.alphas.len();
+        let _ = writeln!(
+            s,
+            "    {f} a = clamp(alpha, SHEXP_KNOTS[0], SHEXP_KNOTS[{}]);",
+            n - 1
+        );
+        let _ = writeln!(s, "    int seg = 0;");
+        let _ = writeln!(
+            s,
+            "    for (int k = 1; k < {}; ++k) {{ if (a > SHEXP_KNOTS[k]) seg = k; }}",
+            n - 1
+        );
+        let _ = writeln!(
+            s,
+            "    {f} t = (a - SHEXP_KNOTS[seg]) / (SHEXP_KNOTS[seg + 1] - SHEXP_KNOTS[seg]);"
+        );
+        let _ = writeln!(
+            s,
+            "    int bp = seg * {np};\n    int bq = seg * {};",
+            nq - 1
+        );
+    }
+    let lerp = match lang {
+        Lang::Glsl => "mix",
+        Lang::Hlsl => "lerp",
+    };
+    // Coefficient i of an array with `stride` entries per knot: a constant, or the lerp between
+    // the bracketing knots' sets (offset `base`).
+    let coef = |name: &str, base: &str, i: usize, stride: usize| match knots {
+        None => format!("{name}[{i}]"),
+        Some(_) => format!(
+            "{lerp}({name}[{base} + {i}], {name}[{base} + {}], t)",
+            stride + i
+        ),
+    };
     for i in 0..np {
         let _ = writeln!(
             s,
-            "    e += SHEXP_P[{i}] * (damp[{}] * yp[{i}]);",
+            "    e += {} * (damp[{}] * yp[{i}]);",
+            coef("SHEXP_P", "bp", i, np),
             band_of(i)
         );
     }
     for i in 1..nq {
         let _ = writeln!(
             s,
-            "    e += SHEXP_Q[{}] * (damp[{}] * yq[{i}]);",
-            i - 1,
+            "    e += {} * (damp[{}] * yq[{i}]);",
+            coef("SHEXP_Q", "bq", i - 1, nq - 1),
             band_of(i)
         );
     }
@@ -328,27 +391,14 @@ pub fn hlsl(c: &Coeffs) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::dfg::FresnelTail;
     use glam::Vec3;
     use ibl_core::sampling::Pcg32;
 
     fn probe() -> Coeffs {
         Coeffs {
-            p_order: 4,
-            q_order: 2,
-            alphas: vec![0.2, 1.0],
             p: (0..25).map(|i| [0.1 * i as f32, -0.05, 0.01]).collect(),
             q: (0..8).map(|i| [0.02 * i as f32, 0.0, -0.3]).collect(),
-            residual: 0.0,
-            residual_rgb: [0.0; 3],
-            condition_number: 1.0,
-            rows: 0,
-            samples: 0,
-            floor: [0.0; 3],
-            fresnel: FresnelTail::Ratio,
-            target: crate::coeffs::Target::E0,
-            objective: crate::coeffs::Objective::Log,
-            convention: String::new(),
+            ..Coeffs::zeros(4, 2, vec![0.2, 1.0])
         }
     }
 
@@ -400,6 +450,38 @@ mod tests {
         assert_eq!(rename_y("(x * y) - y[3] * yq"), "(x * y_) - y[3] * yq");
     }
 
+    /// `probe()` with three α knots; knot 1's DC is 9.
+    fn knot_probe() -> Coeffs {
+        let mut c = probe();
+        let mut p2 = c.p.clone();
+        p2[0] = [9.0; 3];
+        c.alpha_knots = Some(crate::coeffs::AlphaKnots {
+            alphas: vec![0.2, 0.5, 1.0],
+            p: vec![c.p.clone(), p2, c.p.clone()],
+            q: vec![c.q.clone(); 3],
+            residual: 0.0,
+        });
+        c
+    }
+
+    #[test]
+    fn knot_snippets_lerp_every_coefficient() {
+        let c = knot_probe();
+        let g = glsl(&c);
+        assert!(g.contains("const float SHEXP_KNOTS[3] = float[3]("));
+        assert!(g.contains("const vec3 SHEXP_P[75]") && g.contains("const vec3 SHEXP_Q[24]"));
+        assert!(g.contains("mix(SHEXP_P[bp + 24], SHEXP_P[bp + 49], t)"));
+        assert!(g.contains("mix(SHEXP_Q[bq + 7], SHEXP_Q[bq + 15], t)"));
+        assert!(g.contains("for (int k = 1; k < 2; ++k)"));
+        let h = hlsl(&c);
+        assert!(h.contains("static const float SHEXP_KNOTS[3] = {"));
+        assert!(h.contains("lerp(SHEXP_P[bp + 0], SHEXP_P[bp + 25], t)"));
+        // The knot-major layout puts knot 1's DC (9.0) at index 25.
+        let after = &g[g.find("SHEXP_P[75]").unwrap()..];
+        let items: Vec<&str> = after.split("vec3(").skip(1).take(26).collect();
+        assert!(items[25].starts_with("9.000000000e0"), "{}", items[25]);
+    }
+
     #[test]
     fn glsl_snippet_validates_with_naga_when_available() {
         // naga (wgpu's shader translator) parses and validates GLSL; skipped when absent.
@@ -411,27 +493,29 @@ mod tests {
             return;
         }
         let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("probe.frag");
-        let src = format!(
+        for (name, c) in [("probe", probe()), ("knots", knot_probe())] {
+            let path = dir.path().join(format!("{name}.frag"));
+            let src = format!(
             "#version 450\n{}\nlayout(location = 0) out vec4 o_color;\nvoid main() {{\n    vec3 n = normalize(vec3(0.2, 0.3, 1.0));\n    o_color = vec4(shexp_specular(n, vec3(0.0, 0.0, 1.0), 0.6, vec3(0.04), vec2(0.5, 0.1)), 1.0);\n}}\n",
-            glsl(&probe())
+            glsl(&c)
         );
-        std::fs::write(&path, src).unwrap();
-        let r = std::process::Command::new("naga")
-            .args(["--input-kind", "glsl", "--shader-stage", "frag"])
-            .arg(&path)
-            .output()
-            .unwrap();
-        let msg =
-            String::from_utf8_lossy(&r.stderr).to_string() + &String::from_utf8_lossy(&r.stdout);
-        eprintln!(
-            "naga: {}",
-            if r.status.success() {
-                "GLSL snippet validated"
-            } else {
-                &msg
-            }
-        );
-        assert!(r.status.success(), "{msg}");
+            std::fs::write(&path, src).unwrap();
+            let r = std::process::Command::new("naga")
+                .args(["--input-kind", "glsl", "--shader-stage", "frag"])
+                .arg(&path)
+                .output()
+                .unwrap();
+            let msg = String::from_utf8_lossy(&r.stderr).to_string()
+                + &String::from_utf8_lossy(&r.stdout);
+            eprintln!(
+                "naga ({name}): {}",
+                if r.status.success() {
+                    "GLSL snippet validated"
+                } else {
+                    &msg
+                }
+            );
+            assert!(r.status.success(), "{name}: {msg}");
+        }
     }
 }

@@ -108,6 +108,7 @@ fn uses_given_coefficients_and_prefiltered_chain() {
         normals: 12,
         views: 12,
         samples: 64,
+        alpha_knots: vec![0.2, 1.0],
         ..Default::default()
     };
     let coeffs = ibl_shexp::fit::fit_cube(&fp, &cube, &ibl_core::progress::NoProgress)
@@ -145,6 +146,12 @@ fn uses_given_coefficients_and_prefiltered_chain() {
     let mem = &v["details"]["environments"][0]["memory"];
     assert_eq!(mem["split_sum_sizes"], serde_json::json!([16, 8]));
     assert_eq!(mem["split_sum_bytes_rgb32f"], 6 * (256 + 64) * 12);
+    // The probe carries α knots: the evaluator scores and sizes what it reconstructs.
+    assert_eq!(mem["shexp_bytes"], 2 * 33 * 3 * 4);
+    let rep = v["details"]["environments"][0]["representation"]
+        .as_str()
+        .unwrap();
+    assert!(rep.contains("α knots [0.2, 1.0]"), "{rep}");
 }
 
 #[test]

@@ -8,7 +8,8 @@ use std::path::PathBuf;
 /// per colour channel, P (order --p-order, at the reflection vector) and Q (order --q-order
 /// without DC, at the half-reflection vector) by least squares on log E0 (eq. 13), then, by
 /// default, refined on the relative linear error (--objective log skips that). --alphas are GGX
-/// α values (α = roughness²).
+/// α values (α = roughness²). --alpha-knots adds coefficient sets interpolated in α (beyond
+/// the paper; the file keeps eq. 11's p and q).
 #[derive(Parser)]
 #[command(version, about)]
 struct Cli {
@@ -44,6 +45,15 @@ fn main() {
             t.estimate,
             t.solve
         ));
+        if let Some(k) = &c.alpha_knots {
+            ctx.info(format!(
+                "alpha knots {:?}: {} × {} coefficients per channel, log-space RMS residual {:.4}",
+                k.alphas,
+                k.alphas.len(),
+                c.p.len() + c.q.len(),
+                k.residual
+            ));
+        }
         let details = serde_json::json!({
             "face_size": baked.fitted.face_size,
             "rows": c.rows,
@@ -51,6 +61,7 @@ fn main() {
             "residual": c.residual,
             "residual_rgb": c.residual_rgb,
             "condition_number": c.condition_number,
+            "alpha_knots": c.alpha_knots.as_ref().map(|k| &k.alphas),
             "timings": t,
         });
         Ok::<_, ibl_shexp::Error>((outputs, details))

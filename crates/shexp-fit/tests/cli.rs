@@ -147,6 +147,40 @@ fn the_objective_is_chosen_by_flag_and_recorded() {
 }
 
 #[test]
+fn alpha_knots_are_fitted_beside_eq_11() {
+    let dir = tempfile::tempdir().unwrap();
+    let env = dir.path().join("env.exr");
+    write_env(&env, false);
+    let out = dir.path().join("knots.json");
+    let mut args = vec![
+        env.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--alpha-knots",
+        "0.2,1",
+        "--emit-shader",
+    ];
+    args.extend(small());
+    let o = run(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let c: Coeffs = ibl_core::io::data::read(&out).unwrap();
+    c.validate(&out).unwrap();
+    // The eq. 11 sets are still there for eq. 11 readers; the knots sit beside them.
+    assert_eq!((c.p.len(), c.q.len()), (25, 8));
+    let k = c.alpha_knots.as_ref().expect("alpha_knots written");
+    assert_eq!(k.alphas, vec![0.2, 1.0]);
+    assert_eq!((k.p.len(), k.p[0].len(), k.q[1].len()), (2, 25, 8));
+    assert!(
+        k.residual.is_finite() && k.residual < c.residual,
+        "{} vs {}",
+        k.residual,
+        c.residual
+    );
+    let glsl = std::fs::read_to_string(out.with_extension("glsl")).unwrap();
+    assert!(glsl.contains("SHEXP_KNOTS[2]") && glsl.contains("mix(SHEXP_P[bp + 0]"));
+}
+
+#[test]
 fn output_is_identical_for_any_thread_count_and_ron_by_extension() {
     let dir = tempfile::tempdir().unwrap();
     let env = dir.path().join("env.exr");
@@ -244,6 +278,18 @@ fn bad_inputs_fail_cleanly() {
             "unknowns",
         ),
         (vec![e, "-o", o, "--samples", "zero"], 2, "samples"),
+        (vec![e, "-o", o, "--alpha-knots", "0.5"], 2, "alpha-knots"),
+        (
+            vec![e, "-o", o, "--alpha-knots", "0.6,0.3"],
+            2,
+            "alpha-knots",
+        ),
+        (vec![e, "-o", o, "--alpha-knots", "0.2,2"], 2, "alpha-knots"),
+        (
+            vec![e, "-o", o, "--alpha-knots", "0.2,0.3,0.4,1"],
+            2,
+            "alpha-knots",
+        ),
     ];
     for (args, code, needle) in cases {
         let r = run(&args);
