@@ -1,5 +1,5 @@
-//! The one texel traversal: parallel maps over cube faces and rows with per-thread state,
-//! and ordered reductions whose result does not depend on the thread count.
+//! The one texel traversal: parallel maps over cube faces and image rows with per-thread
+//! state, and ordered reductions whose result does not depend on the thread count.
 //!
 //! Kernels passed in here never see threads: they compute one texel (or one row) from its
 //! coordinates. Work is split by rows, rows are reported to the progress sink.
@@ -49,6 +49,39 @@ where
     cube
 }
 
+/// Fills an image's rows in parallel: `data` is split into rows of `row_len` floats and
+/// `kernel(state, j, row)` writes row j and returns what it measured there. The results come
+/// back **in row order** (fold them for a thread-count-independent total). `init` makes
+/// per-thread scratch state; `label` and `texels_per_row` drive the progress sink.
+pub fn map_image_rows_with<S, T, I, K>(
+    data: &mut [f32],
+    row_len: usize,
+    texels_per_row: usize,
+    label: &str,
+    progress: &dyn Progress,
+    init: I,
+    kernel: K,
+) -> Vec<T>
+where
+    T: Send,
+    I: Fn() -> S + Sync,
+    K: Fn(&mut S, usize, &mut [f32]) -> T + Sync,
+{
+    let rows = data.len() / row_len.max(1);
+    progress.start(label, (rows * texels_per_row) as u64);
+    let out = data
+        .par_chunks_mut(row_len.max(1))
+        .enumerate()
+        .map_init(&init, |state, (j, row)| {
+            let t = kernel(state, j, row);
+            progress.inc(texels_per_row as u64);
+            t
+        })
+        .collect();
+    progress.finish();
+    out
+}
+
 /// Evaluates `row_fn(r)` for rows 0..rows in parallel and folds the results **in row order**
 /// with `combine`, so the sum is bit-identical for any thread count.
 pub fn ordered_row_reduce<T, F, C>(rows: usize, row_fn: F, init: T, combine: C) -> T
@@ -65,6 +98,33 @@ where
 mod tests {
     use super::*;
     use crate::progress::NoProgress;
+
+    #[test]
+    fn image_rows_are_filled_and_reported_in_order() {
+        let (w, h, ch) = (7, 33, 2);
+        let mut data = vec![0.0f32; w * h * ch];
+        let sums = map_image_rows_with(
+            &mut data,
+            w * ch,
+            w,
+            "rows",
+            &NoProgress,
+            || 0usize,
+            |calls, j, row| {
+                *calls += 1;
+                for (i, px) in row.chunks_exact_mut(ch).enumerate() {
+                    px.copy_from_slice(&[j as f32, i as f32]);
+                }
+                j
+            },
+        );
+        assert_eq!(sums, (0..h).collect::<Vec<_>>());
+        for j in 0..h {
+            for i in 0..w {
+                assert_eq!(&data[(j * w + i) * ch..][..ch], &[j as f32, i as f32]);
+            }
+        }
+    }
 
     #[test]
     fn map_visits_each_texel_once_in_place() {

@@ -14,7 +14,6 @@ use ibl_core::io::{self, ColorSpace, WriteOptions};
 use ibl_core::progress::Progress;
 use ibl_core::traverse::ordered_row_reduce;
 use ibl_core::{Error, Image};
-use rayon::prelude::*;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 
@@ -241,13 +240,16 @@ impl ConvertStats {
 pub fn convert(decoder: &Decoder, img: &Image, progress: &dyn Progress) -> (Image, ConvertStats) {
     let (w, ch) = (img.width, img.channels);
     let mut out = Image::new(img.width, img.height, 3);
-    progress.start("quaternions", (img.width * img.height) as u64);
     let identity = encode_quat([1.0, 0.0, 0.0]);
-    let rows: Vec<ConvertStats> = out
-        .data
-        .par_chunks_mut(w * 3)
-        .zip(img.data.par_chunks(w * ch))
-        .map(|(orow, irow)| {
+    let rows: Vec<ConvertStats> = ibl_core::traverse::map_image_rows_with(
+        &mut out.data,
+        w * 3,
+        w,
+        "quaternions",
+        progress,
+        || (),
+        |_, j, orow| {
+            let irow = &img.data[j * w * ch..(j + 1) * w * ch];
             let mut s = ConvertStats::empty();
             for (o, t) in orow.chunks_exact_mut(3).zip(irow.chunks_exact(ch)) {
                 let rgb = match decoder.decode_raw(t) {
@@ -275,12 +277,10 @@ pub fn convert(decoder: &Decoder, img: &Image, progress: &dyn Progress) -> (Imag
                 };
                 o.copy_from_slice(&rgb);
             }
-            s.texels = (orow.len() / 3) as u64;
-            progress.inc(s.texels);
+            s.texels = w as u64;
             s
-        })
-        .collect();
-    progress.finish();
+        },
+    );
     let stats = rows
         .into_iter()
         .fold(ConvertStats::empty(), ConvertStats::merge)

@@ -14,7 +14,6 @@ use ibl_core::image::check_texels;
 use ibl_core::io;
 use ibl_core::progress::Progress;
 use ibl_core::{Error, Image};
-use rayon::prelude::*;
 use serde::Serialize;
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -536,12 +535,15 @@ pub fn generate(
     let scale = aspect_scale(w, h);
     let (rot_s, rot_c) = params.rotate.to_radians().sin_cos();
     let mut out = Image::new(w, h, 4);
-    progress.start("tpr texels", (w * h) as u64);
-    let rows: Vec<std::result::Result<[u64; 3], (usize, usize)>> = out
-        .data
-        .par_chunks_mut(w * 4)
-        .enumerate()
-        .map_init(Scratch::default, |scratch, (j, row)| {
+    type RowResult = std::result::Result<[u64; 3], (usize, usize)>;
+    let rows: Vec<RowResult> = ibl_core::traverse::map_image_rows_with(
+        &mut out.data,
+        w * 4,
+        w,
+        "tpr texels",
+        progress,
+        Scratch::default,
+        |scratch, j, row| {
             let v = (j as f64 + 0.5) / h as f64;
             let mut counts = [0u64; 3];
             let mut pair = [0.0f64; 2];
@@ -597,11 +599,9 @@ pub fn generate(
                     r[1] as f32,
                 ]);
             }
-            progress.inc(w as u64);
             Ok(counts)
-        })
-        .collect();
-    progress.finish();
+        },
+    );
     for r in rows {
         match r {
             Ok([z, n, c]) => {
