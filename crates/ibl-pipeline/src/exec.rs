@@ -212,126 +212,99 @@ impl Drop for Session {
         let _ = std::fs::remove_dir_all(&self.tmp);
         let _ = std::fs::remove_dir(self.cache.tmp());
         let _ = std::fs::remove_dir(self.cache.journal());
-        let _ = std::fs::remove_file(self.cache.lock_path());
-        HELD.lock()
-            .unwrap()
-            .retain(|p| *p != self.cache.lock_path());
+        release_lock(&self.cache.lock_path());
         CLEANUP.lock().unwrap().clear();
     }
 }
 
-/// Lock files this process holds (a lock naming our own pid is ours only if listed here: a
-/// dead process may have had our pid).
-static HELD: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+/// Lock files this process holds, with the open handle that holds the OS lock on each.
+static HELD: Mutex<Vec<(PathBuf, std::fs::File)>> = Mutex::new(Vec::new());
 
-fn pid_alive(pid: u32, lock: &Path) -> bool {
-    if pid == std::process::id() {
-        return HELD.lock().unwrap().iter().any(|p| p == lock);
-    }
-    if Path::new("/proc/self").exists() {
-        return Path::new(&format!("/proc/{pid}")).exists();
-    }
-    // Without /proc we cannot tell; a lock left by a dead process must then be removed by hand.
-    true
-}
-
-/// Takes the lock at `path`: a file holding our pid, which appears whole or not at all (written
-/// to a temporary file, then hard-linked to the lock's name, which fails if the lock exists).
-/// A lock naming a dead process is taken over; one that cannot be read as a pid is someone
-/// else's (it is never removed here).
+/// Takes the lock at `path`: an exclusive OS file lock (flock / LockFileEx) on the file, held
+/// for the session; the file also records our pid for the message others get.
+///
+/// Why an OS lock and not a pid file: the kernel releases it when the process dies, however it
+/// dies, so there is no stale lock to take over and no race between two runs taking over the
+/// same stale lock (with pid files, both could delete it and both proceed). Unlinking on exit
+/// is safe because a taker that opened the old file checks, once locked, that the path still
+/// names the file it locked, and starts again if not.
 fn take_lock(path: &Path) -> Result<()> {
-    let pid = std::process::id();
-    let tmp = cache::temp_beside(path);
-    std::fs::write(&tmp, pid.to_string()).map_err(|e| Error::io(&tmp, e))?;
-    let result = take_lock_with(path, &tmp, pid);
-    let _ = std::fs::remove_file(&tmp);
-    result
-}
-
-fn take_lock_with(path: &Path, tmp: &Path, pid: u32) -> Result<()> {
-    for _ in 0..2 {
-        // Listed first, so another thread of ours seeing the new lock knows it is live.
-        HELD.lock().unwrap().push(path.to_path_buf());
-        match std::fs::hard_link(tmp, path) {
-            Ok(()) => return Ok(()),
-            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => unhold(path),
-            // No hard links here: create the lock in place, with the pid written at once.
-            Err(_) => {
-                unhold(path);
-                match create_lock(path, pid) {
-                    Ok(true) => return Ok(()),
-                    Ok(false) => {}
-                    Err(e) => return Err(Error::io(path, e)),
-                }
-            }
-        }
-        let text = match std::fs::read_to_string(path) {
-            Ok(t) => t,
-            // Gone in between: try again.
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => continue,
-            Err(e) => return Err(Error::io(path, e)),
-        };
-        match text.trim().parse::<u32>() {
-            Ok(other) if pid_alive(other, path) => {
+    use std::fs::TryLockError;
+    use std::io::{Read, Seek, Write};
+    for _ in 0..8 {
+        let mut f = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .open(path)
+            .map_err(|e| Error::io(path, e))?;
+        match f.try_lock() {
+            Ok(()) => {}
+            Err(TryLockError::WouldBlock) => {
+                let mut text = String::new();
+                let _ = f.read_to_string(&mut text);
+                let who = match text.trim().parse::<u32>() {
+                    Ok(pid) => format!("pid {pid}"),
+                    Err(_) => "starting".into(),
+                };
                 return Err(Error::Busy {
                     path: path.to_path_buf(),
-                    why: format!("another bake (pid {other}) is using this output folder"),
+                    why: format!("another bake ({who}) is using this output folder"),
                 });
             }
-            Ok(_) => {
-                // Left by a dead process.
-                let _ = std::fs::remove_file(path);
-            }
-            Err(_) => {
-                return Err(Error::Busy {
-                    path: path.to_path_buf(),
-                    why: format!(
-                        "the lock holds {:?}, not a process id; if no bake is using this output \
-                         folder, remove the lock file",
-                        text.trim()
+            Err(TryLockError::Error(e)) => {
+                return Err(Error::io(
+                    path,
+                    std::io::Error::new(
+                        e.kind(),
+                        format!("cannot lock (does this file system support locks?): {e}"),
                     ),
-                });
+                ))
             }
         }
+        if !same_file(&f, path) {
+            // Unlinked (and maybe re-created) by its last holder after we opened it.
+            continue;
+        }
+        let written = f
+            .set_len(0)
+            .and_then(|_| f.rewind())
+            .and_then(|_| f.write_all(std::process::id().to_string().as_bytes()));
+        written.map_err(|e| Error::io(path, e))?;
+        HELD.lock().unwrap().push((path.to_path_buf(), f));
+        return Ok(());
     }
     Err(Error::Busy {
         path: path.to_path_buf(),
-        why: "could not take the lock".into(),
+        why: "could not take the lock (it kept being replaced)".into(),
     })
 }
 
-/// The fallback where hard links are impossible: `Ok(false)` when the lock exists.
-fn create_lock(path: &Path, pid: u32) -> std::io::Result<bool> {
-    use std::io::Write;
-    HELD.lock().unwrap().push(path.to_path_buf());
-    let created = std::fs::OpenOptions::new()
-        .write(true)
-        .create_new(true)
-        .open(path);
-    match created {
-        Ok(mut f) => match f.write_all(pid.to_string().as_bytes()) {
-            Ok(()) => Ok(true),
-            Err(e) => {
-                let _ = std::fs::remove_file(path);
-                unhold(path);
-                Err(e)
-            }
-        },
-        Err(e) => {
-            unhold(path);
-            if e.kind() == std::io::ErrorKind::AlreadyExists {
-                Ok(false)
-            } else {
-                Err(e)
-            }
-        }
+/// Whether `path` still names the file `f` has open.
+fn same_file(f: &std::fs::File, path: &Path) -> bool {
+    let (Ok(a), Ok(b)) = (f.metadata(), std::fs::metadata(path)) else {
+        return false;
+    };
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        a.dev() == b.dev() && a.ino() == b.ino()
+    }
+    #[cfg(not(unix))]
+    {
+        // Windows refuses to delete a file another handle has open without sharing it, so
+        // the path cannot have been replaced under us.
+        let _ = (a, b);
+        true
     }
 }
 
-/// Forgets one hold of `path` (taken by [`take_lock_with`] or [`create_lock`]).
-fn unhold(path: &Path) {
+/// Releases the lock at `path`: unlinks the file while still holding it, then closes it.
+fn release_lock(path: &Path) {
     let mut held = HELD.lock().unwrap();
-    if let Some(k) = held.iter().position(|p| p == path) {
+    if let Some(k) = held.iter().position(|(p, _)| p == path) {
+        let _ = std::fs::remove_file(path);
         held.remove(k);
     }
 }
@@ -1001,27 +974,35 @@ mod tests {
     }
 
     #[test]
-    fn an_unreadable_lock_is_busy_not_stale() {
+    fn a_held_lock_is_busy_and_a_stale_one_is_taken() {
         let dir = tempfile::tempdir().unwrap();
         let out = dir.path().join("out");
         let cache = CacheDir::new(&out);
         std::fs::create_dir_all(&cache.root).unwrap();
-        // What a lock being created by another process may look like for an instant.
-        for text in ["", "12ab"] {
+        // A lock file left by a dead run (any content, no OS lock on it) is simply taken.
+        for text in ["", "12ab", "4000000"] {
             std::fs::write(cache.lock_path(), text).unwrap();
-            match Session::open_output(&out) {
-                Err(Error::Busy { why, .. }) => assert!(why.contains("remove the lock"), "{why}"),
-                Err(e) => panic!("{e}"),
-                Ok(_) => panic!("took a lock holding {text:?}"),
-            }
-            assert_eq!(std::fs::read_to_string(cache.lock_path()).unwrap(), text);
+            let session = Session::open_output(&out).unwrap();
+            assert_eq!(
+                std::fs::read_to_string(cache.lock_path()).unwrap(),
+                std::process::id().to_string()
+            );
+            drop(session);
+            assert!(!cache.lock_path().exists(), "released locks are removed");
         }
-        std::fs::remove_file(cache.lock_path()).unwrap();
+        // One held through another handle (as another process would) is busy, names the pid,
+        // and is left alone.
+        std::fs::write(cache.lock_path(), "4242").unwrap();
+        let holder = std::fs::File::open(cache.lock_path()).unwrap();
+        holder.lock().unwrap();
+        match Session::open_output(&out) {
+            Err(Error::Busy { why, .. }) => assert!(why.contains("pid 4242"), "{why}"),
+            Err(e) => panic!("{e}"),
+            Ok(_) => panic!("took a held lock"),
+        }
+        assert_eq!(std::fs::read_to_string(cache.lock_path()).unwrap(), "4242");
+        drop(holder);
         let session = Session::open_output(&out).unwrap();
-        assert_eq!(
-            std::fs::read_to_string(cache.lock_path()).unwrap(),
-            std::process::id().to_string()
-        );
         let names: Vec<String> = std::fs::read_dir(&cache.root)
             .unwrap()
             .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
@@ -1035,9 +1016,13 @@ mod tests {
 
     #[test]
     fn of_threads_racing_for_a_lock_exactly_one_gets_it() {
-        for _ in 0..20 {
+        // Fresh locks and stale ones (a file a dead run left): one winner either way.
+        for round in 0..20 {
             let dir = tempfile::tempdir().unwrap();
             let lock = dir.path().join("lock");
+            if round % 2 == 1 {
+                std::fs::write(&lock, "4000000").unwrap();
+            }
             let won = std::sync::atomic::AtomicUsize::new(0);
             std::thread::scope(|s| {
                 for _ in 0..8 {
@@ -1048,9 +1033,37 @@ mod tests {
                     });
                 }
             });
-            assert_eq!(won.into_inner(), 1);
-            HELD.lock().unwrap().retain(|p| *p != lock);
+            assert_eq!(won.into_inner(), 1, "round {round}");
+            release_lock(&lock);
+            assert!(!lock.exists());
         }
+    }
+
+    #[test]
+    fn a_lock_released_while_another_taker_holds_its_old_file_is_retaken_cleanly() {
+        // The unlink race: a taker that opened the file before its holder unlinked it must not
+        // end up holding a lock on a file no longer at the path while a third party holds the
+        // new one. Hammer take/release from threads; at any instant at most one holder.
+        let dir = tempfile::tempdir().unwrap();
+        let lock = dir.path().join("lock");
+        let inside = std::sync::atomic::AtomicUsize::new(0);
+        let max = std::sync::atomic::AtomicUsize::new(0);
+        std::thread::scope(|s| {
+            for _ in 0..4 {
+                s.spawn(|| {
+                    for _ in 0..200 {
+                        if take_lock(&lock).is_ok() {
+                            let now = inside.fetch_add(1, std::sync::atomic::Ordering::SeqCst) + 1;
+                            max.fetch_max(now, std::sync::atomic::Ordering::SeqCst);
+                            std::thread::yield_now();
+                            inside.fetch_sub(1, std::sync::atomic::Ordering::SeqCst);
+                            release_lock(&lock);
+                        }
+                    }
+                });
+            }
+        });
+        assert_eq!(max.into_inner(), 1);
     }
 
     #[test]
