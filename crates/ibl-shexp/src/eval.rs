@@ -149,6 +149,8 @@ pub struct EnvReport {
     pub name: String,
     /// The SH-exp representation scored ([`Coeffs::describe`]).
     pub representation: String,
+    /// When the probe carries α knots: the wins of its eq. 11 `p`, `q` alone, for comparison.
+    pub wins_eq11: Option<usize>,
     pub face_size: usize,
     pub fresnel: FresnelTail,
     pub split_sum_source: String,
@@ -430,9 +432,15 @@ pub fn score(
         ratio_rgba16f: ss.bytes(8) as f64 / coeffs.bytes() as f64,
         ratio_rgb32f: ss.bytes(12) as f64 / coeffs.bytes() as f64,
     };
+    // A knotted probe also holds eq. 11's p and q: score them too, side by side.
+    let wins_eq11 = coeffs
+        .alpha_knots
+        .is_some()
+        .then(|| score(name, truth, &coeffs.eq11(), ss, params, false).0.wins);
     let report = EnvReport {
         name: name.to_string(),
         representation: coeffs.describe(),
+        wins_eq11,
         face_size: truth.face_size,
         fresnel: coeffs.fresnel,
         split_sum_source: ss.source.clone(),
@@ -610,6 +618,13 @@ pub fn markdown(reports: &[EnvReport]) -> String {
             r.cases.len(),
             r.worst_truth_error_share
         );
+        if let Some(w) = r.wins_eq11 {
+            let _ = writeln!(
+                s,
+                "eq. 11 alone (the same file's p and q, without the knots): wins {w}/{}\n",
+                r.cases.len()
+            );
+        }
         let _ = writeln!(
             s,
             "memory per probe: SH-exp {} B (f32), split-sum {} B as RGBA16F ({:.0}×), {} B as RGB32F ({:.0}×)\n",

@@ -152,6 +152,24 @@ fn uses_given_coefficients_and_prefiltered_chain() {
         .as_str()
         .unwrap();
     assert!(rep.contains("α knots [0.2, 1.0]"), "{rep}");
+    // ... and the same file's eq. 11 p, q are scored beside it.
+    let eq11 = &v["details"]["environments"][0]["wins_eq11"];
+    assert!(eq11.as_u64().is_some_and(|w| w <= 8), "{eq11}");
+    // It is exactly what the eq. 11 probe alone scores.
+    let c11 = dir.path().join("c11.json");
+    ibl_core::io::data::write(&c11, &coeffs.eq11()).unwrap();
+    let pos = args
+        .iter()
+        .position(|a| *a == cpath.to_str().unwrap())
+        .unwrap();
+    args[pos] = c11.to_str().unwrap();
+    let o = run(&args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v11: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let env11 = &v11["details"]["environments"][0];
+    assert_eq!(env11["wins"], *eq11);
+    assert!(env11["wins_eq11"].is_null());
+    assert_eq!(env11["memory"]["shexp_bytes"], 33 * 3 * 4);
 }
 
 #[test]
