@@ -118,7 +118,8 @@ pub struct Params {
     /// --log-weight 0` (bench/shexp.md); every knot needs a value of --alphas beside it.
     #[arg(long, value_delimiter = ',')]
     pub alpha_knots: Vec<f32>,
-    /// Also write a GLSL and an HLSL snippet of eq. 11 beside the output (.glsl, .hlsl).
+    /// Also write a GLSL and an HLSL snippet of eq. 11 beside the output (.glsl, .hlsl); with
+    /// `--alpha-knots`, of the knots' interpolation.
     #[arg(long)]
     pub emit_shader: bool,
     /// Set NaN/Inf input texels to 0 instead of refusing the input.
