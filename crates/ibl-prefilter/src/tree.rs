@@ -217,7 +217,7 @@ impl CellTree {
         // Coarser levels while the size halves exactly.
         let mut sums: Vec<Sums> = Vec::new();
         let mut s = n;
-        while s % 2 == 0 {
+        while s.is_multiple_of(2) {
             let h = s / 2;
             let parent: Vec<Sums> = (0..6 * h * h)
                 .into_par_iter()
@@ -387,7 +387,7 @@ impl CellBlock {
 
     /// Pads to a whole number of lanes with empty cells (zero energy and solid angle).
     fn pad(&mut self) {
-        while self.cols[0].len() % LANES != 0 {
+        while !self.cols[0].len().is_multiple_of(LANES) {
             for (k, col) in self.cols.iter_mut().enumerate() {
                 // A unit mean (+z) keeps the arithmetic finite; the weights multiply zeros.
                 col.push(if k == 2 || k == 12 { 1.0 } else { 0.0 });
@@ -494,7 +494,7 @@ fn accumulate<const HORIZON: bool>(
 ) {
     const L: usize = LANES;
     let len = block.cols[0].len();
-    debug_assert!(len % L == 0);
+    debug_assert!(len.is_multiple_of(L));
     scratch.resize(2 * len, 0.0);
     let (wm, wg) = scratch.split_at_mut(len);
     weights::<HORIZON>(block, 0, n, a2, wm);
