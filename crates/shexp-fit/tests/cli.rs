@@ -48,22 +48,28 @@ fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).to_string()
 }
 
-#[test]
-fn fits_and_writes_coefficients_and_shaders() {
-    let dir = tempfile::tempdir().unwrap();
-    let env = dir.path().join("env.exr");
-    write_env(&env, false);
-    let out = dir.path().join("probe.json");
-    let mut args = vec![
-        env.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--emit-shader",
-    ];
+/// Fits `dir`/env.exr (written on first use) into `dir`/`name` with the small settings and
+/// `extra` flags; returns the output path and the probe read back.
+fn fit_ok(dir: &Path, name: &str, extra: &[&str]) -> (PathBuf, Coeffs) {
+    let env = dir.join("env.exr");
+    if !env.exists() {
+        write_env(&env, false);
+    }
+    let out = dir.join(name);
+    let mut args = vec![env.to_str().unwrap(), "-o", out.to_str().unwrap()];
+    args.extend(extra);
     args.extend(small());
     let o = run(&args);
     assert!(o.status.success(), "{}", stderr(&o));
     let c: Coeffs = ibl_core::io::data::read(&out).unwrap();
+    (out, c)
+}
+
+#[test]
+fn fits_and_writes_coefficients_and_shaders() {
+    let dir = tempfile::tempdir().unwrap();
+    let env = dir.path().join("env.exr");
+    let (out, c) = fit_ok(dir.path(), "probe.json", &["--emit-shader"]);
     c.validate(&out).unwrap();
     assert_eq!((c.p_order, c.q_order, c.p.len(), c.q.len()), (4, 2, 25, 8));
     assert_eq!(c.alphas, vec![0.2, 0.4667, 0.7333, 1.0]);
@@ -116,18 +122,12 @@ fn the_objective_is_chosen_by_flag_and_recorded() {
     use ibl_shexp::coeffs::Objective;
     let dir = tempfile::tempdir().unwrap();
     let env = dir.path().join("env.exr");
-    write_env(&env, false);
     let mut fitted = Vec::new();
-    for (flag, want) in [(None, Objective::Relative), (Some("log"), Objective::Log)] {
-        let out = dir.path().join(format!("{want:?}.json"));
-        let mut args = vec![env.to_str().unwrap(), "-o", out.to_str().unwrap()];
-        if let Some(f) = flag {
-            args.extend(["--objective", f]);
-        }
-        args.extend(small());
-        let o = run(&args);
-        assert!(o.status.success(), "{}", stderr(&o));
-        let c: Coeffs = ibl_core::io::data::read(&out).unwrap();
+    for (flags, want) in [
+        (&[][..], Objective::Relative),
+        (&["--objective", "log"][..], Objective::Log),
+    ] {
+        let (_, c) = fit_ok(dir.path(), &format!("{want:?}.json"), flags);
         assert_eq!(c.objective, want);
         fitted.push(c);
     }
@@ -149,21 +149,11 @@ fn the_objective_is_chosen_by_flag_and_recorded() {
 #[test]
 fn alpha_knots_are_fitted_beside_eq_11() {
     let dir = tempfile::tempdir().unwrap();
-    let env = dir.path().join("env.exr");
-    write_env(&env, false);
-    let out = dir.path().join("knots.json");
-    let mut args = vec![
-        env.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--alpha-knots",
-        "0.2,1",
-        "--emit-shader",
-    ];
-    args.extend(small());
-    let o = run(&args);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let c: Coeffs = ibl_core::io::data::read(&out).unwrap();
+    let (out, c) = fit_ok(
+        dir.path(),
+        "knots.json",
+        &["--alpha-knots", "0.2,1", "--emit-shader"],
+    );
     c.validate(&out).unwrap();
     // The eq. 11 sets are still there for eq. 11 readers; the knots sit beside them.
     assert_eq!((c.p.len(), c.q.len()), (25, 8));
