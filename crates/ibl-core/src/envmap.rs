@@ -281,6 +281,27 @@ pub enum Layout {
     Faces,
     /// One KTX2 file with all faces and levels.
     Ktx2,
+    /// One DDS file (DX10 header, cubemap flags) with all faces and levels.
+    Dds,
+    /// One KTX 1.1 file with all faces and levels (what Filament's cmgen writes).
+    Ktx1,
+}
+
+impl Layout {
+    /// File extension of a single-file container, `None` for face files.
+    pub fn extension(self) -> Option<&'static str> {
+        match self {
+            Layout::Faces => None,
+            Layout::Ktx2 => Some("ktx2"),
+            Layout::Dds => Some("dds"),
+            Layout::Ktx1 => Some("ktx"),
+        }
+    }
+
+    /// `dir/<name>.<ext>` for a single-file container, `None` for face files.
+    pub fn container_path(self, dir: &Path, name: &str) -> Option<PathBuf> {
+        self.extension().map(|e| dir.join(format!("{name}.{e}")))
+    }
 }
 
 /// Encodes a cube (or chain) for `dir` without touching the disk: `(path, bytes)` pairs.
@@ -297,6 +318,10 @@ pub fn encode_cube_outputs(
             dir.join(format!("{ktx_name}.ktx2")),
             io::ktx2::encode_cube(mips, depth),
         )]),
+        Layout::Dds | Layout::Ktx1 => Err(Error::unsupported(
+            dir,
+            format!("{layout:?} output is not written yet"),
+        )),
         Layout::Faces => {
             use rayon::prelude::*;
             let opts = WriteOptions {
@@ -354,7 +379,9 @@ pub fn cube_output_paths(
     ktx_name: &str,
 ) -> Vec<PathBuf> {
     match layout {
-        Layout::Ktx2 => vec![dir.join(format!("{ktx_name}.ktx2"))],
+        Layout::Ktx2 | Layout::Dds | Layout::Ktx1 => {
+            vec![layout.container_path(dir, ktx_name).expect("single file")]
+        }
         Layout::Faces => (0..levels)
             .flat_map(|l| {
                 Face::ALL.iter().map(move |f| {

@@ -4,6 +4,7 @@
 pub mod atomic;
 pub mod data;
 mod exr_io;
+pub mod format;
 pub mod ktx2;
 mod ldr;
 mod rgbe;

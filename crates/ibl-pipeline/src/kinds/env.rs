@@ -22,10 +22,9 @@ pub(super) fn one_input<'a>(kind: &str, inputs: &'a [PathBuf]) -> Result<&'a Pat
 
 /// Where a cube (or chain) written for `out` is read from by the next stage.
 pub(super) fn cube_product(out: &Path, layout: Layout, ktx_name: &str) -> PathBuf {
-    match layout {
-        Layout::Faces => out.to_path_buf(),
-        Layout::Ktx2 => out.join(format!("{ktx_name}.ktx2")),
-    }
+    layout
+        .container_path(out, ktx_name)
+        .unwrap_or_else(|| out.to_path_buf())
 }
 
 pub static EQUIRECT_TO_CUBE: Adapter<e2c::Params> = Adapter {
