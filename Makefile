@@ -3,7 +3,7 @@ CARGO ?= cargo
 OUT ?= out
 DEMO_INPUT ?= fixtures/hdri/city_512.exr
 
-.PHONY: all build demo test unit lint fmt fmt-check bench bench-quick fuzz clean
+.PHONY: all build demo test unit lint fmt fmt-check bench bench-quick fuzz conformance clean
 
 all: build
 
@@ -43,6 +43,11 @@ bench:
 
 bench-quick:
 	scripts/bench.sh --quick
+
+# Independent readers, decoders and writers (libktx, the ktx2 crate, ktx-parse, imagecodecs)
+# check every container and format the bakes write; installs them from PyPI and npm.
+conformance: build
+	conformance/run.sh
 
 # Coverage-guided fuzzing of every parser for a bounded time (FUZZ_SECONDS per target).
 fuzz:

@@ -17,6 +17,7 @@ mkdir -p bench
 	# output path under target/release/examples and could run the wrong harness.
 	cargo run --release -q -p "$crate" --example "bench-$crate" -- $quick
 done
+[ -z "$gather" ] && echo "== containers" && cargo run --release -q -p ibl-env --example bench-containers -- $quick
 {
 	echo "# Benchmark report"
 	echo

@@ -7,11 +7,51 @@
 //! mis-sized buffer would only panic later, in a bake.
 
 use ibl_core::image::Image;
-use ibl_core::io::{decode_image, ktx2, ColorSpace};
+use ibl_core::io::{container, decode_image, texture, ColorSpace};
+use ibl_core::CubeMips;
 use std::path::Path;
 
-/// Names of the image targets, as in `fuzz/fuzz_targets/` and `fuzz/corpus/`.
-pub const IMAGE_TARGETS: [&str; 4] = ["exr", "hdr", "png", "ktx2"];
+/// Names of the image targets, as in `fuzz/fuzz_targets/` and `fuzz/corpus/`. `zstd` is the
+/// KTX2 reader again, seeded with zstd-supercompressed files so the fuzzer works on the
+/// inflation path.
+pub const IMAGE_TARGETS: [&str; 7] = ["exr", "hdr", "png", "ktx2", "zstd", "dds", "ktx1"];
+
+/// The file name a target's inputs are read under (errors must name it).
+pub fn target_path(name: &str) -> &'static Path {
+    Path::new(match name {
+        "exr" => "f.exr",
+        "hdr" => "f.hdr",
+        "png" => "f.png",
+        "ktx2" | "zstd" => "f.ktx2",
+        "dds" => "f.dds",
+        "ktx1" => "f.ktx",
+        other => panic!("unknown image fuzz target '{other}'"),
+    })
+}
+
+/// Decodes `data` as target `name` reads it: a container (KTX2, DDS, KTX1) as a cube chain,
+/// anything else as an image.
+pub fn decode_target(name: &str, data: &[u8]) -> Result<(), ibl_core::Error> {
+    let path = target_path(name);
+    match name {
+        "ktx2" | "zstd" | "dds" | "ktx1" => container_cube(path, data).map(|_| ()),
+        _ => decode_image(path, data, ColorSpace::Linear).map(|_| ()),
+    }
+}
+
+/// A container's texture decoded: a cube chain, or for a 2D texture its level 0 checked.
+fn container_cube(path: &Path, data: &[u8]) -> Result<Option<CubeMips>, ibl_core::Error> {
+    let Some(tex) = container::read(path, data)? else {
+        return Err(ibl_core::Error::invalid(path, "not a container"));
+    };
+    if tex.payload.faces == 6 {
+        return texture::decode_cube(path, &tex.payload).map(Some);
+    }
+    let p = &tex.payload;
+    let img = texture::decode_image(&p.levels[0][0], p.format, p.width, p.height);
+    check_image(&img);
+    Ok(None)
+}
 
 fn check_image(img: &Image) {
     assert!(img.width > 0 && img.height > 0, "decoded an empty image");
@@ -49,9 +89,10 @@ pub fn png(data: &[u8]) {
     }
 }
 
-/// `ktx2` target: float cubemaps with their mip chain.
-pub fn ktx2(data: &[u8]) {
-    if let Ok(mips) = ktx2::decode_cube(Path::new("f.ktx2"), data) {
+/// `ktx2`, `zstd`, `dds` and `ktx1` targets: cube maps with their mip chain, in every pixel
+/// format the readers take.
+pub fn container(name: &str, data: &[u8]) {
+    if let Ok(Some(mips)) = container_cube(target_path(name), data) {
         assert!(!mips.levels.is_empty());
         for (l, cube) in mips.levels.iter().enumerate() {
             assert!(cube.size > 0, "level {l} is empty");
@@ -68,7 +109,7 @@ pub fn run_image_target(name: &str, data: &[u8]) {
         "exr" => exr(data),
         "hdr" => hdr(data),
         "png" => png(data),
-        "ktx2" => ktx2(data),
+        "ktx2" | "zstd" | "dds" | "ktx1" => container(name, data),
         other => panic!("unknown image fuzz target '{other}'"),
     }
 }

@@ -1,7 +1,7 @@
 //! `equirect-to-cube`: parse, call `ibl_env::equirect_to_cube`, write, report.
 
 use clap::Parser;
-use ibl_env::equirect_to_cube::{run, Params};
+use ibl_env::equirect_to_cube::{run, Params, CUBE_NAME};
 use std::path::PathBuf;
 
 /// Latitude-longitude HDR (or a cross, strip, face folder or KTX2 cube) to an area-filtered
@@ -26,7 +26,18 @@ fn main() {
         cli.params.validate()?;
         let env = ctx.load_environment(&cli.input, cli.params.sanitize)?;
         let baked = run(&cli.params, &env, &cli.output, ctx.progress())?;
-        let outputs = ibl_cli::write_outputs(&baked.files)?;
-        Ok::<_, ibl_core::Error>((outputs, serde_json::json!({ "face_size": baked.face_size })))
+        baked.warnings.iter().for_each(|w| ctx.warn(w.clone()));
+        let outputs = if cli.params.to_equirect {
+            ibl_cli::write_outputs(&baked.files)?
+        } else {
+            ibl_cli::write_cube_outputs(ctx, &cli.output, CUBE_NAME, &baked.files)?
+        };
+        Ok::<_, ibl_core::Error>((
+            outputs,
+            serde_json::json!({
+                "face_size": baked.face_size,
+                "encoding": ibl_cli::encoding_details(&baked.encoding),
+            }),
+        ))
     })
 }

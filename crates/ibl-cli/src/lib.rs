@@ -89,6 +89,37 @@ pub fn write_outputs(
     Ok(files.iter().map(|f| f.0.display().to_string()).collect())
 }
 
+/// Writes a cube bake's files as one atomic set, then removes what an earlier run of the same
+/// bake left in `dir` that this one did not write (another layout's container or faces, levels
+/// of a longer chain; see [`ibl_core::output::stale_cube_files`]), each with a warning, so the
+/// folder holds exactly this run's result.
+pub fn write_cube_outputs(
+    ctx: &Ctx,
+    dir: &std::path::Path,
+    name: &str,
+    files: &[(std::path::PathBuf, Vec<u8>)],
+) -> Result<Vec<String>, ibl_core::Error> {
+    let outputs = write_outputs(files)?;
+    let written: Vec<std::path::PathBuf> = files.iter().map(|f| f.0.clone()).collect();
+    for stale in ibl_core::output::stale_cube_files(dir, name, &written) {
+        std::fs::remove_file(&stale).map_err(|e| ibl_core::Error::io(&stale, e))?;
+        ctx.warn(format!(
+            "removed {} (left by an earlier run with another layout or a longer chain)",
+            stale.display()
+        ));
+    }
+    Ok(outputs)
+}
+
+/// The `encoding` details of a `--json` summary: the sidecar's numbers and each level's
+/// encode time.
+pub fn encoding_details(levels: &[ibl_core::io::texture::LevelEncoding]) -> serde_json::Value {
+    serde_json::json!({
+        "levels": levels,
+        "seconds": levels.iter().map(|l| l.seconds).collect::<Vec<f64>>(),
+    })
+}
+
 /// Runs a binary's body: builds the thread pool, times it, prints the summary or the error
 /// chain, and exits with the right code. Never returns.
 pub fn run<E, F>(tool: &str, common: CommonArgs, body: F) -> !

@@ -5,7 +5,7 @@ use crate::cube::{CubeMips, Cubemap, Face};
 use crate::equirect::{self, Filter};
 use crate::error::{Error, Result};
 use crate::image::{check_texels, Image, TexelReport};
-use crate::io::{self, ColorSpace, FloatDepth, WriteOptions};
+use crate::io::{self, ColorSpace};
 use crate::progress::Progress;
 use std::path::{Path, PathBuf};
 
@@ -116,7 +116,7 @@ fn cube_to_cube(
 const IMAGE_EXTS: [&str; 5] = ["exr", "hdr", "png", "jpg", "jpeg"];
 
 /// Finds `stem.<ext>` in `dir` for any readable extension.
-fn find_with_stem(dir: &Path, stem: &str) -> Option<PathBuf> {
+pub(crate) fn find_with_stem(dir: &Path, stem: &str) -> Option<PathBuf> {
     IMAGE_EXTS
         .iter()
         .map(|e| dir.join(format!("{stem}.{e}")))
@@ -177,9 +177,7 @@ pub fn load_environment(path: &Path, sanitize: bool) -> Result<LoadedEnvironment
             std::io::Error::new(std::io::ErrorKind::NotFound, "no such file or folder"),
         ));
     }
-    if io::extension(path) == "ktx2" {
-        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-        let mut mips = io::ktx2::decode_cube(path, &bytes)?;
+    if let Some(mut mips) = read_container_cube(path)? {
         let mut cube = mips.levels.swap_remove(0);
         let mut report = TexelReport::default();
         for face in &mut cube.faces {
@@ -262,145 +260,46 @@ pub fn classify_layout(path: &Path, img: Image) -> Result<Environment> {
     Ok(Environment::Cube(Cubemap::from_faces(faces)?))
 }
 
-/// Output container for cubemaps.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    PartialEq,
-    Eq,
-    Default,
-    serde::Serialize,
-    serde::Deserialize,
-    clap::ValueEnum,
-)]
-#[serde(rename_all = "kebab-case")]
-pub enum Layout {
-    /// One EXR per face (`px.exr` … or `m{l}_px.exr` … for chains).
-    #[default]
-    Faces,
-    /// One KTX2 file with all faces and levels.
-    Ktx2,
-    /// One DDS file (DX10 header, cubemap flags) with all faces and levels.
-    Dds,
-    /// One KTX 1.1 file with all faces and levels (what Filament's cmgen writes).
-    Ktx1,
-}
+pub use crate::output::Layout;
 
-impl Layout {
-    /// File extension of a single-file container, `None` for face files.
-    pub fn extension(self) -> Option<&'static str> {
-        match self {
-            Layout::Faces => None,
-            Layout::Ktx2 => Some("ktx2"),
-            Layout::Dds => Some("dds"),
-            Layout::Ktx1 => Some("ktx"),
+/// Reads `path` as a KTX2, KTX1 or DDS cube (found by its magic bytes, or by its extension
+/// when it is too short to have any); `None` if it is not a container file. A container
+/// holding a 2D image is refused here (cube readers need six faces).
+fn read_container_cube(path: &Path) -> Result<Option<CubeMips>> {
+    if path.is_dir() {
+        return Ok(None);
+    }
+    let named = io::container::Container::from_extension(path).is_some();
+    let mut head = [0u8; 12];
+    let n = {
+        use std::io::Read;
+        let mut f = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+        f.read(&mut head).map_err(|e| Error::io(path, e))?
+    };
+    if io::container::Container::sniff(&head[..n]).is_none() {
+        if named {
+            return Err(Error::invalid(
+                path,
+                "not a KTX2, KTX or DDS file (the identifier is missing or the file is truncated)",
+            ));
         }
+        return Ok(None);
     }
-
-    /// `dir/<name>.<ext>` for a single-file container, `None` for face files.
-    pub fn container_path(self, dir: &Path, name: &str) -> Option<PathBuf> {
-        self.extension().map(|e| dir.join(format!("{name}.{e}")))
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let tex = io::container::read(path, &bytes)?.expect("sniffed");
+    if tex.payload.faces != 6 {
+        return Err(Error::unsupported(
+            path,
+            "a 2D texture, not a cube map (convert it to an equirect .exr first)",
+        ));
     }
+    io::texture::decode_cube(path, &tex.payload).map(Some)
 }
 
-/// Encodes a cube (or chain) for `dir` without touching the disk: `(path, bytes)` pairs.
-/// A single level is named `px.exr`…, a chain `m{l}_px.exr`…; KTX2 is `dir/<ktx_name>.ktx2`.
-pub fn encode_cube_outputs(
-    dir: &Path,
-    mips: &CubeMips,
-    layout: Layout,
-    depth: FloatDepth,
-    ktx_name: &str,
-) -> Result<Vec<(PathBuf, Vec<u8>)>> {
-    match layout {
-        Layout::Ktx2 => Ok(vec![(
-            dir.join(format!("{ktx_name}.ktx2")),
-            io::ktx2::encode_cube(mips, depth),
-        )]),
-        Layout::Dds | Layout::Ktx1 => Err(Error::unsupported(
-            dir,
-            format!("{layout:?} output is not written yet"),
-        )),
-        Layout::Faces => {
-            use rayon::prelude::*;
-            let opts = WriteOptions {
-                float: depth,
-                ..Default::default()
-            };
-            let chain = mips.levels.len() > 1;
-            let jobs: Vec<(PathBuf, &Image)> = mips
-                .levels
-                .iter()
-                .enumerate()
-                .flat_map(|(l, cube)| {
-                    Face::ALL.iter().map(move |f| {
-                        let name = if chain {
-                            format!("m{l}_{}.exr", f.name())
-                        } else {
-                            format!("{}.exr", f.name())
-                        };
-                        (dir.join(name), &cube.faces[*f as usize])
-                    })
-                })
-                .collect();
-            jobs.into_par_iter()
-                .map(|(p, img)| io::encode_image(&p, img, &opts).map(|b| (p, b)))
-                .collect()
-        }
-    }
-}
-
-/// Face files of an earlier, longer chain in `dir` that a chain of `levels` levels does not
-/// overwrite (`m{l}_*` for l ≥ `levels`, or every `m{l}_*` when one level is written as `px…`):
-/// a chain writer removes them after a successful write, or a reader would take them as part
-/// of the new chain.
-pub fn stale_chain_files(dir: &Path, levels: usize) -> Vec<PathBuf> {
-    let first = if levels > 1 { levels } else { 0 };
-    let mut out = Vec::new();
-    for l in first.. {
-        let found: Vec<PathBuf> = Face::ALL
-            .iter()
-            .filter_map(|f| find_with_stem(dir, &format!("m{l}_{}", f.name())))
-            .collect();
-        if found.is_empty() {
-            break;
-        }
-        out.extend(found);
-    }
-    out
-}
-
-/// Paths [`encode_cube_outputs`] would write (for planning and cleaning).
-pub fn cube_output_paths(
-    dir: &Path,
-    levels: usize,
-    layout: Layout,
-    ktx_name: &str,
-) -> Vec<PathBuf> {
-    match layout {
-        Layout::Ktx2 | Layout::Dds | Layout::Ktx1 => {
-            vec![layout.container_path(dir, ktx_name).expect("single file")]
-        }
-        Layout::Faces => (0..levels)
-            .flat_map(|l| {
-                Face::ALL.iter().map(move |f| {
-                    if levels > 1 {
-                        dir.join(format!("m{l}_{}.exr", f.name()))
-                    } else {
-                        dir.join(format!("{}.exr", f.name()))
-                    }
-                })
-            })
-            .collect(),
-    }
-}
-
-/// Loads a cube chain written by [`encode_cube_outputs`] (faces or KTX2).
+/// Loads a cube chain written by [`crate::output::encode_cube`] (faces or any container).
 pub fn read_cube_chain(path: &Path) -> Result<CubeMips> {
-    if io::extension(path) == "ktx2" {
-        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-        return io::ktx2::decode_cube(path, &bytes);
+    if let Some(mips) = read_container_cube(path)? {
+        return Ok(mips);
     }
     if find_with_stem(path, "m0_px").is_some() && find_with_stem(path, "px").is_some() {
         return Err(Error::invalid(
@@ -570,24 +469,48 @@ mod tests {
     }
 
     #[test]
-    fn faces_and_ktx2_outputs_read_back() {
-        let dir = tempfile::tempdir().unwrap();
+    fn every_layout_and_format_reads_back() {
+        use crate::io::format::PixelFormat;
+        use crate::output::{cube_output_paths, encode_cube, Encoding};
         let mips = CubeMips::build(labelled_cube(8), 2);
-        for layout in [Layout::Faces, Layout::Ktx2] {
-            let files =
-                encode_cube_outputs(dir.path(), &mips, layout, FloatDepth::F32, "cube").unwrap();
-            let paths: Vec<_> = files.iter().map(|f| f.0.clone()).collect();
-            assert_eq!(
-                paths,
-                cube_output_paths(dir.path(), mips.levels.len(), layout, "cube")
-            );
-            io::write_many_atomic(&files).unwrap();
-            let target = if layout == Layout::Ktx2 {
-                dir.path().join("cube.ktx2")
-            } else {
-                dir.path().to_path_buf()
-            };
-            assert_eq!(read_cube_chain(&target).unwrap(), mips);
+        for layout in Layout::ALL {
+            for format in PixelFormat::ALL {
+                if layout == Layout::Faces
+                    && !matches!(format, PixelFormat::Rgba32f | PixelFormat::Rgba16f)
+                {
+                    continue;
+                }
+                let dir = tempfile::tempdir().unwrap();
+                let enc = Encoding {
+                    layout,
+                    format,
+                    ..Default::default()
+                };
+                let out = encode_cube(dir.path(), &mips, &enc, "cube", &[]).unwrap();
+                let paths: Vec<_> = out.files.iter().map(|f| f.0.clone()).collect();
+                assert_eq!(
+                    paths,
+                    cube_output_paths(dir.path(), mips.levels.len(), layout, "cube")
+                );
+                io::write_many_atomic(&out.files).unwrap();
+                let target = layout
+                    .container_path(dir.path(), "cube")
+                    .unwrap_or_else(|| dir.path().to_path_buf());
+                let back = read_cube_chain(&target).unwrap();
+                if format == PixelFormat::Rgba32f {
+                    assert_eq!(back, mips);
+                } else {
+                    // What the reader decodes is what the encoder measured.
+                    for (l, (a, b)) in mips.levels.iter().zip(&back.levels).enumerate() {
+                        let (mean, max) = crate::io::texture::relative_errors(&a.faces, &b.faces);
+                        assert!(
+                            (mean - out.levels[l].mean_rel).abs() < 1e-12,
+                            "{layout:?} {format:?}"
+                        );
+                        assert!((max - out.levels[l].max_rel).abs() < 1e-12);
+                    }
+                }
+            }
         }
     }
 }

@@ -14,6 +14,7 @@ pub mod equirect;
 pub mod error;
 pub mod image;
 pub mod io;
+pub mod output;
 pub mod params;
 pub mod progress;
 pub mod sampling;

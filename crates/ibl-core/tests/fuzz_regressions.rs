@@ -50,12 +50,7 @@ fn regressions_are_refused_with_an_error() {
     for t in IMAGE_TARGETS {
         for p in files_in(&fuzz_dir().join("regressions").join(t)) {
             let data = std::fs::read(&p).unwrap();
-            let path = Path::new("f").with_extension(t);
-            let err = if t == "ktx2" {
-                ktx2::decode_cube(&path, &data).err()
-            } else {
-                io::decode_image(&path, &data, ColorSpace::Linear).err()
-            };
+            let err = images::decode_target(t, &data).err();
             let guarded = p
                 .file_name()
                 .unwrap()
@@ -91,12 +86,7 @@ fn every_seed_is_a_valid_file() {
         );
         for p in files {
             let data = std::fs::read(&p).unwrap();
-            let path = Path::new("f").with_extension(t);
-            let ok = if t == "ktx2" {
-                ktx2::decode_cube(&path, &data).map(|_| ())
-            } else {
-                io::decode_image(&path, &data, ColorSpace::Linear).map(|_| ())
-            };
+            let ok = images::decode_target(t, &data);
             assert!(ok.is_ok(), "{}: {}", p.display(), ok.unwrap_err());
         }
     }
@@ -556,6 +546,33 @@ fn regenerate_seed_corpus() {
         "seed-rgb32f-2-levels2.ktx2".into(),
         ktx2_rgb32f_seed(),
     ));
+
+    // The packed and block formats in every container (zstd: supercompressed KTX2).
+    use ibl_core::io::format::{Bc6hQuality, PixelFormat};
+    use ibl_core::io::{dds, ktx1, texture};
+    for format in PixelFormat::ALL {
+        let (p, _) = texture::encode_chain(&cube_chain(4, 1), format, Bc6hQuality::Fast);
+        let n = format.name();
+        files.push((
+            "zstd",
+            format!("seed-{n}-4-levels3.ktx2"),
+            ktx2::encode(&p, Some(3), &[]).unwrap(),
+        ));
+        files.push(("dds", format!("seed-{n}-4-levels3.dds"), dds::encode(&p)));
+        let sh = [("sh".to_string(), b"0.5 0.25 0.125\n".to_vec())];
+        files.push((
+            "ktx1",
+            format!("seed-{n}-4-levels3.ktx"),
+            ktx1::encode(&p, &sh),
+        ));
+        if format != PixelFormat::Rgba32f {
+            files.push((
+                "ktx2",
+                format!("seed-{n}-4-levels3.ktx2"),
+                ktx2::encode(&p, None, &[]).unwrap(),
+            ));
+        }
+    }
 
     for t in IMAGE_TARGETS {
         let dir = corpus.join(t);

@@ -1,13 +1,19 @@
 //! The `equirect-to-cube` bake: an environment (equirect, cross, strip, faces or KTX2) to an
 //! area-filtered cubemap of any face size, and the inverse to an equirect for previews.
 
-use ibl_core::envmap::{self, Environment, Layout, LoadedEnvironment};
+#[cfg(test)]
+use ibl_core::envmap::Layout;
+use ibl_core::envmap::{Environment, LoadedEnvironment};
 use ibl_core::equirect::{self, Filter};
+use ibl_core::io::format::PixelFormat;
+use ibl_core::io::texture::LevelEncoding;
 use ibl_core::io::{self, FloatDepth, WriteOptions};
+use ibl_core::output::{self, Encoding};
 use ibl_core::progress::Progress;
 use ibl_core::{CubeMips, Error, Result};
 use std::path::{Path, PathBuf};
 
+ibl_core::cube_output_params! {
 /// Parameters of the bake: CLI flags and RON keys alike.
 #[derive(Clone, Debug, PartialEq, clap::Args, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -23,12 +29,6 @@ pub struct Params {
         allow_negative_numbers = true
     )]
     pub rotate: f32,
-    /// Output container: one EXR per face or one KTX2 file.
-    #[arg(long, value_enum, default_value_t = Layout::Faces)]
-    pub layout: Layout,
-    /// Write 16-bit half floats instead of 32-bit.
-    #[arg(long)]
-    pub half: bool,
     /// Resampling filter: exact footprint mean (area) or one bilinear tap.
     #[arg(long, value_enum, default_value_t = Filter::Area)]
     pub filter: Filter,
@@ -38,6 +38,7 @@ pub struct Params {
     /// Set NaN/Inf input texels to 0 instead of refusing the input.
     #[arg(long)]
     pub sanitize: bool,
+}
 }
 
 impl Default for Params {
@@ -60,7 +61,13 @@ impl Params {
             }
         }
         ibl_core::params::check_rotate(self.rotate)?;
+        self.encoding()?;
         Ok(())
+    }
+
+    /// The output encoding asked for, checked.
+    pub fn encoding(&self) -> Result<Encoding> {
+        self.cube_output().resolve(Encoding::default())
     }
 }
 
@@ -69,7 +76,22 @@ pub struct Baked {
     /// Encoded files, ready for [`io::write_many_atomic`].
     pub files: Vec<(PathBuf, Vec<u8>)>,
     pub face_size: usize,
+    /// What the output encoding cost (one entry for the cube; none for --to-equirect).
+    pub encoding: Vec<LevelEncoding>,
+    /// Things the user should know (clamped values).
+    pub warnings: Vec<String>,
 }
+
+/// Paths [`run`] writes for `params` into `out` (for planning, cleaning and stale files).
+pub fn output_paths(params: &Params, out: &Path) -> Result<Vec<PathBuf>> {
+    let enc = params.encoding()?;
+    let mut p = output::cube_output_paths(out, 1, enc.layout, CUBE_NAME);
+    p.extend(output::encoding_sidecar_path(out, CUBE_NAME, &enc));
+    Ok(p)
+}
+
+/// Name of the cube container (`cube.ktx2`, `cube.dds`, `cube.ktx`).
+pub const CUBE_NAME: &str = "cube";
 
 /// Resamples a loaded environment to a cube (or an equirect with `to_equirect`) and encodes
 /// the outputs for `out_dir` (or the output file for equirect).
@@ -80,7 +102,12 @@ pub fn run(
     progress: &dyn Progress,
 ) -> Result<Baked> {
     params.validate()?;
-    let depth = FloatDepth::from_half(params.half);
+    let enc = params.encoding()?;
+    let depth = if enc.format == PixelFormat::Rgba16f {
+        FloatDepth::F16
+    } else {
+        FloatDepth::F32
+    };
     if params.to_equirect {
         // --rotate turns the environment before any bake (DESIGN.md), this one included.
         let base = match &input.env {
@@ -111,20 +138,25 @@ pub fn run(
         return Ok(Baked {
             files: vec![(path, bytes)],
             face_size: base.size,
+            encoding: Vec::new(),
+            warnings: Vec::new(),
         });
     }
     let n = params.size.unwrap_or_else(|| input.env.natural_face_size());
     let cube = input.env.to_cube(n, params.filter, params.rotate, progress);
-    let files = envmap::encode_cube_outputs(
+    let encoded = output::encode_cube(out, &CubeMips { levels: vec![cube] }, &enc, CUBE_NAME, &[])?;
+    let mut files = encoded.files;
+    files.extend(output::encoding_sidecar(
         out,
-        &CubeMips { levels: vec![cube] },
-        params.layout,
-        depth,
-        "cube",
-    )?;
+        CUBE_NAME,
+        &enc,
+        &encoded.levels,
+    )?);
     Ok(Baked {
         files,
         face_size: n,
+        encoding: encoded.levels,
+        warnings: encoded.warnings,
     })
 }
 
@@ -144,7 +176,11 @@ mod tests {
         let from_ron: Params = ron_from_str("()");
         assert_eq!(from_ron, Params::default());
         assert_eq!(Params::default().size, None);
-        assert_eq!(Params::default().layout, Layout::Faces);
+        assert_eq!(Params::default().layout, None);
+        assert_eq!(Params::default().encoding().unwrap().layout, Layout::Faces);
+        let p: Params =
+            ron_from_str("(layout: Some(ktx2), format: Some(bc6h), bc6h_quality: Some(slow))");
+        assert_eq!(p.encoding().unwrap().format, PixelFormat::Bc6h);
     }
 
     fn ron_from_str(s: &str) -> Params {

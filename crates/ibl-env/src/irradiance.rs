@@ -4,9 +4,11 @@
 
 use glam::Vec3;
 use ibl_core::cube::{solid_angle_table, texel_direction, CubeMips, Cubemap, Face};
-use ibl_core::envmap::{self, Environment, Layout, LoadedEnvironment};
+use ibl_core::envmap::{Environment, LoadedEnvironment};
 use ibl_core::equirect::{pixel_direction, rotate_y, row_solid_angle};
-use ibl_core::io::{self, FloatDepth};
+use ibl_core::io;
+use ibl_core::io::texture::LevelEncoding;
+use ibl_core::output::{self, Encoding};
 use ibl_core::progress::Progress;
 use ibl_core::sh::{self, cosine_lobe_zonal, num_coeffs};
 use ibl_core::traverse::{map_cube_texels, ordered_row_reduce};
@@ -16,6 +18,7 @@ use std::path::{Path, PathBuf};
 /// Largest band count accepted (l ≤ 15).
 pub const MAX_BANDS: usize = 16;
 
+ibl_core::cube_output_params! {
 /// Parameters of the bake: CLI flags and RON keys alike.
 #[derive(Clone, Debug, PartialEq, clap::Args, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -50,15 +53,10 @@ pub struct Params {
         allow_negative_numbers = true
     )]
     pub rotate: f32,
-    /// Irradiance cube container: one EXR per face or one KTX2 file.
-    #[arg(long, value_enum, default_value_t = Layout::Faces)]
-    pub layout: Layout,
-    /// Write 16-bit half floats instead of 32-bit.
-    #[arg(long)]
-    pub half: bool,
     /// Set NaN/Inf input texels to 0 instead of refusing the input.
     #[arg(long)]
     pub sanitize: bool,
+}
 }
 
 impl Default for Params {
@@ -89,8 +87,26 @@ impl Params {
             )));
         }
         ibl_core::params::check_rotate(self.rotate)?;
+        self.encoding()?;
         Ok(())
     }
+
+    /// The irradiance cube's output encoding, checked.
+    pub fn encoding(&self) -> Result<Encoding> {
+        self.cube_output().resolve(Encoding::default())
+    }
+}
+
+/// Name of the irradiance cube container (`irradiance.ktx2`, `.dds`, `.ktx`).
+pub const CUBE_NAME: &str = "irradiance";
+
+/// Paths [`run`] writes for `params` into `out` (for planning, cleaning and stale files).
+pub fn output_paths(params: &Params, out: &Path) -> Result<Vec<PathBuf>> {
+    let enc = params.encoding()?;
+    let mut p = vec![out.join(&params.sh_file)];
+    p.extend(output::cube_output_paths(out, 1, enc.layout, CUBE_NAME));
+    p.extend(output::encoding_sidecar_path(out, CUBE_NAME, &enc));
+    Ok(p)
 }
 
 /// The coefficients file: radiance projection L_lm and the coefficients of E/π.
@@ -367,6 +383,10 @@ pub struct Baked {
     pub coefficients: ShCoefficients,
     /// Irradiance-cube values below zero from SH ringing, clamped to 0.
     pub negative_clamped: usize,
+    /// What the output encoding cost.
+    pub encoding: Vec<LevelEncoding>,
+    /// Things the user should know (values clamped by the output format).
+    pub warnings: Vec<String>,
 }
 
 /// Projects, convolves and encodes `DIR/<sh_file>` and the irradiance cube.
@@ -402,18 +422,27 @@ pub fn run(
     };
     let sh_path = out_dir.join(&params.sh_file);
     let mut files = vec![(sh_path.clone(), io::data::encode(&sh_path, &coefficients)?)];
-    let depth = FloatDepth::from_half(params.half);
-    files.extend(envmap::encode_cube_outputs(
+    let enc = params.encoding()?;
+    let encoded = output::encode_cube(
         out_dir,
         &CubeMips { levels: vec![cube] },
-        params.layout,
-        depth,
-        "irradiance",
+        &enc,
+        CUBE_NAME,
+        &[],
+    )?;
+    files.extend(encoded.files);
+    files.extend(output::encoding_sidecar(
+        out_dir,
+        CUBE_NAME,
+        &enc,
+        &encoded.levels,
     )?);
     Ok(Baked {
         files,
         coefficients,
         negative_clamped,
+        encoding: encoded.levels,
+        warnings: encoded.warnings,
     })
 }
 

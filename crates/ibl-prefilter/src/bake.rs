@@ -8,9 +8,11 @@ use crate::samples::SampleTable;
 use crate::tree::{tree_level, CellTree, TreeParams};
 use ibl_core::bordered::BorderedMips;
 use ibl_core::cube::{mip_sizes, texel_direction, Cubemap, Face};
-use ibl_core::envmap::{self, Environment, Layout, LoadedEnvironment};
+use ibl_core::envmap::{Environment, LoadedEnvironment};
 use ibl_core::equirect::Filter;
-use ibl_core::io::{self, FloatDepth};
+use ibl_core::io;
+use ibl_core::io::texture::LevelEncoding;
+use ibl_core::output::{self, Encoding};
 use ibl_core::progress::Progress;
 use ibl_core::{luminance, CubeMips};
 use serde::Serialize;
@@ -120,6 +122,7 @@ impl Method {
 /// (studio, sunset, interior fixtures at 32², 32–1024 samples, biases 0, 0.5, 1).
 pub const LOD_BIAS: f32 = 0.0;
 
+ibl_core::cube_output_params! {
 /// Parameters of the bake: CLI flags and RON keys alike.
 #[derive(Clone, Debug, PartialEq, clap::Args, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -142,12 +145,6 @@ pub struct Params {
     /// Stop the chain at the last level with roughness ≤ R (spacing of the full chain kept).
     #[arg(long, value_name = "R")]
     pub max_roughness: Option<f32>,
-    /// Output container: one EXR per face and level, or one KTX2 file.
-    #[arg(long, value_enum, default_value_t = Layout::Faces)]
-    pub layout: Layout,
-    /// Write 16-bit half floats instead of 32-bit.
-    #[arg(long)]
-    pub half: bool,
     /// Brute-force reference: the exact kernel summed over every source texel (slow).
     #[arg(long)]
     pub reference: bool,
@@ -162,6 +159,7 @@ pub struct Params {
     /// Set NaN/Inf input texels to 0 instead of refusing the input.
     #[arg(long)]
     pub sanitize: bool,
+}
 }
 
 impl Default for Params {
@@ -219,7 +217,13 @@ impl Params {
             }
         }
         ibl_core::params::check_rotate(self.rotate)?;
+        self.encoding()?;
         Ok(())
+    }
+
+    /// The chain's output encoding, checked.
+    pub fn encoding(&self) -> Result<Encoding> {
+        Ok(self.cube_output().resolve(Encoding::default())?)
     }
 
     /// Levels of the full chain N.
@@ -355,6 +359,9 @@ pub struct Report {
     pub max_roughness: Option<f32>,
     pub note: Option<String>,
     pub level: Vec<LevelReport>,
+    /// The output encoding and what it cost per level against the float chain (filled by
+    /// [`run`]; the bake alone leaves it empty).
+    pub encoding: Option<serde_json::Value>,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -403,6 +410,8 @@ pub struct Baked {
     /// Encoded files (the chain and `prefilter.json`), ready for [`io::write_many_atomic`].
     pub files: Vec<(PathBuf, Vec<u8>)>,
     pub chain: Chain,
+    /// What the output encoding cost per level (its seconds included).
+    pub encoding: Vec<LevelEncoding>,
 }
 
 /// Name of the sidecar report.
@@ -415,22 +424,31 @@ pub fn run(
     out_dir: &Path,
     progress: &dyn Progress,
 ) -> Result<Baked> {
-    let chain = bake_chain(params, &input.env, progress)?;
-    let depth = FloatDepth::from_half(params.half);
-    let mut files =
-        envmap::encode_cube_outputs(out_dir, &chain.mips, params.layout, depth, "prefilter")?;
+    let enc = params.encoding()?;
+    let mut chain = bake_chain(params, &input.env, progress)?;
+    let encoded = output::encode_cube(out_dir, &chain.mips, &enc, CHAIN_NAME, &[])?;
+    chain.report.encoding = Some(output::encoding_report(&enc, &encoded.levels));
+    chain.warnings.extend(encoded.warnings);
+    let mut files = encoded.files;
     let json = out_dir.join(REPORT_NAME);
     let bytes = io::data::encode(&json, &chain.report)?;
     files.push((json, bytes));
-    Ok(Baked { files, chain })
+    Ok(Baked {
+        files,
+        chain,
+        encoding: encoded.levels,
+    })
 }
 
+/// Name of the chain's container (`prefilter.ktx2`, `.dds`, `.ktx`).
+pub const CHAIN_NAME: &str = "prefilter";
+
 /// Paths [`run`] writes for `params` (for planning and cleaning).
-pub fn output_paths(params: &Params, out_dir: &Path) -> Vec<PathBuf> {
-    let mut p =
-        envmap::cube_output_paths(out_dir, params.baked_levels(), params.layout, "prefilter");
+pub fn output_paths(params: &Params, out_dir: &Path) -> Result<Vec<PathBuf>> {
+    let enc = params.encoding()?;
+    let mut p = output::cube_output_paths(out_dir, params.baked_levels(), enc.layout, CHAIN_NAME);
     p.push(out_dir.join(REPORT_NAME));
-    p
+    Ok(p)
 }
 
 /// What the rough levels are computed from.
@@ -556,6 +574,7 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
         max_roughness: params.max_roughness,
         note,
         level: reports,
+        encoding: None,
     };
     Ok(Chain {
         mips: CubeMips { levels },
@@ -627,10 +646,11 @@ mod tests {
         assert_eq!(Params::default().quality, Quality::Default);
         assert_eq!(Params::default().chain_levels(), 6);
         let p: Params =
-            ron::from_str("(size: 64, levels: Some(4), quality: high, layout: ktx2)").unwrap();
+            ron::from_str("(size: 64, levels: Some(4), quality: high, layout: Some(ktx2))")
+                .unwrap();
         assert_eq!(
-            (p.size, p.levels, p.quality, p.layout),
-            (64, Some(4), Quality::High, Layout::Ktx2)
+            (p.size, p.levels, p.quality, p.encoding().unwrap().layout),
+            (64, Some(4), Quality::High, ibl_core::output::Layout::Ktx2)
         );
     }
 

@@ -1,7 +1,7 @@
 //! `irradiance`: parse, call `ibl_env::irradiance`, write, report.
 
 use clap::Parser;
-use ibl_env::irradiance::{run, Params};
+use ibl_env::irradiance::{run, Params, CUBE_NAME};
 use std::path::PathBuf;
 
 /// Diffuse irradiance of an environment: DIR/sh.json (radiance projection and E/π
@@ -32,10 +32,15 @@ fn main() {
                 baked.negative_clamped
             ));
         }
-        let outputs = ibl_cli::write_outputs(&baked.files)?;
+        baked.warnings.iter().for_each(|w| ctx.warn(w.clone()));
+        let outputs = ibl_cli::write_cube_outputs(ctx, &cli.output, CUBE_NAME, &baked.files)?;
         Ok::<_, ibl_core::Error>((
             outputs,
-            serde_json::json!({ "coefficients": baked.coefficients, "negative_clamped": baked.negative_clamped }),
+            serde_json::json!({
+                "coefficients": baked.coefficients,
+                "negative_clamped": baked.negative_clamped,
+                "encoding": ibl_cli::encoding_details(&baked.encoding),
+            }),
         ))
     })
 }

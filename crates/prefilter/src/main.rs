@@ -1,7 +1,7 @@
 //! `prefilter`: parse, call `ibl_prefilter::run`, write atomically, report.
 
 use clap::Parser;
-use ibl_prefilter::bake::{run, Params};
+use ibl_prefilter::bake::{run, Params, CHAIN_NAME};
 use std::path::PathBuf;
 
 /// GGX prefiltered specular mip chain (split-sum radiance term): level l of N holds the
@@ -27,17 +27,7 @@ fn main() {
         cli.params.validate()?;
         let env = ctx.load_environment(&cli.input, cli.params.sanitize)?;
         let baked = run(&cli.params, &env, &cli.output, ctx.progress())?;
-        let outputs = ibl_cli::write_outputs(&baked.files)?;
-        if cli.params.layout == ibl_core::envmap::Layout::Faces {
-            let levels = baked.chain.mips.levels.len();
-            for stale in ibl_core::envmap::stale_chain_files(&cli.output, levels) {
-                std::fs::remove_file(&stale).map_err(|e| ibl_core::Error::io(&stale, e))?;
-                ctx.warn(format!(
-                    "removed {} (a level of an earlier, longer chain)",
-                    stale.display()
-                ));
-            }
-        }
+        let outputs = ibl_cli::write_cube_outputs(ctx, &cli.output, CHAIN_NAME, &baked.files)?;
         baked
             .chain
             .warnings
@@ -53,6 +43,7 @@ fn main() {
             "source_seconds": baked.chain.source_seconds,
             "estimate_seconds": baked.chain.estimate_seconds,
             "level_seconds": baked.chain.level_seconds,
+            "encoding": ibl_cli::encoding_details(&baked.encoding),
         });
         Ok::<_, ibl_prefilter::Error>((outputs, details))
     })

@@ -362,3 +362,159 @@ fn bad_inputs_fail_with_one_line_and_write_nothing() {
     );
     assert_fails_cleanly(&[i, "-o", o, "--samples", "64"], &out, 2, "--samples");
 }
+
+#[test]
+fn every_container_and_format_reads_back_within_the_reported_error() {
+    let tmp = tempfile::tempdir().unwrap();
+    let input = fixture("hdri/interior_256.exr");
+    // 64² down to 8×8, the default chain's smallest face (BC6H is bounded there, see below).
+    let float_dir = tmp.path().join("float");
+    quick_sized(&input, &float_dir, "64", "4", &["--layout", "ktx2"]);
+    let float = ibl_core::envmap::read_cube_chain(&float_dir.join("prefilter.ktx2")).unwrap();
+    for (layout, ext, zstd) in [
+        ("ktx2", "ktx2", false),
+        ("ktx2", "ktx2", true),
+        ("dds", "dds", false),
+        ("ktx1", "ktx", false),
+    ] {
+        for format in ["rgba16f", "rgb9e5", "b10g11r11", "bc6h"] {
+            let dir = tmp.path().join(format!("{layout}-{zstd}-{format}"));
+            let mut args = vec!["--layout", layout, "--format", format];
+            if zstd {
+                args.extend(["--zstd", "19"]);
+            }
+            quick_sized(&input, &dir, "64", "4", &args);
+            let file = dir.join(format!("prefilter.{ext}"));
+            let mut want = vec!["prefilter.json".to_string(), format!("prefilter.{ext}")];
+            want.sort();
+            assert_eq!(files_in(&dir), want);
+            let back = ibl_core::envmap::read_cube_chain(&file).unwrap();
+            let enc = &report(&dir)["encoding"];
+            assert_eq!(enc["format"], format);
+            assert_eq!(enc["layout"], layout);
+            for (l, (a, b)) in float.levels.iter().zip(&back.levels).enumerate() {
+                let (mean, max) = ibl_core::io::texture::relative_errors(&a.faces, &b.faces);
+                let reported = &enc["levels"][l];
+                assert!(
+                    (reported["mean_rel"].as_f64().unwrap() - mean).abs() < 1e-12,
+                    "{file:?} {l}"
+                );
+                assert!((reported["max_rel"].as_f64().unwrap() - max).abs() < 1e-12);
+                // BC6H: under 3% down to 8×8 faces (the default chain's smallest); below, one
+                // block spans a quarter face or more and its 16 steps cost a few percent.
+                let bound = match format {
+                    "rgba16f" => 2f64.powi(-11),
+                    "rgb9e5" => 2f64.powi(-9),
+                    "b10g11r11" => 2f64.powi(-6),
+                    _ if a.size >= 8 => 0.03,
+                    _ => 0.06,
+                };
+                assert!(mean < bound, "{format} level {l}: {mean}");
+            }
+        }
+    }
+}
+
+fn quick_container(input: &Path, out: &Path, extra: &[&str]) {
+    quick_sized(input, out, "16", "5", extra)
+}
+
+fn quick_sized(input: &Path, out: &Path, size: &str, levels: &str, extra: &[&str]) {
+    let mut args = vec![
+        input.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--size",
+        size,
+        "--levels",
+        levels,
+        "-q",
+    ];
+    args.extend(extra);
+    let o = run(&args);
+    assert!(
+        o.status.success(),
+        "{args:?}: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
+
+#[test]
+fn changing_the_layout_leaves_only_this_run_s_files() {
+    let tmp = tempfile::tempdir().unwrap();
+    let input = fixture("hdri/sunset_256.exr");
+    let out = tmp.path().join("o");
+    quick_container(&input, &out, &[]);
+    assert_eq!(files_in(&out).len(), 6 * 5 + 1);
+    quick_container(&input, &out, &["--layout", "ktx2", "--format", "bc6h"]);
+    assert_eq!(files_in(&out), vec!["prefilter.json", "prefilter.ktx2"]);
+    quick_container(&input, &out, &["--layout", "dds", "--half"]);
+    assert_eq!(files_in(&out), vec!["prefilter.dds", "prefilter.json"]);
+    quick_container(&input, &out, &[]);
+    assert!(!files_in(&out).iter().any(|f| f.ends_with(".dds")));
+}
+
+#[test]
+fn combinations_that_make_no_sense_are_refused_before_reading_the_input() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    let o = out.to_str().unwrap();
+    // The input does not exist: the parameters are refused first (exit 2, not 4).
+    let missing = tmp.path().join("missing.exr");
+    let m = missing.to_str().unwrap();
+    for (args, needle) in [
+        (vec!["--format", "bc6h"], "cannot be written as EXR faces"),
+        (
+            vec!["--layout", "dds", "--zstd", "3"],
+            "--zstd needs --layout ktx2",
+        ),
+        (vec!["--layout", "ktx2", "--zstd", "99"], "out of range"),
+        (
+            vec!["--half", "--format", "rgb9e5", "--layout", "ktx2"],
+            "--half means",
+        ),
+        (
+            vec!["--layout", "ktx1", "--bc6h-quality", "slow"],
+            "--bc6h-quality",
+        ),
+    ] {
+        let mut a = vec![m, "-o", o];
+        a.extend(args);
+        assert_fails_cleanly(&a, &out, 2, needle);
+        let e = String::from_utf8_lossy(&run(&a).stderr).into_owned();
+        assert!(e.contains("valid:"), "{e}");
+    }
+}
+
+#[test]
+fn damaged_containers_are_refused_cleanly() {
+    let tmp = tempfile::tempdir().unwrap();
+    let good = tmp.path().join("good");
+    quick_container(
+        &fixture("hdri/sunset_256.exr"),
+        &good,
+        &["--layout", "ktx2", "--format", "rgb9e5", "--zstd", "5"],
+    );
+    let bytes = std::fs::read(good.join("prefilter.ktx2")).unwrap();
+    let out = tmp.path().join("out");
+    for (name, data) in [
+        ("cut.ktx2", bytes[..bytes.len() - 7].to_vec()),
+        ("header.ktx2", bytes[..60].to_vec()),
+        ("named.dds", bytes[..bytes.len() / 2].to_vec()),
+    ] {
+        let p = tmp.path().join(name);
+        std::fs::write(&p, data).unwrap();
+        assert_fails_cleanly(
+            &[
+                p.to_str().unwrap(),
+                "-o",
+                out.to_str().unwrap(),
+                "--size",
+                "8",
+            ],
+            &out,
+            2,
+            name,
+        );
+    }
+}

@@ -119,15 +119,15 @@ fn uses_given_coefficients_and_prefiltered_chain() {
     let chain = ibl_shexp::splitsum::prefilter_chain(&cube, 16, 2, 1, 64);
     let cdir = dir.path().join("chain");
     std::fs::create_dir_all(&cdir).unwrap();
-    let files = ibl_core::envmap::encode_cube_outputs(
+    let encoded = ibl_core::output::encode_cube(
         &cdir,
         &chain,
-        ibl_core::envmap::Layout::Faces,
-        ibl_core::io::FloatDepth::F32,
+        &ibl_core::output::Encoding::default(),
         "prefilter",
+        &[],
     )
     .unwrap();
-    ibl_core::io::write_many_atomic(&files).unwrap();
+    ibl_core::io::write_many_atomic(&encoded.files).unwrap();
     let out = dir.path().join("r");
     let mut args = vec![
         env.to_str().unwrap(),

@@ -1,224 +1,395 @@
-//! KTX2 cubemaps (Khronos KTX 2.0 spec): all faces and mips, RGBA16F or RGBA32F, faces in
-//! KTX2 order (+X −X +Y −Y +Z −Z), rows top first, no supercompression. The reader takes
-//! what the writer produces (and any uncompressed RGBA16F/32F or RGB32F cube).
+//! KTX2 (Khronos KTX 2.0) framing of a [`Payload`]: cubes or 2D images, all levels, any
+//! [`PixelFormat`], optionally zstd-supercompressed (scheme 2), with the data format descriptor
+//! libktx derives from the vkFormat (KhronosGroup/KTX-Software `lib/dfdutils/createdfd.c`,
+//! `vk2dfd.inl`), so that `ktx validate` finds the two consistent.
 
+use super::format::{Bc6hQuality, PixelFormat};
+use super::texture::{self, Payload};
 use super::FloatDepth;
-use crate::cube::{CubeMips, Cubemap};
+use crate::cube::CubeMips;
 use crate::error::{Error, Result};
-use crate::image::Image;
 use std::path::Path;
 
-const IDENTIFIER: [u8; 12] = [
+pub(crate) const IDENTIFIER: [u8; 12] = [
     0xAB, 0x4B, 0x54, 0x58, 0x20, 0x32, 0x30, 0xBB, 0x0D, 0x0A, 0x1A, 0x0A,
 ];
-const VK_FORMAT_R16G16B16A16_SFLOAT: u32 = 97;
 const VK_FORMAT_R32G32B32_SFLOAT: u32 = 106;
-const VK_FORMAT_R32G32B32A32_SFLOAT: u32 = 109;
 const HEADER_LEN: usize = 80;
+const SCHEME_NONE: u32 = 0;
+const SCHEME_ZSTD: u32 = 2;
+/// A zstd stream inflates at most about 32768:1 (a 3-byte RLE block header and one byte give
+/// a 128 KiB block); a level claiming more cannot be valid and is refused before inflating.
+const ZSTD_MAX_RATIO: u64 = 32_768;
 
-/// Basic data format descriptor for an RGBA float format (KDF 1.3 §5: colour model RGBSDA,
-/// BT.709 primaries, linear transfer; one 16-byte sample per channel, float and signed,
-/// sample bounds −1.0 and 1.0 as float bit patterns).
-fn dfd(bytes_per_channel: u32) -> Vec<u8> {
-    let samples = 4u32;
-    let block_size = 24 + 16 * samples;
+/// Channel-type qualifiers of a DFD sample (KDF 1.3 §5.6.4).
+const QUAL_EXPONENT: u8 = 0x20;
+const QUAL_SIGNED: u8 = 0x40;
+const QUAL_FLOAT: u8 = 0x80;
+const F32_ONE: u32 = 0x3F80_0000;
+const F32_MINUS_ONE: u32 = 0xBF80_0000;
+
+/// One sample of a basic descriptor block: (bit offset, bit length, channel id | qualifiers,
+/// lower, upper).
+type Sample = (u16, u8, u8, u32, u32);
+
+/// The basic data format descriptor of `format` (KDF 1.3 §5), byte for byte what libktx's
+/// `vk2dfd` makes: colour model RGBSDA (BC6H for BC6H), BT.709 primaries, linear transfer.
+fn dfd(format: PixelFormat) -> Vec<u8> {
+    let (model, block_dim, bytes_plane0, samples): (u8, [u8; 4], u8, Vec<Sample>) = match format {
+        PixelFormat::Rgba32f | PixelFormat::Rgba16f => {
+            let bits = if format == PixelFormat::Rgba32f {
+                32u16
+            } else {
+                16
+            };
+            let q = QUAL_FLOAT | QUAL_SIGNED;
+            let s = [0u8, 1, 2, 15]
+                .iter()
+                .enumerate()
+                .map(|(k, &ch)| {
+                    (
+                        k as u16 * bits,
+                        (bits - 1) as u8,
+                        ch | q,
+                        F32_MINUS_ONE,
+                        F32_ONE,
+                    )
+                })
+                .collect();
+            (1, [0; 4], (bits / 2) as u8, s)
+        }
+        PixelFormat::B10g11r11 => (
+            1,
+            [0; 4],
+            4,
+            vec![
+                (0, 10, QUAL_FLOAT, 0, F32_ONE),
+                (11, 10, 1 | QUAL_FLOAT, 0, F32_ONE),
+                (22, 9, 2 | QUAL_FLOAT, 0, F32_ONE),
+            ],
+        ),
+        // createDFDPackedShifted's E5B9G9R9 special case: a mantissa and an exponent sample
+        // per channel, mantissa upper 8448, exponent bounds 15 (bias) and 31.
+        PixelFormat::Rgb9e5 => (
+            1,
+            [0; 4],
+            4,
+            (0u8..3)
+                .flat_map(|c| {
+                    [
+                        (9 * c as u16, 8, c, 0, 8448),
+                        (27, 4, c | QUAL_EXPONENT, 15, 31),
+                    ]
+                })
+                .collect(),
+        ),
+        PixelFormat::Bc6h => (
+            133,
+            [3, 3, 0, 0],
+            16,
+            vec![(0, 127, QUAL_FLOAT, 0, F32_ONE)],
+        ),
+    };
+    let block_size = 24 + 16 * samples.len() as u32;
     let mut d = Vec::new();
     d.extend((4 + block_size).to_le_bytes()); // dfdTotalSize
     d.extend(0u32.to_le_bytes()); // vendorId 0 (Khronos), descriptorType 0 (basic)
     d.extend((2u32 | (block_size << 16)).to_le_bytes()); // versionNumber 2, descriptorBlockSize
-    d.extend([1u8, 1, 1, 0]); // colorModel RGBSDA, primaries BT709, transfer linear, flags
-    d.extend([0u8; 4]); // texelBlockDimension 1×1×1×1 (stored minus one)
-    d.extend([(bytes_per_channel * 4) as u8, 0, 0, 0, 0, 0, 0, 0]); // bytesPlane0..7
-    for (k, channel_id) in [0u8, 1, 2, 15].iter().enumerate() {
-        let bit_offset = (k as u32) * bytes_per_channel * 8;
-        let bit_length = (bytes_per_channel * 8 - 1) as u8;
-        let channel_type = channel_id | 0x80 | 0x40; // float, signed
-        d.extend((bit_offset as u16).to_le_bytes());
-        d.push(bit_length);
-        d.push(channel_type);
+    d.extend([model, 1, 1, 0]); // colorModel, primaries BT.709, transfer linear, flags
+    d.extend(block_dim); // texelBlockDimension0..3 (minus one)
+    d.extend([bytes_plane0, 0, 0, 0, 0, 0, 0, 0]); // bytesPlane0..7
+    for (offset, len, channel, lower, upper) in samples {
+        d.extend(offset.to_le_bytes());
+        d.push(len);
+        d.push(channel);
         d.extend([0u8; 4]); // samplePosition
-        d.extend(0xBF80_0000u32.to_le_bytes()); // sampleLower −1.0
-        d.extend(0x3F80_0000u32.to_le_bytes()); // sampleUpper 1.0
+        d.extend(lower.to_le_bytes());
+        d.extend(upper.to_le_bytes());
     }
     d
 }
 
-fn kvd(writer: &str) -> Vec<u8> {
+/// Key/value metadata of KTX1 and KTX2 files: (key, value bytes) pairs.
+pub type Metadata = Vec<(String, Vec<u8>)>;
+
+/// Key/value data: entries sorted by key (as the KTX2 spec requires), each padded to 4 bytes.
+fn kvd(entries: &[(String, Vec<u8>)]) -> Vec<u8> {
+    let mut sorted: Vec<&(String, Vec<u8>)> = entries.iter().collect();
+    sorted.sort_by(|a, b| a.0.as_bytes().cmp(b.0.as_bytes()));
     let mut d = Vec::new();
-    let entry = format!("KTXwriter\0{writer}\0");
-    d.extend((entry.len() as u32).to_le_bytes());
-    d.extend(entry.as_bytes());
-    while d.len() % 4 != 0 {
+    for (k, v) in sorted {
+        let len = k.len() + 1 + v.len();
+        d.extend((len as u32).to_le_bytes());
+        d.extend(k.as_bytes());
         d.push(0);
+        d.extend(v);
+        d.resize(d.len().div_ceil(4) * 4, 0);
     }
     d
 }
 
-/// Encodes a cube mip chain (level 0 first) as KTX2.
-pub fn encode_cube(mips: &CubeMips, depth: FloatDepth) -> Vec<u8> {
-    let (vk_format, bpc) = match depth {
-        FloatDepth::F16 => (VK_FORMAT_R16G16B16A16_SFLOAT, 2u32),
-        FloatDepth::F32 => (VK_FORMAT_R32G32B32A32_SFLOAT, 4u32),
-    };
-    let levels = mips.levels.len();
-    let base = mips.levels[0].size as u32;
-    let dfd = dfd(bpc);
-    let kvd = kvd(&format!("ibl-bake {}", crate::TOOL_VERSION));
+/// The `KTXwriter` entry every writer here puts in its files.
+pub(crate) fn writer_entry() -> (String, Vec<u8>) {
+    (
+        "KTXwriter".into(),
+        format!("ibl-bake {}\0", crate::TOOL_VERSION).into_bytes(),
+    )
+}
+
+/// Frames a payload as KTX2; `zstd` is the supercompression level (1..=22), if any.
+/// `metadata` entries are written besides `KTXwriter`.
+pub fn encode(p: &Payload, zstd: Option<i32>, metadata: &[(String, Vec<u8>)]) -> Result<Vec<u8>> {
+    let codes = p.format.codes();
+    let levels = p.levels.len();
+    let dfd = dfd(p.format);
+    let mut kv = vec![writer_entry()];
+    kv.extend(metadata.iter().cloned());
+    let kvd = kvd(&kv);
     let index_len = 24 * levels;
     let dfd_off = HEADER_LEN + index_len;
     let kvd_off = dfd_off + dfd.len();
     let mut data_start = kvd_off + kvd.len();
-    let align = (bpc * 4) as usize; // lcm(texel size, 4)
-                                    // Level data is stored smallest level first.
-    let level_bytes: Vec<Vec<u8>> = mips
-        .levels
-        .iter()
-        .map(|cube| {
-            let mut b = Vec::with_capacity(cube.size * cube.size * 6 * align);
-            for face in &cube.faces {
-                for px in face.data.chunks_exact(3) {
-                    for v in [px[0], px[1], px[2], 1.0] {
-                        match depth {
-                            FloatDepth::F16 => b.extend(super::f16_saturating(v).to_le_bytes()),
-                            FloatDepth::F32 => b.extend(v.to_le_bytes()),
-                        }
-                    }
-                }
-            }
-            b
-        })
-        .collect();
+    // Level alignment: lcm(texel block size, 4) uncompressed, none when supercompressed.
+    let align = if zstd.is_some() {
+        1
+    } else {
+        let b = p.format.block_bytes();
+        b * 4 / gcd(b, 4)
+    };
+    let raw: Vec<Vec<u8>> = p.levels.iter().map(|faces| faces.concat()).collect();
+    let stored: Vec<Vec<u8>> = match zstd {
+        None => raw.clone(),
+        Some(level) => {
+            use rayon::prelude::*;
+            raw.par_iter()
+                .map(|b| {
+                    zstd::bulk::compress(b, level)
+                        .map_err(|e| Error::param(format!("zstd compression failed: {e}")))
+                })
+                .collect::<Result<_>>()?
+        }
+    };
+    // Level data is stored smallest level first.
     let mut offsets = vec![0usize; levels];
     for l in (0..levels).rev() {
         data_start = data_start.div_ceil(align) * align;
         offsets[l] = data_start;
-        data_start += level_bytes[l].len();
+        data_start += stored[l].len();
     }
     let mut out = Vec::with_capacity(data_start);
     out.extend(IDENTIFIER);
-    let bpc_type_size = bpc;
+    let (layers, faces) = (0u32, p.faces as u32);
+    let scheme = if zstd.is_some() {
+        SCHEME_ZSTD
+    } else {
+        SCHEME_NONE
+    };
     for v in [
-        vk_format,
-        bpc_type_size,
-        base,
-        base,
+        codes.vk,
+        codes.ktx2_type_size,
+        p.width as u32,
+        p.height as u32,
         0,
-        0,
-        6,
+        layers,
+        faces,
         levels as u32,
-        0,
+        scheme,
     ] {
         out.extend(v.to_le_bytes());
     }
-    for v in [
-        dfd_off as u32,
-        dfd.len() as u32,
-        kvd_off as u32,
-        kvd.len() as u32,
-    ] {
-        out.extend(v.to_le_bytes());
+    for v in [dfd_off, dfd.len(), kvd_off, kvd.len()] {
+        out.extend((v as u32).to_le_bytes());
     }
-    out.extend(0u64.to_le_bytes());
-    out.extend(0u64.to_le_bytes());
+    out.extend(0u64.to_le_bytes()); // sgdByteOffset
+    out.extend(0u64.to_le_bytes()); // sgdByteLength
     for l in 0..levels {
-        let len = level_bytes[l].len() as u64;
         out.extend((offsets[l] as u64).to_le_bytes());
-        out.extend(len.to_le_bytes());
-        out.extend(len.to_le_bytes());
+        out.extend((stored[l].len() as u64).to_le_bytes());
+        out.extend((raw[l].len() as u64).to_le_bytes());
     }
     out.extend(&dfd);
     out.extend(&kvd);
     for l in (0..levels).rev() {
         out.resize(offsets[l], 0);
-        out.extend(&level_bytes[l]);
+        out.extend(&stored[l]);
+    }
+    Ok(out)
+}
+
+fn gcd(a: usize, b: usize) -> usize {
+    if b == 0 {
+        a
+    } else {
+        gcd(b, a % b)
+    }
+}
+
+pub(crate) fn u32_at(b: &[u8], o: usize) -> Option<u32> {
+    b.get(o..o + 4)
+        .map(|s| u32::from_le_bytes(s.try_into().expect("4 bytes")))
+}
+fn u64_at(b: &[u8], o: usize) -> Option<u64> {
+    b.get(o..o + 8)
+        .map(|s| u64::from_le_bytes(s.try_into().expect("8 bytes")))
+}
+
+/// Parses key/value data into (key, value) pairs; malformed data is an error.
+pub(crate) fn parse_kvd(
+    path: &Path,
+    d: &[u8],
+    read_u32: impl Fn(&[u8], usize) -> Option<u32>,
+) -> Result<Metadata> {
+    let bad = || Error::invalid(path, "malformed key/value data");
+    let mut out = Vec::new();
+    let mut o = 0usize;
+    while o < d.len() {
+        let len = read_u32(d, o).ok_or_else(bad)? as usize;
+        let entry = d
+            .get(o + 4..(o + 4).checked_add(len).ok_or_else(bad)?)
+            .ok_or_else(bad)?;
+        let nul = entry.iter().position(|&c| c == 0).ok_or_else(bad)?;
+        let key = String::from_utf8_lossy(&entry[..nul]).into_owned();
+        out.push((key, entry[nul + 1..].to_vec()));
+        o += 4 + len.div_ceil(4) * 4;
+    }
+    Ok(out)
+}
+
+/// Parses a KTX2 file into its payload and key/value metadata. Every length and offset is
+/// checked against the file and the image size before anything is allocated; zstd levels are
+/// inflated into exactly the size the header justifies.
+pub fn decode(path: &Path, b: &[u8]) -> Result<(Payload, Metadata)> {
+    let bad = |why: String| Error::invalid(path, format!("not a valid KTX2 file: {why}"));
+    if b.len() < HEADER_LEN || b[..12] != IDENTIFIER {
+        return Err(bad("bad identifier or truncated header".into()));
+    }
+    let h = |k: usize| u32_at(b, 12 + 4 * k).expect("header is 80 bytes");
+    let (vk, width, height, depth, layers, faces, levels, scheme) =
+        (h(0), h(2), h(3), h(4), h(5), h(6), h(7), h(8));
+    if scheme != SCHEME_NONE && scheme != SCHEME_ZSTD {
+        let name = match scheme {
+            1 => "BasisLZ",
+            3 => "zlib",
+            _ => "an unknown scheme",
+        };
+        return Err(Error::unsupported(
+            path,
+            format!("KTX2 supercompressed with {name} (scheme {scheme}; zstd and none are read)"),
+        ));
+    }
+    let (height, levels) =
+        texture::check_shape(path, "KTX2", faces, width, height, depth, layers, levels)?;
+    let (format, rgb32) = match (PixelFormat::from_vk(vk), vk) {
+        (Some(f), _) => (f, false),
+        (None, VK_FORMAT_R32G32B32_SFLOAT) => (PixelFormat::Rgba32f, true),
+        (None, f) => {
+            return Err(Error::unsupported(
+                path,
+                format!("KTX2 vkFormat {f} (read: RGBA32F, RGBA16F, RGB32F, E5B9G9R9, B10G11R11, BC6H_UFLOAT)"),
+            ))
+        }
+    };
+    let index_end = HEADER_LEN + 24 * levels as usize;
+    if b.len() < index_end {
+        return Err(bad("truncated level index".into()));
+    }
+    let mut payload = Payload {
+        format,
+        width: width as usize,
+        height: height as usize,
+        faces: faces as usize,
+        levels: Vec::with_capacity(levels as usize),
+    };
+    for l in 0..levels as usize {
+        let o = HEADER_LEN + 24 * l;
+        let (off, len, raw_len) = (
+            u64_at(b, o).expect("index checked"),
+            u64_at(b, o + 8).expect("index checked"),
+            u64_at(b, o + 16).expect("index checked"),
+        );
+        let (w, hh) = payload.level_dims(l);
+        let face = if rgb32 {
+            w * hh * 12
+        } else {
+            format.image_bytes(w, hh)
+        };
+        let expect = (face * faces as usize) as u64;
+        let data = off
+            .checked_add(len)
+            .and_then(|end| b.get(off as usize..end as usize))
+            .ok_or_else(|| bad(format!("level {l} lies outside the file")))?;
+        let level: Vec<u8> = if scheme == SCHEME_ZSTD {
+            if raw_len != expect {
+                return Err(bad(format!(
+                    "level {l} inflates to {raw_len} bytes, expected {expect}"
+                )));
+            }
+            if expect > len.saturating_mul(ZSTD_MAX_RATIO) + 131_072 {
+                return Err(bad(format!(
+                    "level {l}: {len} zstd bytes cannot inflate to {expect}"
+                )));
+            }
+            let out = zstd::bulk::decompress(data, expect as usize)
+                .map_err(|e| bad(format!("level {l}: zstd stream: {e}")))?;
+            if out.len() as u64 != expect {
+                return Err(bad(format!(
+                    "level {l} inflates to {} bytes, expected {expect}",
+                    out.len()
+                )));
+            }
+            out
+        } else {
+            if len != expect || (raw_len != expect && raw_len != 0) {
+                return Err(bad(format!(
+                    "level {l} holds {len} bytes, expected {expect}"
+                )));
+            }
+            data.to_vec()
+        };
+        let faces_bytes: Vec<Vec<u8>> = level
+            .chunks_exact(face)
+            .map(|f| if rgb32 { rgb_to_rgba32(f) } else { f.to_vec() })
+            .collect();
+        payload.levels.push(faces_bytes);
+    }
+    let dfd_kv = |k: usize| u32_at(b, 48 + 4 * k).expect("header");
+    let (kvd_off, kvd_len) = (dfd_kv(2) as usize, dfd_kv(3) as usize);
+    let kvd = b
+        .get(kvd_off..kvd_off.saturating_add(kvd_len))
+        .ok_or_else(|| bad("key/value data lies outside the file".into()))?;
+    let kv = parse_kvd(path, kvd, u32_at)?;
+    Ok((payload, kv))
+}
+
+fn rgb_to_rgba32(f: &[u8]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(f.len() / 3 * 4);
+    for px in f.chunks_exact(12) {
+        out.extend(px);
+        out.extend(1.0f32.to_le_bytes());
     }
     out
 }
 
-fn u32_at(b: &[u8], o: usize) -> Option<u32> {
-    b.get(o..o + 4)
-        .map(|s| u32::from_le_bytes(s.try_into().unwrap()))
-}
-fn u64_at(b: &[u8], o: usize) -> Option<u64> {
-    b.get(o..o + 8)
-        .map(|s| u64::from_le_bytes(s.try_into().unwrap()))
+/// Encodes a cube chain as an uncompressed float KTX2 (RGBA16F or RGBA32F).
+pub fn encode_cube(mips: &CubeMips, depth: FloatDepth) -> Vec<u8> {
+    let format = match depth {
+        FloatDepth::F16 => PixelFormat::Rgba16f,
+        FloatDepth::F32 => PixelFormat::Rgba32f,
+    };
+    let (payload, _) = texture::encode_chain(mips, format, Bc6hQuality::default());
+    encode(&payload, None, &[]).expect("uncompressed KTX2 encoding cannot fail")
 }
 
-/// Decodes an uncompressed float KTX2 cubemap with all its levels.
+/// Decodes a KTX2 cube map with all its levels, in any format this reader takes.
 pub fn decode_cube(path: &Path, b: &[u8]) -> Result<CubeMips> {
-    let bad = |why: &str| Error::invalid(path, format!("not a valid KTX2 cubemap: {why}"));
-    if b.len() < HEADER_LEN || b[..12] != IDENTIFIER {
-        return Err(bad("bad identifier or truncated header"));
-    }
-    let h = |k: usize| u32_at(b, 12 + 4 * k).unwrap();
-    let (vk_format, width, height, depth, layers, faces, levels, scheme) =
-        (h(0), h(2), h(3), h(4), h(5), h(6), h(7), h(8));
-    if scheme != 0 {
-        return Err(Error::unsupported(path, "supercompressed KTX2"));
-    }
-    if faces != 6 || depth != 0 || layers > 1 || width != height {
-        return Err(Error::unsupported(path, format!("KTX2 with {faces} faces, {width}x{height}x{depth}, {layers} layers (need one square cubemap)")));
-    }
-    let (channels, bpc) = match vk_format {
-        VK_FORMAT_R16G16B16A16_SFLOAT => (4usize, 2usize),
-        VK_FORMAT_R32G32B32A32_SFLOAT => (4, 4),
-        VK_FORMAT_R32G32B32_SFLOAT => (3, 4),
-        f => {
-            return Err(Error::unsupported(
-                path,
-                format!("KTX2 vkFormat {f} (need RGBA16F, RGBA32F or RGB32F)"),
-            ))
-        }
-    };
-    Image::check_size(path, width as u64, height as u64 * 6)?;
-    let levels = levels.max(1) as usize;
-    if levels > 32 {
-        return Err(bad("more than 32 levels"));
-    }
-    let mut out = Vec::with_capacity(levels);
-    for l in 0..levels {
-        let o = HEADER_LEN + 24 * l;
-        let (off, len) = (
-            u64_at(b, o).ok_or_else(|| bad("truncated level index"))?,
-            u64_at(b, o + 8).ok_or_else(|| bad("truncated level index"))?,
-        );
-        let size = ((width as usize) >> l).max(1);
-        let expect = size * size * 6 * channels * bpc;
-        if len as usize != expect {
-            return Err(bad(&format!(
-                "level {l} holds {len} bytes, expected {expect}"
-            )));
-        }
-        let data = b
-            .get(off as usize..(off as usize).saturating_add(expect))
-            .ok_or_else(|| bad(&format!("level {l} lies past the end of the file")))?;
-        let mut cube = Cubemap::new(size);
-        for (fi, face) in cube.faces.iter_mut().enumerate() {
-            let fb =
-                &data[fi * size * size * channels * bpc..(fi + 1) * size * size * channels * bpc];
-            for (t, px) in face
-                .data
-                .chunks_exact_mut(3)
-                .zip(fb.chunks_exact(channels * bpc))
-            {
-                for k in 0..3 {
-                    let s = &px[k * bpc..(k + 1) * bpc];
-                    t[k] = if bpc == 2 {
-                        half::f16::from_le_bytes([s[0], s[1]]).to_f32()
-                    } else {
-                        f32::from_le_bytes(s.try_into().unwrap())
-                    };
-                }
-            }
-        }
-        out.push(cube);
-    }
-    Ok(CubeMips { levels: out })
+    let (payload, _) = decode(path, b)?;
+    texture::decode_cube(path, &payload)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::cube::Cubemap;
 
     fn chain() -> CubeMips {
         let mut base = Cubemap::new(8);
@@ -252,6 +423,38 @@ mod tests {
     }
 
     #[test]
+    fn every_format_with_and_without_zstd_round_trips_its_payload() {
+        let mips = chain();
+        for format in PixelFormat::ALL {
+            let (p, _) = texture::encode_chain(&mips, format, Bc6hQuality::Fast);
+            let plain = encode(&p, None, &[]).unwrap();
+            let packed = encode(&p, Some(3), &[("sh".into(), b"1 2 3\n".to_vec())]).unwrap();
+            let (a, _) = decode(Path::new("a.ktx2"), &plain).unwrap();
+            let (z, kv) = decode(Path::new("z.ktx2"), &packed).unwrap();
+            assert_eq!(a, p, "{format:?}");
+            assert_eq!(z, p, "{format:?}");
+            assert!(kv.iter().any(|(k, v)| k == "sh" && v == b"1 2 3\n"));
+            assert_eq!(u32_at(&packed, 44), Some(SCHEME_ZSTD));
+        }
+    }
+
+    #[test]
+    fn dfds_are_libktx_s() {
+        // Sizes and key fields from KTX-Software's createdfd.c for each format.
+        let rgb9e5 = dfd(PixelFormat::Rgb9e5);
+        assert_eq!(rgb9e5.len(), 4 + 24 + 6 * 16);
+        assert_eq!(u32_at(&rgb9e5, 4 + 24 + 16 + 8), Some(15)); // exponent sampleLower (bias)
+        assert_eq!(u32_at(&rgb9e5, 4 + 24 + 12), Some(8448)); // mantissa sampleUpper
+        let bc6h = dfd(PixelFormat::Bc6h);
+        assert_eq!(bc6h[12], 133);
+        assert_eq!(&bc6h[16..20], &[3, 3, 0, 0]);
+        assert_eq!(bc6h[20], 16);
+        let b10 = dfd(PixelFormat::B10g11r11);
+        assert_eq!(b10.len(), 4 + 24 + 3 * 16);
+        assert_eq!(b10[4 + 24 + 2 * 16 + 2], 9); // blue: 10 bits
+    }
+
+    #[test]
     fn truncated_or_garbled_ktx2_is_an_error() {
         let bytes = encode_cube(&chain(), FloatDepth::F32);
         for cut in [0, 11, 79, 100, bytes.len() - 1] {
@@ -260,5 +463,28 @@ mod tests {
         let mut b = bytes.clone();
         b[12 + 4 * 6] = 1;
         assert!(decode_cube(Path::new("c.ktx2"), &b).is_err());
+    }
+
+    #[test]
+    fn zstd_levels_claiming_huge_sizes_are_refused_without_allocating() {
+        let (p, _) = texture::encode_chain(&chain(), PixelFormat::Rgb9e5, Bc6hQuality::Fast);
+        let good = encode(&p, Some(1), &[]).unwrap();
+        // Level 0's uncompressedByteLength → 2^40: refused (does not match the header's size).
+        let mut b = good.clone();
+        b[HEADER_LEN + 16..HEADER_LEN + 24].copy_from_slice(&(1u64 << 40).to_le_bytes());
+        let e = decode(Path::new("z.ktx2"), &b).unwrap_err().to_string();
+        assert!(e.contains("inflates"), "{e}");
+        // A huge declared image: refused by the size limit before any level is read.
+        let mut b = good.clone();
+        b[20..24].copy_from_slice(&60000u32.to_le_bytes());
+        b[24..28].copy_from_slice(&60000u32.to_le_bytes());
+        assert!(decode(Path::new("z.ktx2"), &b).is_err());
+        // Corrupt zstd bytes: an error, not a panic.
+        let off = u64_at(&good, HEADER_LEN).unwrap() as usize;
+        let mut b = good.clone();
+        for k in 0..8 {
+            b[off + k] ^= 0x5a;
+        }
+        assert!(decode(Path::new("z.ktx2"), &b).is_err());
     }
 }

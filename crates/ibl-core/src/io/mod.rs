@@ -2,12 +2,18 @@
 //! and the atomic write every output goes through.
 
 pub mod atomic;
+mod bc6h;
+pub mod container;
 pub mod data;
+pub mod dds;
 mod exr_io;
 pub mod format;
+pub mod ktx1;
 pub mod ktx2;
 mod ldr;
+pub mod packed;
 mod rgbe;
+pub mod texture;
 
 pub use atomic::{write_atomic, write_many_atomic};
 

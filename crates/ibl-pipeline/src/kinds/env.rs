@@ -1,7 +1,8 @@
 //! Stage kinds of `ibl-env`: `equirect-to-cube` and `irradiance`.
 
 use super::{input_error, Adapter, Arity, BakeError, Baked};
-use ibl_core::envmap::{self, load_environment, Layout};
+use ibl_core::envmap::load_environment;
+use ibl_core::output::Encoding;
 use ibl_core::progress::Progress;
 use ibl_env::equirect_to_cube as e2c;
 use ibl_env::irradiance as irr;
@@ -20,10 +21,12 @@ pub(super) fn one_input<'a>(kind: &str, inputs: &'a [PathBuf]) -> Result<&'a Pat
     }
 }
 
-/// Where a cube (or chain) written for `out` is read from by the next stage.
-pub(super) fn cube_product(out: &Path, layout: Layout, ktx_name: &str) -> PathBuf {
-    layout
-        .container_path(out, ktx_name)
+/// Where a cube (or chain) written for `out` is read from by the next stage (parameters are
+/// validated before any product is asked for; an invalid encoding reads as the default).
+pub(super) fn cube_product<E>(out: &Path, enc: Result<Encoding, E>, name: &str) -> PathBuf {
+    enc.unwrap_or_default()
+        .layout
+        .container_path(out, name)
         .unwrap_or_else(|| out.to_path_buf())
 }
 
@@ -38,28 +41,30 @@ pub static EQUIRECT_TO_CUBE: Adapter<e2c::Params> = Adapter {
         if p.to_equirect {
             out.join("equirect.exr")
         } else {
-            cube_product(out, p.layout, "cube")
+            cube_product(out, p.encoding(), e2c::CUBE_NAME)
         }
     },
     outputs: |p, _, out| {
-        Ok(if p.to_equirect {
-            vec![out.join("equirect.exr")]
+        if p.to_equirect {
+            Ok(vec![out.join("equirect.exr")])
         } else {
-            envmap::cube_output_paths(out, 1, p.layout, "cube")
-        })
+            Ok(e2c::output_paths(p, out)?)
+        }
     },
     run: |p, inputs, out, progress: &dyn Progress| {
         let env = load_environment(one_input("equirect-to-cube", inputs)?, p.sanitize)?;
         let baked = e2c::run(p, &env, out, progress)?;
+        let mut warnings = env.warnings();
+        warnings.extend(baked.warnings);
         Ok(Baked {
             files: baked.files,
-            warnings: env.warnings(),
+            warnings,
         })
     },
     validate: |p| Ok(p.validate()?),
     argv: None,
     example: || {
-        super::example("(size: 16, rotate: -12.5, layout: ktx2, half: true, filter: bilinear, to_equirect: true, sanitize: true)")
+        super::example("(size: 16, rotate: -12.5, layout: ktx2, half: true, zstd: 19, filter: bilinear, to_equirect: true, sanitize: true)")
     },
 };
 
@@ -71,11 +76,7 @@ pub static IRRADIANCE: Adapter<irr::Params> = Adapter {
     reads: Arity::one(ENVIRONMENT),
     out: super::in_dir,
     product: |_, out| out.to_path_buf(),
-    outputs: |p, _, out| {
-        let mut files = vec![out.join(&p.sh_file)];
-        files.extend(envmap::cube_output_paths(out, 1, p.layout, "irradiance"));
-        Ok(files)
-    },
+    outputs: |p, _, out| Ok(irr::output_paths(p, out)?),
     run: |p, inputs, out, progress: &dyn Progress| {
         let env = load_environment(one_input("irradiance", inputs)?, p.sanitize)?;
         let baked = irr::run(p, &env, out, progress)?;
@@ -86,6 +87,7 @@ pub static IRRADIANCE: Adapter<irr::Params> = Adapter {
                 baked.negative_clamped
             ));
         }
+        warnings.extend(baked.warnings);
         Ok(Baked {
             files: baked.files,
             warnings,
@@ -94,6 +96,6 @@ pub static IRRADIANCE: Adapter<irr::Params> = Adapter {
     validate: |p| Ok(p.validate()?),
     argv: None,
     example: || {
-        super::example("(bands: 5, size: 8, exact: true, exact_source_width: 64, window: true, sh_file: \"coeffs.ron\", rotate: 90, layout: ktx2, half: true, sanitize: true)")
+        super::example("(bands: 5, size: 8, exact: true, exact_source_width: 64, window: true, sh_file: \"coeffs.ron\", rotate: 90, layout: dds, format: bc6h, bc6h_quality: fast, sanitize: true)")
     },
 };

@@ -13,13 +13,14 @@ pub static PREFILTER: Adapter<Params> = Adapter {
     package: "prefilter",
     reads: Arity::one(ENVIRONMENT),
     out: super::in_dir,
-    product: |p, out| cube_product(out, p.layout, "prefilter"),
-    outputs: |p, _, out| Ok(pf::output_paths(p, out)),
+    product: |p, out| cube_product(out, p.encoding(), pf::CHAIN_NAME),
+    outputs: |p, _, out| Ok(pf::output_paths(p, out)?),
     run: |p, inputs, out, progress: &dyn Progress| {
         let env = load_environment(one_input("prefilter", inputs)?, p.sanitize)?;
         let baked = pf::run(p, &env, out, progress)?;
         let mut warnings = env.warnings();
         warnings.extend(baked.chain.report.note.clone());
+        warnings.extend(baked.chain.warnings.iter().cloned());
         Ok(Baked {
             files: baked.files,
             warnings,
@@ -28,6 +29,6 @@ pub static PREFILTER: Adapter<Params> = Adapter {
     validate: |p| Ok(p.validate()?),
     argv: None,
     example: || {
-        super::example("(size: 16, levels: 3, quality: high, method: fis, samples: 32, max_roughness: 0.25, layout: ktx2, half: true, reference: true, rotate: 45.5, sanitize: true)")
+        super::example("(size: 16, levels: 3, quality: high, method: fis, samples: 32, max_roughness: 0.25, layout: ktx1, format: b10g11r11, reference: true, rotate: 45.5, sanitize: true)")
     },
 };

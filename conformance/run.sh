@@ -1,0 +1,39 @@
+#!/usr/bin/env bash
+# `make conformance`: what the bakes write, checked by code that is not ours (libktx, the
+# ktx2 crate, ktx-parse, imagecodecs, a spec-written numpy decoder), and files written by code
+# that is not ours read back by our tools. Installs what it needs from PyPI and npm into
+# target/conformance (kept between runs). See conformance/README.md.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+BIN=${BIN:-target/release}
+WORK=target/conformance
+ENV_MAP=${CONFORMANCE_ENV:-fixtures/hdri/interior_256.exr}
+mkdir -p "$WORK"
+
+if [ ! -x "$WORK/venv/bin/python" ]; then
+	python3 -m venv "$WORK/venv"
+fi
+"$WORK/venv/bin/pip" install -q --disable-pip-version-check -r conformance/requirements.txt
+(cd conformance && npm ci --no-audit --no-fund --silent)
+
+# The matrix: every tool that writes a cube × every container × every format.
+BAKES="$WORK/bakes"
+rm -rf "$BAKES"
+for tool in prefilter equirect-to-cube irradiance; do
+	case $tool in
+	prefilter) size=(--size 64 --levels 4) ;;
+	equirect-to-cube) size=(--size 32) ;;
+	irradiance) size=(--size 16) ;;
+	esac
+	for container in ktx2 ktx2-zstd dds ktx1; do
+		case $container in
+		ktx2-zstd) layout=(--layout ktx2 --zstd 19) ;;
+		*) layout=(--layout "$container") ;;
+		esac
+		for format in rgba32f rgba16f rgb9e5 b10g11r11 bc6h; do
+			"$BIN/$tool" "$ENV_MAP" -o "$BAKES/$tool/$container-$format" "${size[@]}" "${layout[@]}" --format "$format" -q
+		done
+	done
+done
+echo "baked $(find "$BAKES" -type f | wc -l) files from $ENV_MAP"
+"$WORK/venv/bin/python" conformance/containers.py "$BAKES" "$BIN"

@@ -1,0 +1,314 @@
+//! Cube chains as GPU texture payloads: every level's faces encoded in one [`PixelFormat`],
+//! with what the encoding cost against the float data. The containers (KTX2, DDS, KTX1) only
+//! frame a [`Payload`]; they never see texels.
+
+use super::format::{Bc6hQuality, PixelFormat};
+use super::packed;
+use crate::cube::{CubeMips, Cubemap};
+use crate::error::{Error, Result};
+use crate::image::Image;
+use rayon::prelude::*;
+use std::path::Path;
+use std::time::Instant;
+
+/// Encoded images of a texture: a cube (6 faces) or a 2D image (1), every level.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Payload {
+    pub format: PixelFormat,
+    /// Width of level 0 (faces are square for cubes).
+    pub width: usize,
+    /// Height of level 0.
+    pub height: usize,
+    /// 6 for a cube (faces +X −X +Y −Y +Z −Z), 1 for a 2D image.
+    pub faces: usize,
+    /// `levels[l][f]`: the bytes of face `f` of level `l`, [`PixelFormat::image_bytes`] long.
+    pub levels: Vec<Vec<Vec<u8>>>,
+}
+
+impl Payload {
+    /// Width and height of level `l` (halved per level, at least 1).
+    pub fn level_dims(&self, l: usize) -> (usize, usize) {
+        ((self.width >> l).max(1), (self.height >> l).max(1))
+    }
+
+    /// Bytes of one face of level `l`.
+    pub fn face_bytes(&self, l: usize) -> usize {
+        let (w, h) = self.level_dims(l);
+        self.format.image_bytes(w, h)
+    }
+
+    /// Checks that the faces hold exactly the bytes their format and size need.
+    pub fn check(&self, path: &Path) -> Result<()> {
+        for (l, faces) in self.levels.iter().enumerate() {
+            let want = self.face_bytes(l);
+            if faces.len() != self.faces || faces.iter().any(|f| f.len() != want) {
+                return Err(Error::invalid(
+                    path,
+                    format!(
+                        "level {l} does not hold {} images of {want} bytes",
+                        self.faces
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The shape a container header declares, as every container reader checks it before
+/// allocating: one 2D image or one cube, no depth or array layers, square cube faces, within
+/// the image size limit, and no more levels than halving allows. `what` names the container
+/// in messages. Returns (height, levels) with KTX's 0s read as 1.
+#[allow(clippy::too_many_arguments)] // one header's fields, named at the call
+pub(crate) fn check_shape(
+    path: &Path,
+    what: &str,
+    faces: u32,
+    width: u32,
+    height: u32,
+    depth: u32,
+    layers: u32,
+    levels: u32,
+) -> Result<(u32, u32)> {
+    if depth > 1 || layers > 1 || !(faces == 1 || faces == 6) || width == 0 {
+        return Err(Error::unsupported(
+            path,
+            format!("{what} with {faces} faces, {width}x{height}x{depth}, {layers} layers (need a cube or a 2D image)"),
+        ));
+    }
+    let height = height.max(1);
+    let bad = |why: String| Error::invalid(path, format!("not a valid {what} file: {why}"));
+    if faces == 6 && width != height {
+        return Err(bad(format!(
+            "cube faces of {width}x{height} are not square"
+        )));
+    }
+    crate::image::Image::check_size(path, width as u64, height as u64 * faces as u64)?;
+    let max_levels = 32 - width.max(height).leading_zeros();
+    let levels = levels.max(1);
+    if levels > max_levels {
+        return Err(bad(format!(
+            "{levels} levels, but a {width}x{height} image has at most {max_levels}"
+        )));
+    }
+    Ok((height, levels))
+}
+
+/// What encoding one level cost, against the float texels it came from.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct LevelEncoding {
+    pub level: usize,
+    pub size: usize,
+    /// Mean over texels and channels of |decoded − float| / max(m, ε), m the texel's
+    /// largest float channel and ε = 10⁻³ × the level's mean m (see [`relative_errors`]).
+    pub mean_rel: f64,
+    /// The largest such error.
+    pub max_rel: f64,
+    /// Channel values outside [0, the format's largest value], clamped when encoded.
+    pub clamped: usize,
+    /// Bytes of the level (all faces), before supercompression.
+    pub bytes: usize,
+    /// Wall-clock seconds the level took to encode (not part of any file: outputs are
+    /// identical from run to run).
+    #[serde(skip)]
+    pub seconds: f64,
+}
+
+/// How [`relative_errors`] measures: written beside the numbers in sidecars.
+pub const ERROR_METRIC: &str = "mean and max over texels and channels of |decoded - float| / max(m, eps), m = the texel's largest float channel, eps = 1e-3 x the level's mean m";
+
+/// Encodes every level of a chain, faces in parallel, and measures each level's error by
+/// decoding what was written.
+pub fn encode_chain(
+    mips: &CubeMips,
+    format: PixelFormat,
+    quality: Bc6hQuality,
+) -> (Payload, Vec<LevelEncoding>) {
+    let jobs: Vec<(usize, usize)> = (0..mips.levels.len())
+        .flat_map(|l| (0..6).map(move |f| (l, f)))
+        .collect();
+    // Ordered collect: the bytes do not depend on which thread encoded which face.
+    let encoded: Vec<(Vec<u8>, usize, f64)> = jobs
+        .par_iter()
+        .map(|&(l, f)| {
+            let t = Instant::now();
+            let face = &mips.levels[l].faces[f];
+            let (bytes, clamped) = encode_image(face, format, quality);
+            (bytes, clamped, t.elapsed().as_secs_f64())
+        })
+        .collect();
+    let mut levels = Vec::with_capacity(mips.levels.len());
+    let mut report = Vec::with_capacity(mips.levels.len());
+    for (l, cube) in mips.levels.iter().enumerate() {
+        let faces: Vec<&(Vec<u8>, usize, f64)> = encoded[6 * l..6 * l + 6].iter().collect();
+        let decoded: Vec<Image> = if format.is_lossless() {
+            Vec::new()
+        } else {
+            faces
+                .par_iter()
+                .map(|(b, _, _)| decode_image(b, format, cube.size, cube.size))
+                .collect()
+        };
+        let (mean_rel, max_rel) = if format.is_lossless() {
+            (0.0, 0.0)
+        } else {
+            relative_errors(&cube.faces, &decoded)
+        };
+        report.push(LevelEncoding {
+            level: l,
+            size: cube.size,
+            mean_rel,
+            max_rel,
+            clamped: faces.iter().map(|f| f.1).sum(),
+            bytes: faces.iter().map(|f| f.0.len()).sum(),
+            seconds: faces.iter().map(|f| f.2).sum(),
+        });
+        levels.push(faces.into_iter().map(|f| f.0.clone()).collect());
+    }
+    let size = mips.levels.first().map_or(0, |c| c.size);
+    (
+        Payload {
+            format,
+            width: size,
+            height: size,
+            faces: 6,
+            levels,
+        },
+        report,
+    )
+}
+
+/// Decodes a cube payload into float levels.
+pub fn decode_cube(path: &Path, p: &Payload) -> Result<CubeMips> {
+    p.check(path)?;
+    if p.faces != 6 || p.width != p.height {
+        return Err(Error::invalid(path, "not a cube map (need 6 square faces)"));
+    }
+    let levels = p
+        .levels
+        .par_iter()
+        .enumerate()
+        .map(|(l, faces)| {
+            let (n, _) = p.level_dims(l);
+            let imgs: Vec<Image> = faces
+                .iter()
+                .map(|b| decode_image(b, p.format, n, n))
+                .collect();
+            Cubemap::from_faces(imgs.try_into().expect("six faces"))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    Ok(CubeMips { levels })
+}
+
+/// Mean and largest relative error of `decoded` against `float` (see [`ERROR_METRIC`]).
+pub fn relative_errors(float: &[Image], decoded: &[Image]) -> (f64, f64) {
+    let m = |px: &[f32]| px[0].max(px[1]).max(px[2]).max(0.0) as f64;
+    let (mut sum_m, mut n) = (0.0f64, 0usize);
+    for img in float {
+        for px in img.data.chunks_exact(3) {
+            sum_m += m(px);
+            n += 1;
+        }
+    }
+    let eps = (1e-3 * sum_m / n.max(1) as f64).max(f64::MIN_POSITIVE);
+    let (mut sum, mut max) = (0.0f64, 0.0f64);
+    for (a, b) in float.iter().zip(decoded) {
+        for (pa, pb) in a.data.chunks_exact(3).zip(b.data.chunks_exact(3)) {
+            let d = m(pa).max(eps);
+            for c in 0..3 {
+                let e = (pb[c] as f64 - pa[c] as f64).abs() / d;
+                sum += e;
+                max = max.max(e);
+            }
+        }
+    }
+    (sum / (3 * n.max(1)) as f64, max)
+}
+
+/// Encodes one RGB float image; returns the bytes and how many channel values were clamped.
+pub fn encode_image(img: &Image, format: PixelFormat, quality: Bc6hQuality) -> (Vec<u8>, usize) {
+    let max = format.max_value();
+    let clamped = img
+        .data
+        .chunks_exact(img.channels)
+        .map(|px| {
+            px[..3]
+                .iter()
+                .enumerate()
+                .filter(|&(c, &v)| {
+                    let top = if format == PixelFormat::B10g11r11 && c == 2 {
+                        packed::UF10_MAX
+                    } else {
+                        max
+                    };
+                    !(0.0..=top).contains(&v)
+                })
+                .count()
+        })
+        .sum();
+    let mut out = Vec::with_capacity(format.image_bytes(img.width, img.height));
+    let texels = img
+        .data
+        .chunks_exact(img.channels)
+        .map(|px| [px[0], px[1], px[2]]);
+    match format {
+        PixelFormat::Rgba32f => texels.for_each(|t| {
+            for v in [t[0], t[1], t[2], 1.0] {
+                out.extend(v.to_le_bytes());
+            }
+        }),
+        PixelFormat::Rgba16f => texels.for_each(|t| {
+            for v in [t[0], t[1], t[2], 1.0] {
+                out.extend(super::f16_saturating(v.max(0.0)).to_le_bytes());
+            }
+        }),
+        PixelFormat::Rgb9e5 => {
+            texels.for_each(|t| out.extend(packed::rgb9e5_encode(t).to_le_bytes()))
+        }
+        PixelFormat::B10g11r11 => {
+            texels.for_each(|t| out.extend(packed::b10g11r11_encode(t).to_le_bytes()))
+        }
+        PixelFormat::Bc6h => out = super::bc6h::encode(img, quality),
+    }
+    (out, clamped)
+}
+
+/// Decodes one `width`×`height` image of `format` (bytes already checked to be
+/// [`PixelFormat::image_bytes`] long) to RGB floats.
+pub fn decode_image(bytes: &[u8], format: PixelFormat, width: usize, height: usize) -> Image {
+    debug_assert_eq!(bytes.len(), format.image_bytes(width, height));
+    let mut img = Image::new(width, height, 3);
+    let u32s = || {
+        bytes
+            .chunks_exact(4)
+            .map(|b| u32::from_le_bytes(b.try_into().unwrap()))
+    };
+    match format {
+        PixelFormat::Rgba32f => {
+            for (t, b) in img.data.chunks_exact_mut(3).zip(bytes.chunks_exact(16)) {
+                for c in 0..3 {
+                    t[c] = f32::from_le_bytes(b[4 * c..4 * c + 4].try_into().unwrap());
+                }
+            }
+        }
+        PixelFormat::Rgba16f => {
+            for (t, b) in img.data.chunks_exact_mut(3).zip(bytes.chunks_exact(8)) {
+                for c in 0..3 {
+                    t[c] = half::f16::from_le_bytes([b[2 * c], b[2 * c + 1]]).to_f32();
+                }
+            }
+        }
+        PixelFormat::Rgb9e5 => {
+            for (t, v) in img.data.chunks_exact_mut(3).zip(u32s()) {
+                t.copy_from_slice(&packed::rgb9e5_decode(v));
+            }
+        }
+        PixelFormat::B10g11r11 => {
+            for (t, v) in img.data.chunks_exact_mut(3).zip(u32s()) {
+                t.copy_from_slice(&packed::b10g11r11_decode(v));
+            }
+        }
+        PixelFormat::Bc6h => super::bc6h::decode(bytes, &mut img),
+    }
+    img
+}
