@@ -2,6 +2,7 @@
 
 import argparse
 import json
+import os
 import sys
 
 from .executor import BLOCKED, FAILED, BakeRayError, run
@@ -45,6 +46,12 @@ def main(argv=None):
     r.add_argument("-q", "--quiet", action="store_true", help="no per-stage lines on stderr")
     a = ap.parse_args(argv)
     log = (lambda m: None) if a.quiet else (lambda m: print(m, file=sys.stderr, flush=True))
+    # Ray prints (worker deaths, retries) on stdout; with --json only the report goes there.
+    json_out = None
+    if a.json:
+        sys.stdout.flush()
+        json_out = os.fdopen(os.dup(1), "w")
+        os.dup2(2, 1)
     try:
         report = run(
             a.pipeline,
@@ -62,8 +69,10 @@ def main(argv=None):
         print("bake-ray: interrupted; completed stages are kept, the next run resumes from them",
               file=sys.stderr)
         return 130
-    if a.json:
-        print(json.dumps(report, indent=2))
+    if json_out is not None:
+        sys.stdout.flush()
+        json_out.write(json.dumps(report, indent=2) + "\n")
+        json_out.flush()
     else:
         _table(report)
     if report["interrupted"]:

@@ -92,6 +92,11 @@ def _write_result(folder, result):
         json.dump(result["report"], f)
 
 
+def _is_loopback(address):
+    host = address.split("://")[-1].rsplit(":", 1)[0].strip("[]")
+    return host in ("localhost", "::1") or host.startswith("127.")
+
+
 def _first_line(e):
     text = str(e).strip().splitlines()
     return text[-1] if text else type(e).__name__
@@ -107,6 +112,11 @@ def run(
     log=None,
 ):
     """Runs `pipeline` on Ray. Returns the report (a dict, what `--json` prints)."""
+    loopback = address is None or _is_loopback(address)
+    if loopback:
+        # Ray rewrites a loopback address to this machine's outward IP (for remote workers);
+        # this switch (read when `ray` is imported) keeps a local cluster on 127.0.0.1.
+        os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
     import ray
 
     t0 = time.time()
@@ -148,14 +158,15 @@ def run(
     started_ray = False
     if to_run:
         if not ray.is_initialized():
-            # Loopback only: a local instance listens on 127.0.0.1, a driver joining a cluster
-            # says it is at 127.0.0.1 (a remote cluster is reached through --address).
-            kwargs = dict(_node_ip_address="127.0.0.1", include_dashboard=False,
-                          log_to_driver=False, configure_logging=False)
-            if address:
-                ray.init(address=address, **kwargs)
-            else:
-                ray.init(**kwargs)
+            # A local instance, or a cluster on this machine, stays on 127.0.0.1; a remote
+            # cluster (--address HOST:PORT) is joined from this machine's outward address.
+            kwargs = dict(log_to_driver=False, configure_logging=False)
+            if loopback:
+                kwargs["_node_ip_address"] = "127.0.0.1"
+            if address is None:
+                kwargs["include_dashboard"] = False
+            # "local": a new instance, never one found through RAY_ADDRESS or /tmp/ray.
+            ray.init(address=address or "local", **kwargs)
             started_ray = True
         nodes = sorted(n["NodeID"] for n in ray.nodes() if n.get("Alive"))
         options = dict(num_cpus=num_cpus, max_retries=max_retries, retry_exceptions=False)

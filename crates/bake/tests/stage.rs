@@ -87,9 +87,7 @@ fn plan(dir: &Path, pipeline: &Path) -> Vec<Value> {
 fn materialise(entry: &Value, inputs: &Path) {
     for (k, read) in entry["reads"].as_array().unwrap().iter().enumerate() {
         for f in read["files"].as_array().unwrap() {
-            let to = inputs
-                .join(k.to_string())
-                .join(f["rel"].as_str().unwrap());
+            let to = inputs.join(k.to_string()).join(f["rel"].as_str().unwrap());
             std::fs::create_dir_all(to.parent().unwrap()).unwrap();
             std::fs::copy(f["path"].as_str().unwrap(), &to).unwrap();
         }
@@ -99,7 +97,10 @@ fn materialise(entry: &Value, inputs: &Path) {
 /// Runs `bake stage` for `entry` in a scratch folder away from the pipeline; the result folder.
 fn run_stage(scratch: &Path, entry: &Value) -> PathBuf {
     let id = entry["id"].as_str().unwrap().replace('/', "_");
-    let (inputs, out) = (scratch.join(format!("in-{id}")), scratch.join(format!("res-{id}")));
+    let (inputs, out) = (
+        scratch.join(format!("in-{id}")),
+        scratch.join(format!("res-{id}")),
+    );
     materialise(entry, &inputs);
     let e = scratch.join(format!("{id}.json"));
     std::fs::write(&e, serde_json::to_vec(entry).unwrap()).unwrap();
@@ -230,7 +231,9 @@ fn bad_entries_inputs_and_results_fail_with_one_line_and_write_nothing() {
     // A damaged input: the sky cut short.
     let inputs = scratch.join("in");
     materialise(&cube, &inputs);
-    let sky = inputs.join("0").join(cube["reads"][0]["args"][0].as_str().unwrap());
+    let sky = inputs
+        .join("0")
+        .join(cube["reads"][0]["args"][0].as_str().unwrap());
     let bytes = std::fs::read(&sky).unwrap();
     std::fs::write(&sky, &bytes[..bytes.len() / 3]).unwrap();
     let out = scratch.join("res");
@@ -259,8 +262,16 @@ fn bad_entries_inputs_and_results_fail_with_one_line_and_write_nothing() {
     let mut b = std::fs::read(&face).unwrap();
     b[100] ^= 1;
     std::fs::write(&face, b).unwrap();
-    let o = bake(d, &["commit", pipeline.to_str().unwrap(), out.to_str().unwrap()]);
-    assert_eq!(o.status.code(), Some(2), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = bake(
+        d,
+        &["commit", pipeline.to_str().unwrap(), out.to_str().unwrap()],
+    );
+    assert_eq!(
+        o.status.code(),
+        Some(2),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
     assert!(String::from_utf8_lossy(&o.stderr).contains("px.exr"));
     assert!(!d.join("out/p/cube").exists());
 }

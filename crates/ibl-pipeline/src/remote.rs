@@ -135,9 +135,7 @@ pub fn entries(graph: &Graph, plan: &Plan) -> Result<Vec<Option<StageEntry>>> {
                     let product = uk.product(up_params, &up.dir);
                     let files = uk
                         .outputs(up_params, &graph.input_args(*j), &up.dir)
-                        .map_err(|e| {
-                            Error::Core(ibl_core::Error::invalid(&up.dir, e.message))
-                        })?
+                        .map_err(|e| Error::Core(ibl_core::Error::invalid(&up.dir, e.message)))?
                         .into_iter()
                         .filter_map(|f| {
                             rel_text(&f, output).map(|rel| ShippedFile {
@@ -184,7 +182,10 @@ fn input_read(name: &str, r: &crate::graph::ResolvedInput) -> Result<ReadEntry> 
         rel_text(p, &root).ok_or_else(|| {
             Error::Core(ibl_core::Error::invalid(
                 p,
-                format!("input '{name}' cannot be shipped (not below {})", root.display()),
+                format!(
+                    "input '{name}' cannot be shipped (not below {})",
+                    root.display()
+                ),
             ))
         })
     };
@@ -267,7 +268,10 @@ pub fn run_entry(
     for (k, r) in entry.reads.iter().enumerate() {
         for a in &r.args {
             if !cache::is_inside_rel(a) {
-                return Err(invalid(format!("read '{}': argument '{a}' is not a plain relative path", r.name)));
+                return Err(invalid(format!(
+                    "read '{}': argument '{a}' is not a plain relative path",
+                    r.name
+                )));
             }
             args.push(inputs.join(k.to_string()).join(a));
         }
@@ -311,8 +315,11 @@ pub fn run_entry(
     Ok(report)
 }
 
+/// A result folder's files: path relative to the stage's folder, bytes.
+type ResultFiles = Vec<(String, Vec<u8>)>;
+
 /// Reads a result folder's report and files, checking every file's size and hash.
-fn read_result(dir: &Path) -> std::result::Result<(StageOutput, Vec<(String, Vec<u8>)>), String> {
+fn read_result(dir: &Path) -> std::result::Result<(StageOutput, ResultFiles), String> {
     let report_path = dir.join(REPORT);
     let bytes =
         std::fs::read(&report_path).map_err(|e| format!("{}: {e}", report_path.display()))?;
@@ -321,7 +328,11 @@ fn read_result(dir: &Path) -> std::result::Result<(StageOutput, Vec<(String, Vec
     let mut files = Vec::with_capacity(report.outputs.len());
     for o in &report.outputs {
         if !cache::is_inside_rel(&o.rel) {
-            return Err(format!("{}: output '{}' is not a plain relative path", report_path.display(), o.rel));
+            return Err(format!(
+                "{}: output '{}' is not a plain relative path",
+                report_path.display(),
+                o.rel
+            ));
         }
         let p = dir.join(FILES).join(&o.rel);
         let b = std::fs::read(&p).map_err(|e| format!("{}: {e}", p.display()))?;
@@ -366,10 +377,10 @@ pub fn commit(graph: &Graph, results: &[PathBuf], restore: &[String]) -> Result<
     };
     let mut done = Vec::new();
     let commit_one = |i: usize,
-                          staged: std::result::Result<Vec<exec::Staged>, String>,
-                          status: Status,
-                          seconds: f64,
-                          warnings: Vec<String>| {
+                      staged: std::result::Result<Vec<exec::Staged>, String>,
+                      status: Status,
+                      seconds: f64,
+                      warnings: Vec<String>| {
         let planned = &plan.stages[i];
         let staging = exec::staging_dir(&session, i, &graph.stages[i].id);
         let mut r = result_of(i, status, planned.decision.reason().to_string());
@@ -431,8 +442,7 @@ pub fn commit(graph: &Graph, results: &[PathBuf], restore: &[String]) -> Result<
             done.push(result_of(
                 i,
                 Status::Failed,
-                "the pipeline or its inputs changed since this stage was planned: run again"
-                    .into(),
+                "the pipeline or its inputs changed since this stage was planned: run again".into(),
             ));
             continue;
         }
@@ -447,7 +457,10 @@ pub fn commit(graph: &Graph, results: &[PathBuf], restore: &[String]) -> Result<
             exec::stage_files(
                 &staging,
                 &s.dir,
-                files.into_iter().map(|(rel, b)| (s.dir.join(rel), b)).collect(),
+                files
+                    .into_iter()
+                    .map(|(rel, b)| (s.dir.join(rel), b))
+                    .collect(),
             )
         };
         done.push(commit_one(
@@ -499,7 +512,10 @@ mod tests {
     #[test]
     fn relative_paths_stay_inside_and_globs_share_their_folder() {
         let root = Path::new("/a/b");
-        assert_eq!(rel_text(Path::new("/a/b/c/d.exr"), root).as_deref(), Some("c/d.exr"));
+        assert_eq!(
+            rel_text(Path::new("/a/b/c/d.exr"), root).as_deref(),
+            Some("c/d.exr")
+        );
         assert_eq!(rel_text(Path::new("/a/b/../x.exr"), root), None);
         assert_eq!(rel_text(Path::new("/a/b"), root), None, "not a file below");
         assert_eq!(rel_text(Path::new("/elsewhere/x"), root), None);
@@ -537,10 +553,15 @@ mod tests {
         assert_eq!(e[0].key, plan.stages[0].key.clone().unwrap());
         let irr = &e[1].reads[0];
         assert_eq!(irr.stage.as_deref(), Some("cube"));
-        assert_eq!((irr.prefix.as_str(), irr.args[0].as_str()), ("cube", "cube"));
+        assert_eq!(
+            (irr.prefix.as_str(), irr.args[0].as_str()),
+            ("cube", "cube")
+        );
         let faces: Vec<&str> = irr.files.iter().map(|f| f.rel.as_str()).collect();
         assert_eq!(faces.len(), 6);
-        assert!(faces.iter().all(|f| f.starts_with("cube/") && f.ends_with(".exr")));
+        assert!(faces
+            .iter()
+            .all(|f| f.starts_with("cube/") && f.ends_with(".exr")));
         assert_eq!(e[2].reads[0].args, ["a.exr", "sub/b.exr"]);
         assert_eq!(e[3].reads[0].args, ["hdri"]);
         let dir_files: Vec<&str> = e[3].reads[0].files.iter().map(|f| f.rel.as_str()).collect();
