@@ -82,6 +82,16 @@ def test_example_pipelines_are_byte_identical_to_bake_run(cluster, work, bin_dir
     assert plain.returncode == 0, plain.stderr
     assert {s["status"] for s in json.loads(plain.stdout)["stages"]} <= {"up-to-date", "skipped"}
 
+    # Outputs deleted by hand come back from the cache, without a task, as with `bake run`.
+    gone = sorted(rel for rel in got if rel.startswith(ran[0]["id"] + os.sep))
+    assert gone, "the stage folder is its id"
+    for rel in gone:
+        os.remove(os.path.join(str(work / "out-ray" / name), rel))
+    r3, third = run_json(["run", pipeline, "--address", cluster.address, "--bin-dir", bin_dir])
+    assert r3.returncode == 0, r3.stderr
+    assert third["tasks_submitted"] == 0 and statuses(third)[ran[0]["id"]] == "restored"
+    assert tree(work / "out-ray" / name) == expected
+
 
 def test_a_killed_worker_is_retried_with_identical_outputs(cluster, work, bin_dir, tmp_path):
     ref = bake(bin_dir, "run", str(work / "pipelines" / "probe.ron"), "--quiet")

@@ -233,7 +233,6 @@ fn entry_params(
             entry.params
         )));
     }
-    kind.validate(&p)?;
     Ok(p)
 }
 
@@ -264,6 +263,7 @@ pub fn run_entry(
         class: ErrorClass::Unsupported,
     })?;
     let params = entry_params(kind, entry)?;
+    kind.validate(&params)?;
     let mut args = Vec::new();
     for (k, r) in entry.reads.iter().enumerate() {
         for a in &r.args {
@@ -535,7 +535,7 @@ mod tests {
         for f in ["hdri/a.exr", "hdri/sub/b.exr"] {
             std::fs::write(dir.path().join(f), f).unwrap();
         }
-        let src = r#"(output: "out", inputs: { "sky": File("hdri/a.exr"), "all": Glob("hdri/**/*.exr"), "dir": Folder("hdri") },
+        let src = r#"(output: "out", inputs: { "sky": File("hdri/a.exr"), "all": Glob("hdri/sub/*.exr"), "dir": Folder("hdri") },
             stages: [
                 (id: "cube", kind: "equirect-to-cube", reads: ["sky"], params: (size: 4)),
                 (id: "irr", kind: "irradiance", reads: ["cube"]),
@@ -562,7 +562,8 @@ mod tests {
         assert!(faces
             .iter()
             .all(|f| f.starts_with("cube/") && f.ends_with(".exr")));
-        assert_eq!(e[2].reads[0].args, ["a.exr", "sub/b.exr"]);
+        assert_eq!(e[2].reads[0].args, ["b.exr"]);
+        assert_eq!(e[2].reads[0].files[0].rel, "b.exr");
         assert_eq!(e[3].reads[0].args, ["hdri"]);
         let dir_files: Vec<&str> = e[3].reads[0].files.iter().map(|f| f.rel.as_str()).collect();
         assert_eq!(dir_files, ["hdri/a.exr", "hdri/sub/b.exr"]);
