@@ -117,7 +117,6 @@ def run(
         # Ray rewrites a loopback address to this machine's outward IP (for remote workers);
         # this switch (read when `ray` is imported) keeps a local cluster on 127.0.0.1.
         os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
-    import ray
 
     t0 = time.time()
     log = log or (lambda msg: None)
@@ -157,6 +156,8 @@ def run(
     interrupted = False
     started_ray = False
     if to_run:
+        import ray  # only when there is work: a run with nothing to do starts no Ray
+
         if not ray.is_initialized():
             # A local instance, or a cluster on this machine, stays on 127.0.0.1; a remote
             # cluster (--address HOST:PORT) is joined from this machine's outward address.

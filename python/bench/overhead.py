@@ -62,7 +62,7 @@ def main(bin_dir):
     finally:
         c.shutdown()
         shutil.rmtree(work, ignore_errors=True)
-    print("%d tiny stages: bake run %.2f s, bake-ray %.2f s on 2 nodes -> %.3f s of overhead per "
+    print("tiny stages (%d): bake run %.2f s, bake-ray %.2f s on 2 nodes -> %.3f s of overhead per "
           "task (wall); %.3f s per task inside the worker (materialise + bake stage + pack)"
           % (N, t_bake, t_ray, (t_ray - t_bake) / N * 2, task))
     print("a second bake-ray run (nothing to do, no task): %.2f s" % t_noop)

@@ -86,8 +86,8 @@ pub struct StageOutput {
 
 /// `path` relative to `root` as a plain relative path with `/` separators.
 fn rel_text(path: &Path, root: &Path) -> Option<String> {
-    let rel = crate::paths::normalize(path);
-    let rel = rel.strip_prefix(crate::paths::normalize(root)).ok()?;
+    let rel = crate::paths::absolute(path);
+    let rel = rel.strip_prefix(crate::paths::absolute(root)).ok()?;
     let parts: Vec<String> = rel
         .components()
         .map(|c| c.as_os_str().to_string_lossy().into_owned())
@@ -171,12 +171,16 @@ pub fn entries(graph: &Graph, plan: &Plan) -> Result<Vec<Option<StageEntry>>> {
 /// below the folder they share, so the bake sees the names it would see in place.
 fn input_read(name: &str, r: &crate::graph::ResolvedInput) -> Result<ReadEntry> {
     let root = match r.input {
-        crate::schema::Input::File(_) | crate::schema::Input::Folder(_) => r
-            .path
-            .parent()
-            .map(Path::to_path_buf)
-            .unwrap_or_else(|| r.path.clone()),
-        crate::schema::Input::Glob(_) => common_folder(&r.files),
+        crate::schema::Input::File(_) | crate::schema::Input::Folder(_) => {
+            let path = crate::paths::absolute(&r.path);
+            path.parent().map(Path::to_path_buf).unwrap_or(path)
+        }
+        crate::schema::Input::Glob(_) => common_folder(
+            &r.files
+                .iter()
+                .map(|f| crate::paths::absolute(f))
+                .collect::<Vec<_>>(),
+        ),
     };
     let rel = |p: &Path| {
         rel_text(p, &root).ok_or_else(|| {
