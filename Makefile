@@ -3,7 +3,7 @@ CARGO ?= cargo
 OUT ?= out
 DEMO_INPUT ?= fixtures/hdri/city_512.exr
 
-.PHONY: all build demo test unit lint fmt fmt-check bench bench-quick fuzz conformance clean
+.PHONY: all build demo test unit lint fmt fmt-check bench bench-quick fuzz conformance ray-test clean
 
 all: build
 
@@ -48,6 +48,12 @@ bench-quick:
 # check every container and format the bakes write; installs them from PyPI and npm.
 conformance: build
 	conformance/run.sh
+
+# The Ray executor (python/) on a two-node Ray cluster on 127.0.0.1: builds the release `bake`
+# if needed, installs ray, pytest and bake-ray (scripts/setup-ray.sh), runs python/tests.
+ray-test: build
+	scripts/setup-ray.sh
+	cd python && BAKE_RAY_BIN_DIR=$(CURDIR)/target/release python3 -m pytest -q tests
 
 # Coverage-guided fuzzing of every parser for a bounded time (FUZZ_SECONDS per target).
 fuzz:

@@ -7,7 +7,7 @@ use ibl_pipeline::exec::{self, Observer, RunReport, StageResult, Status};
 use ibl_pipeline::graph::{Graph, Source};
 use ibl_pipeline::plan::{Decision, Plan};
 use ibl_pipeline::scene::Need;
-use ibl_pipeline::{kinds, ninja, paths, Error};
+use ibl_pipeline::{kinds, ninja, paths, remote, Error};
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
@@ -65,6 +65,35 @@ enum Cmd {
     /// Remove what the pipeline produced and its cache.
     Clean {
         file: PathBuf,
+        #[arg(long)]
+        json: bool,
+    },
+    /// Run one stage on its own, from its plan entry (`bake plan --json`, `stages[].entry`) and
+    /// its inputs materialised under a folder: what any executor (a Ray task) runs.
+    Stage {
+        /// The stage's entry (JSON).
+        #[arg(long)]
+        entry: PathBuf,
+        /// Its inputs: one folder per read, numbered in `reads` order, holding that read's
+        /// files at their `rel` paths.
+        #[arg(long)]
+        inputs: PathBuf,
+        /// The result folder to write: `files/` (the stage's outputs) and `stage.json`.
+        #[arg(long)]
+        out: PathBuf,
+        /// Print the stage's report (stage.json) on stdout.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Commit stages run elsewhere (result folders of `bake stage`) into the pipeline's output
+    /// folder and cache exactly as `bake run` does, and restore stages from the cache.
+    Commit {
+        file: PathBuf,
+        /// Result folders written by `bake stage`.
+        results: Vec<PathBuf>,
+        /// Stages the plan restores from the cache (repeatable).
+        #[arg(long, value_name = "STAGE")]
+        restore: Vec<String>,
         #[arg(long)]
         json: bool,
     },
@@ -150,9 +179,10 @@ fn run(cli: Cli) -> Result<i32, Error> {
                 None => {
                     let plan = ibl_pipeline::plan::plan(&graph, force)?;
                     if json {
+                        let entries = remote::entries(&graph, &plan)?;
                         println!(
                             "{}",
-                            serde_json::to_string_pretty(&plan_json(&graph, &plan))
+                            serde_json::to_string_pretty(&plan_json(&graph, &plan, &entries))
                                 .expect("plan serialises")
                         );
                     } else {
@@ -192,6 +222,61 @@ fn run(cli: Cli) -> Result<i32, Error> {
                 print_report(&report);
             }
             Ok(if report.failed() { 1 } else { 0 })
+        }
+        Cmd::Stage {
+            entry,
+            inputs,
+            out,
+            json,
+        } => {
+            let text = std::fs::read(&entry).map_err(|e| Error::io(&entry, e))?;
+            let e: remote::StageEntry = serde_json::from_slice(&text).map_err(|e| {
+                Error::Core(ibl_core::Error::invalid(
+                    &entry,
+                    format!("not a stage entry: {e}"),
+                ))
+            })?;
+            match remote::run_entry(&e, &inputs, &out) {
+                Ok(report) => {
+                    if json {
+                        println!(
+                            "{}",
+                            serde_json::to_string_pretty(&report).expect("report serialises")
+                        );
+                    }
+                    for w in &report.warnings {
+                        eprintln!("bake: warning: {}: {w}", e.id);
+                    }
+                    Ok(0)
+                }
+                Err(err) => {
+                    eprintln!("bake: error: stage '{}': {}", e.id, err.message);
+                    Ok(exit_code(err.class))
+                }
+            }
+        }
+        Cmd::Commit {
+            file,
+            results,
+            restore,
+            json,
+        } => {
+            let graph = ibl_pipeline::load(&file)?;
+            let done = remote::commit(&graph, &results, &restore)?;
+            if json {
+                println!(
+                    "{}",
+                    serde_json::to_string_pretty(&done).expect("results serialise")
+                );
+            }
+            let mut failed = false;
+            for r in &done {
+                if r.status == Status::Failed {
+                    failed = true;
+                    eprintln!("bake: error: stage '{}': {}", r.id, r.reason);
+                }
+            }
+            Ok(if failed { 1 } else { 0 })
         }
         Cmd::Clean { file, json } => {
             // Cleaning needs the output folder and its manifest, not the inputs: the graph
@@ -309,7 +394,11 @@ fn print_plan(graph: &Graph, plan: &Plan) {
     }
 }
 
-fn plan_json(graph: &Graph, plan: &Plan) -> serde_json::Value {
+fn plan_json(
+    graph: &Graph,
+    plan: &Plan,
+    entries: &[Option<remote::StageEntry>],
+) -> serde_json::Value {
     let stages: Vec<serde_json::Value> = graph
         .stages
         .iter()
@@ -330,6 +419,7 @@ fn plan_json(graph: &Graph, plan: &Plan) -> serde_json::Value {
                 "key": p.key,
                 "params": s.params.as_ref().map(|p| p.canonical()),
                 "outputs": outputs,
+                "entry": entries[i],
             })
         })
         .collect();

@@ -34,7 +34,7 @@ fn gate() -> std::sync::RwLockReadGuard<'static, ()> {
 }
 
 /// Permission to commit: the gate, then the commit lock.
-fn commit_lock() -> (
+pub(crate) fn commit_lock() -> (
     std::sync::RwLockReadGuard<'static, ()>,
     std::sync::MutexGuard<'static, ()>,
 ) {
@@ -519,12 +519,12 @@ pub fn run(
 
 /// The manifest, even if a thread panicked while holding it (it is only ever replaced whole
 /// record by record).
-fn lock(m: &Mutex<Manifest>) -> std::sync::MutexGuard<'_, Manifest> {
+pub(crate) fn lock(m: &Mutex<Manifest>) -> std::sync::MutexGuard<'_, Manifest> {
     m.lock().unwrap_or_else(|e| e.into_inner())
 }
 
 /// The text of a panic's payload.
-fn panic_message(panic: &(dyn std::any::Any + Send)) -> String {
+pub(crate) fn panic_message(panic: &(dyn std::any::Any + Send)) -> String {
     panic
         .downcast_ref::<String>()
         .cloned()
@@ -548,7 +548,7 @@ fn panicked(session: &Session, graph: &Graph, i: usize, msg: String) -> StageRes
 }
 
 /// The staging folder of stage `i`.
-fn staging_dir(session: &Session, i: usize, id: &str) -> PathBuf {
+pub(crate) fn staging_dir(session: &Session, i: usize, id: &str) -> PathBuf {
     session.tmp.join(format!("{i}-{}", paths::slug(id)))
 }
 
@@ -578,33 +578,11 @@ fn run_stage(
         warnings: vec![],
     };
 
-    let outcome: std::result::Result<Vec<(PathBuf, String, cache::FileStamp)>, String> = (|| {
+    let outcome: std::result::Result<Vec<Staged>, String> = (|| {
         if let Decision::Restore(_) = planned.decision {
-            if let Some(entry) = session.cache.entry(&key) {
-                let _g = gate();
-                if let Some(staged) = session
-                    .cache
-                    .stage_entry(&entry, &staging)
-                    .map_err(|e| e.to_string())?
-                {
-                    result.status = Status::Restored;
-                    return staged
-                        .into_iter()
-                        .zip(entry.files)
-                        .map(|((path, rel), f)| {
-                            let md = std::fs::metadata(&path)
-                                .map_err(|e| format!("{}: {e}", path.display()))?;
-                            Ok((
-                                path,
-                                rel,
-                                cache::FileStamp {
-                                    mtime_ns: cache::mtime_ns(&md),
-                                    ..f.stamp
-                                },
-                            ))
-                        })
-                        .collect();
-                }
+            if let Some(staged) = stage_cached(session, &key, &staging)? {
+                result.status = Status::Restored;
+                return Ok(staged);
             }
             result.reason = format!("{} (cache damaged: baking)", result.reason);
         }
@@ -653,13 +631,53 @@ fn run_stage(
     result
 }
 
+/// A staged file: its path in the staging folder, its path relative to the stage's folder,
+/// its stamp.
+pub(crate) type Staged = (PathBuf, String, cache::FileStamp);
+
+/// Links the cache's outputs of `key` into `staging`; `None` when the cache has no sound entry
+/// for it (the stage must be baked).
+pub(crate) fn stage_cached(
+    session: &Session,
+    key: &str,
+    staging: &Path,
+) -> std::result::Result<Option<Vec<Staged>>, String> {
+    let Some(entry) = session.cache.entry(key) else {
+        return Ok(None);
+    };
+    let _g = gate();
+    let Some(staged) = session
+        .cache
+        .stage_entry(&entry, staging)
+        .map_err(|e| e.to_string())?
+    else {
+        return Ok(None);
+    };
+    staged
+        .into_iter()
+        .zip(entry.files)
+        .map(|((path, rel), f)| {
+            let md = std::fs::metadata(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+            Ok((
+                path,
+                rel,
+                cache::FileStamp {
+                    mtime_ns: cache::mtime_ns(&md),
+                    ..f.stamp
+                },
+            ))
+        })
+        .collect::<std::result::Result<Vec<_>, String>>()
+        .map(Some)
+}
+
 /// Writes a bake's encoded files into `staging` (synced), checking they belong in `dir`.
 /// Returns (staged file, path relative to `dir`, stamp).
-fn stage_files(
+pub(crate) fn stage_files(
     staging: &Path,
     dir: &Path,
     files: Vec<(PathBuf, Vec<u8>)>,
-) -> std::result::Result<Vec<(PathBuf, String, cache::FileStamp)>, String> {
+) -> std::result::Result<Vec<Staged>, String> {
     use std::io::Write;
     std::fs::create_dir_all(staging).map_err(|e| format!("{}: {e}", staging.display()))?;
     let mut out = Vec::with_capacity(files.len());
@@ -692,13 +710,13 @@ fn stage_files(
 
 /// Renames staged files into place and records the stage, under the commit lock and a journal.
 #[allow(clippy::too_many_arguments)]
-fn commit(
+pub(crate) fn commit(
     session: &Session,
     graph: &Graph,
     i: usize,
     key: String,
     parts: KeyParts,
-    staged: Vec<(PathBuf, String, cache::FileStamp)>,
+    staged: Vec<Staged>,
     seconds: f64,
     manifest: &Mutex<Manifest>,
 ) -> Result<Vec<PathBuf>> {

@@ -1,8 +1,9 @@
 //! The pipeline runner's library: RON pipelines ([`schema`]) become a checked stage graph
 //! ([`graph`], with the stages a scene needs derived by [`scene`]), planned against a
-//! content-addressed cache ([`plan`], [`cache`]), run in parallel in-process ([`exec`]) or
-//! written out as a ninja file ([`ninja`]). Each stage kind is a small adapter over a bake
-//! library's `Params` and `run` ([`kinds`]).
+//! content-addressed cache ([`plan`], [`cache`]), run in parallel in-process ([`exec`]),
+//! stage by stage by another executor ([`remote`]), or written out as a ninja file
+//! ([`ninja`]). Each stage kind is a small adapter over a bake library's `Params` and `run`
+//! ([`kinds`]).
 //!
 //! Relative paths in a pipeline are relative to the pipeline file's folder, so a pipeline
 //! means the same from any working folder. Everything the runner keeps lives under the
@@ -17,6 +18,7 @@ pub mod kinds;
 pub mod ninja;
 pub mod paths;
 pub mod plan;
+pub mod remote;
 pub mod scene;
 pub mod schema;
 

@@ -1,0 +1,575 @@
+//! One stage on its own, for executors other than the in-process one (a Ray cluster): the
+//! [`StageEntry`] the plan gives each stage (kind, canonical parameters, key, what it reads and
+//! from which files), [`run_entry`] running it on any machine from materialised inputs into a
+//! result folder, and [`commit`] putting result folders into the pipeline's output folder and
+//! cache through the runner's own staging and commit code (journal, renames, manifest, object
+//! store), so that the next `bake run` finds those stages up to date.
+//!
+//! A result folder holds `stage.json` (a [`StageOutput`]) and `files/`, the stage's files by
+//! their path relative to its folder. An input folder holds one folder per read, numbered in
+//! `reads` order, each holding that read's files by their `rel` paths.
+
+use crate::cache;
+use crate::error::{Error, Result};
+use crate::exec::{self, Session, StageResult, Status};
+use crate::graph::{Graph, Source};
+use crate::kinds::{self, BakeError, Baked};
+use crate::plan::{Decision, Plan};
+use ibl_core::error::ErrorClass;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::time::Instant;
+
+/// Name of the report in a result folder.
+pub const REPORT: &str = "stage.json";
+/// Name of the files' folder in a result folder.
+pub const FILES: &str = "files";
+
+/// Everything needed to run one stage without the pipeline.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StageEntry {
+    pub id: String,
+    pub kind: String,
+    /// The canonical parameters (every field, keys sorted), as hashed into the key.
+    pub params: serde_json::Value,
+    pub key: String,
+    /// The build of `bake` that planned it ([`cache::tool`]); only the same build may run it,
+    /// or the outputs recorded under the key would be another build's.
+    pub tool: String,
+    /// The stage's folder relative to the output folder.
+    pub dir: String,
+    pub reads: Vec<ReadEntry>,
+}
+
+/// One source a stage reads, as files to materialise in its numbered input folder.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ReadEntry {
+    pub name: String,
+    /// For a read of a stage: its id. Its files are that stage's outputs, under `prefix`.
+    pub stage: Option<String>,
+    /// Where a read stage's outputs go in the input folder (its folder relative to the output).
+    pub prefix: String,
+    /// The files, relative to the read's input folder, with where they are on the planning
+    /// machine (for a stage read: where they are once that stage is built).
+    pub files: Vec<ShippedFile>,
+    /// What the bake is given, relative to the read's input folder.
+    pub args: Vec<String>,
+}
+
+/// A file to ship: its place in the input folder and its path where the plan was made.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ShippedFile {
+    pub rel: String,
+    pub path: PathBuf,
+}
+
+/// One produced file.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct OutputFile {
+    /// Relative to the stage's folder.
+    pub rel: String,
+    pub size: u64,
+    pub hash: String,
+}
+
+/// What [`run_entry`] produced: `stage.json` of a result folder.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StageOutput {
+    pub id: String,
+    pub key: String,
+    /// In the order the bake produced them (the order `bake run` records).
+    pub outputs: Vec<OutputFile>,
+    pub warnings: Vec<String>,
+    pub seconds: f64,
+}
+
+/// `path` relative to `root` as a plain relative path with `/` separators.
+fn rel_text(path: &Path, root: &Path) -> Option<String> {
+    let rel = crate::paths::absolute(path);
+    let rel = rel.strip_prefix(crate::paths::absolute(root)).ok()?;
+    let parts: Vec<String> = rel
+        .components()
+        .map(|c| c.as_os_str().to_string_lossy().into_owned())
+        .collect();
+    let text = parts.join("/");
+    cache::is_inside_rel(&text).then_some(text)
+}
+
+/// The deepest folder holding every path of `paths`.
+fn common_folder(paths: &[PathBuf]) -> PathBuf {
+    let mut c = paths
+        .first()
+        .and_then(|p| p.parent())
+        .map(Path::to_path_buf)
+        .unwrap_or_default();
+    while !paths.iter().all(|p| p.starts_with(&c)) && c.pop() {}
+    c
+}
+
+/// The entries of the stages of `plan` that have a key (every needed stage), in stage order.
+pub fn entries(graph: &Graph, plan: &Plan) -> Result<Vec<Option<StageEntry>>> {
+    let output = &graph.pipeline.output;
+    let rel_dir = |dir: &Path| {
+        rel_text(dir, output).ok_or_else(|| {
+            Error::Core(ibl_core::Error::invalid(
+                dir,
+                "a stage folder outside the output folder",
+            ))
+        })
+    };
+    let mut out = Vec::with_capacity(graph.stages.len());
+    for (s, p) in graph.stages.iter().zip(&plan.stages) {
+        let (Some(key), Some((_, params))) = (&p.key, s.runnable()) else {
+            out.push(None);
+            continue;
+        };
+        let mut reads = Vec::new();
+        for (name, src) in &s.reads {
+            reads.push(match src {
+                Source::Input(n) => input_read(name, &graph.inputs[n])?,
+                Source::Stage(j) => {
+                    let up = &graph.stages[*j];
+                    let (uk, up_params) = up.runnable().expect("a read stage is runnable");
+                    let prefix = rel_dir(&up.dir)?;
+                    let product = uk.product(up_params, &up.dir);
+                    let files = uk
+                        .outputs(up_params, &graph.input_args(*j), &up.dir)
+                        .map_err(|e| Error::Core(ibl_core::Error::invalid(&up.dir, e.message)))?
+                        .into_iter()
+                        .filter_map(|f| {
+                            rel_text(&f, output).map(|rel| ShippedFile {
+                                rel,
+                                path: crate::paths::absolute(&f),
+                            })
+                        })
+                        .collect();
+                    ReadEntry {
+                        name: name.clone(),
+                        stage: Some(up.id.clone()),
+                        prefix,
+                        files,
+                        args: vec![rel_dir(&product)?],
+                    }
+                }
+            });
+        }
+        out.push(Some(StageEntry {
+            id: s.id.clone(),
+            kind: s.kind_name.clone(),
+            params: params.canonical(),
+            key: key.clone(),
+            tool: cache::tool(),
+            dir: rel_dir(&s.dir)?,
+            reads,
+        }));
+    }
+    Ok(out)
+}
+
+/// A read of an input: a file and a folder keep their own name, glob matches their paths
+/// below the folder they share, so the bake sees the names it would see in place.
+fn input_read(name: &str, r: &crate::graph::ResolvedInput) -> Result<ReadEntry> {
+    let root = match r.input {
+        crate::schema::Input::File(_) | crate::schema::Input::Folder(_) => {
+            let path = crate::paths::absolute(&r.path);
+            path.parent().map(Path::to_path_buf).unwrap_or(path)
+        }
+        crate::schema::Input::Glob(_) => common_folder(
+            &r.files
+                .iter()
+                .map(|f| crate::paths::absolute(f))
+                .collect::<Vec<_>>(),
+        ),
+    };
+    let rel = |p: &Path| {
+        rel_text(p, &root).ok_or_else(|| {
+            Error::Core(ibl_core::Error::invalid(
+                p,
+                format!(
+                    "input '{name}' cannot be shipped (not below {})",
+                    root.display()
+                ),
+            ))
+        })
+    };
+    Ok(ReadEntry {
+        name: name.to_string(),
+        stage: None,
+        prefix: String::new(),
+        files: r
+            .files
+            .iter()
+            .map(|f| {
+                Ok(ShippedFile {
+                    rel: rel(f)?,
+                    path: crate::paths::absolute(f),
+                })
+            })
+            .collect::<Result<_>>()?,
+        args: r.args.iter().map(|a| rel(a)).collect::<Result<_>>()?,
+    })
+}
+
+fn invalid(message: String) -> BakeError {
+    BakeError {
+        message,
+        class: ErrorClass::InvalidInput,
+    }
+}
+
+/// The parameters of `entry`, rebuilt from their canonical form and checked to give it back.
+fn entry_params(
+    kind: &'static dyn kinds::Kind,
+    entry: &StageEntry,
+) -> std::result::Result<kinds::AnyParams, BakeError> {
+    let serde_json::Value::Object(fields) = &entry.params else {
+        return Err(invalid("the entry's params are not an object".into()));
+    };
+    let mut p = kind.default_params();
+    for (k, v) in fields {
+        p = kind.with(&p, k, v.clone()).map_err(invalid)?;
+    }
+    if p.canonical() != entry.params {
+        return Err(invalid(format!(
+            "the entry's params do not read back the same ({} instead of {})",
+            p.canonical(),
+            entry.params
+        )));
+    }
+    Ok(p)
+}
+
+/// Runs the stage of `entry` from the inputs materialised under `inputs` and writes a result
+/// folder `out` (its `files/` and `stage.json`, both atomically, the report last).
+pub fn run_entry(
+    entry: &StageEntry,
+    inputs: &Path,
+    out: &Path,
+) -> std::result::Result<StageOutput, BakeError> {
+    let t0 = Instant::now();
+    if entry.tool != cache::tool() {
+        return Err(BakeError {
+            message: format!(
+                "this bake is build {}, the plan was made by build {}: run the same build everywhere",
+                cache::tool(),
+                entry.tool
+            ),
+            class: ErrorClass::Unsupported,
+        });
+    }
+    let kind = kinds::find(&entry.kind).ok_or_else(|| BakeError {
+        message: format!(
+            "unknown kind '{}' (this build has: {})",
+            entry.kind,
+            kinds::names().join(", ")
+        ),
+        class: ErrorClass::Unsupported,
+    })?;
+    let params = entry_params(kind, entry)?;
+    kind.validate(&params)?;
+    let mut args = Vec::new();
+    for (k, r) in entry.reads.iter().enumerate() {
+        for a in &r.args {
+            if !cache::is_inside_rel(a) {
+                return Err(invalid(format!(
+                    "read '{}': argument '{a}' is not a plain relative path",
+                    r.name
+                )));
+            }
+            args.push(inputs.join(k.to_string()).join(a));
+        }
+    }
+    let dir = out.join(FILES);
+    let baked = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        kind.run(&params, &args, &dir, &ibl_core::progress::NoProgress)
+    }))
+    .map_err(|panic| BakeError {
+        message: format!("the bake panicked: {}", exec::panic_message(&*panic)),
+        class: ErrorClass::InvalidInput,
+    })??;
+    let Baked { files, warnings } = baked;
+    let mut outputs = Vec::with_capacity(files.len());
+    for (path, bytes) in &files {
+        let rel = rel_text(path, &dir).ok_or_else(|| {
+            invalid(format!(
+                "the bake wrote {} outside its folder {}",
+                path.display(),
+                dir.display()
+            ))
+        })?;
+        outputs.push(OutputFile {
+            rel,
+            size: bytes.len() as u64,
+            hash: cache::hash_bytes(bytes),
+        });
+    }
+    ibl_core::io::write_many_atomic(&files)?;
+    let report = StageOutput {
+        id: entry.id.clone(),
+        key: entry.key.clone(),
+        outputs,
+        warnings,
+        seconds: t0.elapsed().as_secs_f64(),
+    };
+    ibl_core::io::write_atomic(
+        &out.join(REPORT),
+        &serde_json::to_vec_pretty(&report).expect("report serialises"),
+    )?;
+    Ok(report)
+}
+
+/// A result folder's files: path relative to the stage's folder, bytes.
+type ResultFiles = Vec<(String, Vec<u8>)>;
+
+/// Reads a result folder's report and files, checking every file's size and hash.
+fn read_result(dir: &Path) -> std::result::Result<(StageOutput, ResultFiles), String> {
+    let report_path = dir.join(REPORT);
+    let bytes =
+        std::fs::read(&report_path).map_err(|e| format!("{}: {e}", report_path.display()))?;
+    let report: StageOutput = serde_json::from_slice(&bytes)
+        .map_err(|e| format!("{}: not a stage report: {e}", report_path.display()))?;
+    let mut files = Vec::with_capacity(report.outputs.len());
+    for o in &report.outputs {
+        if !cache::is_inside_rel(&o.rel) {
+            return Err(format!(
+                "{}: output '{}' is not a plain relative path",
+                report_path.display(),
+                o.rel
+            ));
+        }
+        let p = dir.join(FILES).join(&o.rel);
+        let b = std::fs::read(&p).map_err(|e| format!("{}: {e}", p.display()))?;
+        if b.len() as u64 != o.size || cache::hash_bytes(&b) != o.hash {
+            return Err(format!(
+                "{}: its bytes are not those the stage reported (damaged in transfer?)",
+                p.display()
+            ));
+        }
+        files.push((o.rel.clone(), b));
+    }
+    Ok((report, files))
+}
+
+/// Commits result folders (stages run elsewhere) and restores stages from the cache, as
+/// `bake run` would: each stage is re-planned here and committed only if its key is the one
+/// it ran with. Stages are committed one by one, so an interrupt keeps those done.
+pub fn commit(graph: &Graph, results: &[PathBuf], restore: &[String]) -> Result<Vec<StageResult>> {
+    let session = Session::open(graph)?;
+    let plan = crate::plan::plan(graph, false)?;
+    let manifest = Mutex::new(plan.manifest);
+    {
+        let _g = exec::commit_lock();
+        session.cache.save_manifest(&exec::lock(&manifest))?;
+    }
+    let result_of = |i: usize, status: Status, reason: String| StageResult {
+        id: graph.stages[i].id.clone(),
+        kind: graph.stages[i].kind_name.clone(),
+        status,
+        reason,
+        seconds: 0.0,
+        outputs: vec![],
+        warnings: vec![],
+    };
+    let find = |id: &str| {
+        graph.index(id).ok_or_else(|| {
+            Error::Core(ibl_core::Error::param(format!(
+                "'{id}' is not a stage of {}",
+                graph.pipeline.file.display()
+            )))
+        })
+    };
+    let mut done = Vec::new();
+    let commit_one = |i: usize,
+                      staged: std::result::Result<Vec<exec::Staged>, String>,
+                      status: Status,
+                      seconds: f64,
+                      warnings: Vec<String>| {
+        let planned = &plan.stages[i];
+        let staging = exec::staging_dir(&session, i, &graph.stages[i].id);
+        let mut r = result_of(i, status, planned.decision.reason().to_string());
+        r.warnings = warnings;
+        r.seconds = seconds;
+        let committed = staged.and_then(|staged| {
+            exec::commit(
+                &session,
+                graph,
+                i,
+                planned.key.clone().expect("work has a key"),
+                planned.parts.clone().expect("work has key parts"),
+                staged,
+                seconds,
+                &manifest,
+            )
+            .map_err(|e| e.to_string())
+        });
+        match committed {
+            Ok(outputs) => r.outputs = outputs,
+            Err(e) => {
+                r.status = Status::Failed;
+                r.reason = e;
+            }
+        }
+        let _ = std::fs::remove_dir_all(&staging);
+        r
+    };
+    for id in restore {
+        let i = find(id)?;
+        let planned = &plan.stages[i];
+        match &planned.decision {
+            Decision::Restore(_) => {
+                let staging = exec::staging_dir(&session, i, &graph.stages[i].id);
+                let key = planned.key.as_deref().expect("work has a key");
+                let staged = exec::stage_cached(&session, key, &staging).and_then(|s| {
+                    s.ok_or_else(|| "its outputs are no longer in the cache: run it".to_string())
+                });
+                done.push(commit_one(i, staged, Status::Restored, 0.0, vec![]));
+            }
+            Decision::UpToDate => done.push(result_of(i, Status::UpToDate, "up to date".into())),
+            d => done.push(result_of(
+                i,
+                Status::Failed,
+                format!("cannot be restored: {} ({})", d.word(), d.reason()),
+            )),
+        }
+    }
+    for dir in results {
+        let (report, files) = match read_result(dir) {
+            Ok(r) => r,
+            Err(e) => {
+                return Err(Error::Core(ibl_core::Error::invalid(dir, e)));
+            }
+        };
+        let i = find(&report.id)?;
+        let (s, planned) = (&graph.stages[i], &plan.stages[i]);
+        if planned.key.as_deref() != Some(report.key.as_str()) {
+            done.push(result_of(
+                i,
+                Status::Failed,
+                "the pipeline or its inputs changed since this stage was planned: run again".into(),
+            ));
+            continue;
+        }
+        if planned.decision == Decision::UpToDate {
+            // Committed meanwhile (by another run): the bytes are those of the same key.
+            done.push(result_of(i, Status::UpToDate, "up to date".into()));
+            continue;
+        }
+        let staging = exec::staging_dir(&session, i, &s.id);
+        let staged = {
+            let _g = exec::commit_lock();
+            exec::stage_files(
+                &staging,
+                &s.dir,
+                files
+                    .into_iter()
+                    .map(|(rel, b)| (s.dir.join(rel), b))
+                    .collect(),
+            )
+        };
+        done.push(commit_one(
+            i,
+            staged,
+            Status::Ran,
+            report.seconds,
+            report.warnings,
+        ));
+    }
+    {
+        let _g = exec::commit_lock();
+        let m = exec::lock(&manifest);
+        session.cache.save_manifest(&m)?;
+        let _ = session.cache.collect_garbage(&m);
+    }
+    Ok(done)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_kinds_parameters_read_back_from_their_canonical_form() {
+        for kind in kinds::all() {
+            for p in [kind.default_params(), kind.example_params()] {
+                let entry = StageEntry {
+                    id: "s".into(),
+                    kind: kind.name().into(),
+                    params: p.canonical(),
+                    key: String::new(),
+                    tool: cache::tool(),
+                    dir: "s".into(),
+                    reads: vec![],
+                };
+                let back = entry_params(kind, &entry)
+                    .unwrap_or_else(|e| panic!("{}: {}", kind.name(), e.message));
+                assert_eq!(
+                    kinds::canonical_text(&back),
+                    kinds::canonical_text(&p),
+                    "{}",
+                    kind.name()
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn relative_paths_stay_inside_and_globs_share_their_folder() {
+        let root = Path::new("/a/b");
+        assert_eq!(
+            rel_text(Path::new("/a/b/c/d.exr"), root).as_deref(),
+            Some("c/d.exr")
+        );
+        assert_eq!(rel_text(Path::new("/a/b/../x.exr"), root), None);
+        assert_eq!(rel_text(Path::new("/a/b"), root), None, "not a file below");
+        assert_eq!(rel_text(Path::new("/elsewhere/x"), root), None);
+        let files = [
+            PathBuf::from("/h/x/one.exr"),
+            PathBuf::from("/h/x/y/two.exr"),
+            PathBuf::from("/h/z/three.exr"),
+        ];
+        assert_eq!(common_folder(&files), PathBuf::from("/h"));
+        assert_eq!(common_folder(&files[..1]), PathBuf::from("/h/x"));
+    }
+
+    #[test]
+    fn the_plans_entries_ship_inputs_by_name_and_stages_by_folder() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::create_dir_all(dir.path().join("hdri/sub")).unwrap();
+        for f in ["hdri/a.exr", "hdri/sub/b.exr"] {
+            std::fs::write(dir.path().join(f), f).unwrap();
+        }
+        let src = r#"(output: "out", inputs: { "sky": File("hdri/a.exr"), "all": Glob("hdri/sub/*.exr"), "dir": Folder("hdri") },
+            stages: [
+                (id: "cube", kind: "equirect-to-cube", reads: ["sky"], params: (size: 4)),
+                (id: "irr", kind: "irradiance", reads: ["cube"]),
+                (id: "g", kind: "equirect-to-cube", reads: ["all"]),
+                (id: "f", kind: "equirect-to-cube", reads: ["dir"]),
+            ])"#;
+        let file = dir.path().join("p.ron");
+        std::fs::write(&file, src).unwrap();
+        let graph = crate::load(&file).unwrap();
+        let plan = crate::plan::plan(&graph, false).unwrap();
+        let e = entries(&graph, &plan).unwrap();
+        let e: Vec<&StageEntry> = e.iter().map(|e| e.as_ref().unwrap()).collect();
+        assert_eq!(e[0].reads[0].args, ["a.exr"]);
+        assert_eq!(e[0].reads[0].files[0].rel, "a.exr");
+        assert_eq!(e[0].key, plan.stages[0].key.clone().unwrap());
+        let irr = &e[1].reads[0];
+        assert_eq!(irr.stage.as_deref(), Some("cube"));
+        assert_eq!(
+            (irr.prefix.as_str(), irr.args[0].as_str()),
+            ("cube", "cube")
+        );
+        let faces: Vec<&str> = irr.files.iter().map(|f| f.rel.as_str()).collect();
+        assert_eq!(faces.len(), 6);
+        assert!(faces
+            .iter()
+            .all(|f| f.starts_with("cube/") && f.ends_with(".exr")));
+        assert_eq!(e[2].reads[0].args, ["b.exr"]);
+        assert_eq!(e[2].reads[0].files[0].rel, "b.exr");
+        assert_eq!(e[3].reads[0].args, ["hdri"]);
+        let dir_files: Vec<&str> = e[3].reads[0].files.iter().map(|f| f.rel.as_str()).collect();
+        assert_eq!(dir_files, ["hdri/a.exr", "hdri/sub/b.exr"]);
+    }
+}

@@ -1,0 +1,179 @@
+"""bake-ray on a real two-node Ray cluster on loopback: the example pipelines give the very
+bytes `bake run` gives, over both nodes; a second run submits nothing and `bake run` agrees;
+a worker killed mid-stage is retried; a stage failing on a damaged input fails alone."""
+
+import json
+import os
+import re
+import signal
+import subprocess
+import time
+
+import pytest
+
+from conftest import bake_ray
+
+PIPELINES = ["probe", "materials", "anisotropic-scene"]
+
+
+def bake(bin_dir, *args):
+    return subprocess.run([os.path.join(bin_dir, "bake")] + list(args), capture_output=True,
+                          text=True, timeout=600)
+
+
+def tree(folder):
+    """Every file under `folder` but the cache: relative path -> bytes."""
+    out = {}
+    for root, dirs, files in os.walk(folder):
+        dirs[:] = [d for d in dirs if d != ".bake"]
+        for f in files:
+            p = os.path.join(root, f)
+            with open(p, "rb") as fh:
+                out[os.path.relpath(p, folder)] = fh.read()
+    return out
+
+
+def redirected(work, name, out_name):
+    """A copy of pipelines/NAME.ron writing into ../OUT_NAME/NAME instead of ../out/NAME."""
+    src = (work / "pipelines" / (name + ".ron")).read_text()
+    text, n = re.subn(r'output: "\.\./out/', 'output: "../%s/' % out_name, src)
+    assert n == 1, "the pipeline names its output folder once"
+    path = work / "pipelines" / ("%s-%s.ron" % (name, out_name))
+    path.write_text(text)
+    return str(path)
+
+
+def run_json(args, env=None):
+    r = bake_ray(list(args) + ["--json"], env=env)
+    assert r.stdout.strip(), "no report; stderr:\n" + r.stderr
+    return r, json.loads(r.stdout)
+
+
+def statuses(report):
+    return {s["id"]: s["status"] for s in report["stages"]}
+
+
+@pytest.mark.parametrize("name", PIPELINES)
+def test_example_pipelines_are_byte_identical_to_bake_run(cluster, work, bin_dir, name):
+    ref = bake(bin_dir, "run", str(work / "pipelines" / (name + ".ron")), "--quiet")
+    assert ref.returncode == 0, ref.stderr
+    expected = tree(work / "out" / name)
+    assert expected, "bake run produced files"
+
+    pipeline = redirected(work, name, "out-ray")
+    r, report = run_json(["run", pipeline, "--address", cluster.address, "--bin-dir", bin_dir])
+    assert r.returncode == 0, r.stderr
+    got = tree(work / "out-ray" / name)
+    assert sorted(got) == sorted(expected)
+    for rel in expected:
+        assert got[rel] == expected[rel], "%s differs from bake run's" % rel
+    ran = [s for s in report["stages"] if s["status"] == "ran"]
+    assert ran and report["tasks_submitted"] == len(ran)
+    assert all(s["node"] in report["nodes"] for s in ran)
+    if len(ran) >= 3:
+        assert len({s["node"] for s in ran}) >= 2, "tasks ran on one node only: %s" % ran
+
+    # A second run has nothing to do and submits no task; `bake run` agrees.
+    r2, again = run_json(["run", pipeline, "--address", cluster.address, "--bin-dir", bin_dir])
+    assert r2.returncode == 0, r2.stderr
+    assert again["tasks_submitted"] == 0
+    assert set(statuses(again).values()) <= {"up-to-date", "skipped"}
+    plain = bake(bin_dir, "run", pipeline, "--json")
+    assert plain.returncode == 0, plain.stderr
+    assert {s["status"] for s in json.loads(plain.stdout)["stages"]} <= {"up-to-date", "skipped"}
+
+    # Outputs deleted by hand come back from the cache, without a task, as with `bake run`.
+    gone = sorted(rel for rel in got if rel.startswith(ran[0]["id"] + os.sep))
+    assert gone, "the stage folder is its id"
+    for rel in gone:
+        os.remove(os.path.join(str(work / "out-ray" / name), rel))
+    r3, third = run_json(["run", pipeline, "--address", cluster.address, "--bin-dir", bin_dir])
+    assert r3.returncode == 0, r3.stderr
+    assert third["tasks_submitted"] == 0 and statuses(third)[ran[0]["id"]] == "restored"
+    assert tree(work / "out-ray" / name) == expected
+
+
+def test_a_killed_worker_is_retried_with_identical_outputs(cluster, work, bin_dir, tmp_path):
+    ref = bake(bin_dir, "run", str(work / "pipelines" / "probe.ron"), "--quiet")
+    assert ref.returncode == 0, ref.stderr
+    marker = tmp_path / "killed-once"
+    pipeline = redirected(work, "probe", "out-kill")
+    r, report = run_json(["run", pipeline, "--address", cluster.address, "--bin-dir", bin_dir],
+                         env={"BAKE_RAY_TEST_KILL_ONCE": str(marker)})
+    assert r.returncode == 0, r.stderr
+    assert marker.exists(), "a worker was killed during a stage"
+    assert all(s == "ran" for s in statuses(report).values())
+    assert tree(work / "out-kill" / "probe") == tree(work / "out" / "probe")
+
+
+def test_a_stage_failing_on_a_damaged_input_fails_alone(cluster, work, bin_dir):
+    good = (work / "fixtures" / "hdri" / "sunset_256.exr").read_bytes()
+    # A real EXR cut short: its header promises data that is not there.
+    (work / "fixtures" / "hdri-damaged" / "truncated.exr").write_bytes(good[: len(good) // 3])
+    (work / "pipelines" / "broken.ron").write_text("""Pipeline(
+    output: "../out/broken",
+    inputs: {
+        "good": File("../fixtures/hdri/sunset_256.exr"),
+        "bad": File("../fixtures/hdri-damaged/truncated.exr"),
+    },
+    stages: [
+        (id: "bad-cube", kind: "equirect-to-cube", reads: ["bad"], params: (size: 16)),
+        (id: "bad-irradiance", kind: "irradiance", reads: ["bad-cube"], params: (size: 8)),
+        (id: "good-cube", kind: "equirect-to-cube", reads: ["good"], params: (size: 16)),
+        (id: "good-irradiance", kind: "irradiance", reads: ["good-cube"], params: (size: 8)),
+        (id: "dfg", kind: "dfg", params: (size: 16, samples: 64)),
+    ],
+)
+""")
+    pipeline = str(work / "pipelines" / "broken.ron")
+    r, report = run_json(["run", pipeline, "--address", cluster.address, "--bin-dir", bin_dir])
+    assert r.returncode == 1, r.stderr
+    assert statuses(report) == {
+        "bad-cube": "failed",
+        "bad-irradiance": "blocked",
+        "good-cube": "ran",
+        "good-irradiance": "ran",
+        "dfg": "ran",
+    }
+    errors = [ln for ln in r.stderr.splitlines() if "error:" in ln]
+    assert len(errors) == 1 and "stage 'bad-cube'" in errors[0], r.stderr
+    assert "truncated.exr" in errors[0], errors[0]
+    out = work / "out" / "broken"
+    assert not (out / "bad-cube").exists() and not (out / "bad-irradiance").exists()
+    assert not os.path.exists(out / ".bake" / "tmp"), "no staging left"
+    # The good branch equals bake run's (which fails the same way).
+    plain = bake(bin_dir, "run", redirected(work, "broken", "out-plain"), "--json")
+    assert plain.returncode == 1
+    assert {s["id"]: s["status"] for s in json.loads(plain.stdout)["stages"]} == statuses(report)
+    assert tree(out) == tree(work / "out-plain" / "broken")
+
+
+def test_without_address_a_local_ray_runs_it_and_ctrl_c_keeps_completed_stages(work, bin_dir):
+    ref = bake(bin_dir, "run", str(work / "pipelines" / "probe.ron"), "--quiet")
+    assert ref.returncode == 0, ref.stderr
+    pipeline = redirected(work, "probe", "out-local")
+    env = dict(os.environ)
+    proc = subprocess.Popen(
+        ["python3", "-m", "bake_ray.cli", "run", pipeline, "--bin-dir", bin_dir],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+        cwd=os.path.join(os.path.dirname(__file__), ".."),
+    )
+    # Interrupt once the first stage is committed.
+    lines = []
+    deadline = time.time() + 300
+    for line in proc.stderr:
+        lines.append(line)
+        if line.startswith("bake-ray: ran ") or time.time() > deadline:
+            break
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=120)
+    err = "".join(lines) + err
+    if proc.returncode == 0:
+        pytest.skip("the run finished before the interrupt landed")
+    assert proc.returncode == 130, err
+    first = tree(work / "out-local" / "probe")
+    assert first, "the completed stage is kept"
+    r, report = run_json(["run", pipeline, "--bin-dir", bin_dir])
+    assert r.returncode == 0, r.stderr
+    assert "up-to-date" in statuses(report).values(), "the next run resumes"
+    assert tree(work / "out-local" / "probe") == tree(work / "out" / "probe")
