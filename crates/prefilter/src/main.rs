@@ -52,6 +52,7 @@ fn main() {
             "resample_seconds": baked.chain.resample_seconds,
             "source_seconds": baked.chain.source_seconds,
             "estimate_seconds": baked.chain.estimate_seconds,
+            "runtime_seconds": baked.chain.runtime_seconds,
             "level_seconds": baked.chain.level_seconds,
         });
         Ok::<_, ibl_prefilter::Error>((outputs, details))
