@@ -38,6 +38,9 @@ pub struct Params {
     /// Set NaN/Inf input texels to 0 instead of refusing the input.
     #[arg(long)]
     pub sanitize: bool,
+    /// Engine the cube is made for: its orientation (an exact face permutation with flips).
+    #[arg(long, value_enum, default_value_t = ibl_target::Target::Gltf)]
+    pub target: ibl_target::Target,
 }
 
 impl Default for Params {
@@ -115,6 +118,7 @@ pub fn run(
     }
     let n = params.size.unwrap_or_else(|| input.env.natural_face_size());
     let cube = input.env.to_cube(n, params.filter, params.rotate, progress);
+    let cube = params.target.spec().orientation.apply(&cube);
     let files = envmap::encode_cube_outputs(
         out,
         &CubeMips { levels: vec![cube] },

@@ -454,6 +454,12 @@ pub fn run(
     let json = out_dir.join(REPORT_NAME);
     let bytes = io::data::encode(&json, &chain.report)?;
     files.push((json, bytes));
+    if params.target != Target::Gltf {
+        files.push((
+            out_dir.join(ibl_target::NOTE_NAME),
+            format!("{}\n", params.target.spec().note).into_bytes(),
+        ));
+    }
     Ok(Baked { files, chain })
 }
 
@@ -462,6 +468,9 @@ pub fn output_paths(params: &Params, out_dir: &Path) -> Vec<PathBuf> {
     let mut p =
         envmap::cube_output_paths(out_dir, params.baked_levels(), params.layout, "prefilter");
     p.push(out_dir.join(REPORT_NAME));
+    if params.target != Target::Gltf {
+        p.push(out_dir.join(ibl_target::NOTE_NAME));
+    }
     p
 }
 

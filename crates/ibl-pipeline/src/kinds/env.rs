@@ -71,11 +71,7 @@ pub static IRRADIANCE: Adapter<irr::Params> = Adapter {
     reads: Arity::one(ENVIRONMENT),
     out: super::in_dir,
     product: |_, out| out.to_path_buf(),
-    outputs: |p, _, out| {
-        let mut files = vec![out.join(&p.sh_file)];
-        files.extend(envmap::cube_output_paths(out, 1, p.layout, "irradiance"));
-        Ok(files)
-    },
+    outputs: |p, _, out| Ok(p.output_paths(out)),
     run: |p, inputs, out, progress: &dyn Progress| {
         let env = load_environment(one_input("irradiance", inputs)?, p.sanitize)?;
         let baked = irr::run(p, &env, out, progress)?;
