@@ -225,6 +225,15 @@ impl Params {
             }
         }
         ibl_core::params::check_rotate(self.rotate)?;
+        if self.target == Target::Babylon
+            && (!self.size.is_power_of_two() || self.baked_levels() != max_levels(self.size))
+        {
+            return Err(Error::Param(format!(
+                "--target babylon needs a power-of-two --size and its full chain down to 1×1 ({} levels for --size {}; no --max-roughness): Babylon's .env holds every level",
+                max_levels(self.size),
+                self.size
+            )));
+        }
         if !self.target.spec().lod.reads_chain() {
             return Err(Error::Param(format!(
                 "--target {} reads no prefiltered chain: three.js filters the environment itself (PMREMGenerator); bake its cube with equirect-to-cube --target three and its LightProbe with irradiance --target three",
@@ -435,6 +444,9 @@ pub struct Baked {
     pub chain: Chain,
 }
 
+/// Name of the Babylon.js `.env` written with `--target babylon`.
+pub const BABYLON_ENV_NAME: &str = "environment.env";
+
 /// Name of the sidecar report.
 pub const REPORT_NAME: &str = "prefilter.json";
 
@@ -454,6 +466,14 @@ pub fn run(
     let json = out_dir.join(REPORT_NAME);
     let bytes = io::data::encode(&json, &chain.report)?;
     files.push((json, bytes));
+    if params.target == Target::Babylon {
+        // The .env carries the chain and the irradiance polynomial of the same environment.
+        let path = out_dir.join(BABYLON_ENV_NAME);
+        let irradiance = ibl_target::babylon::irradiance_sh(&chain.mips.levels[0]);
+        let orientation = params.target.spec().orientation;
+        let bytes = ibl_target::babylon::encode_env(&path, &oriented, &irradiance, orientation)?;
+        files.push((path, bytes));
+    }
     if params.target != Target::Gltf {
         files.push((
             out_dir.join(ibl_target::NOTE_NAME),
@@ -468,6 +488,9 @@ pub fn output_paths(params: &Params, out_dir: &Path) -> Vec<PathBuf> {
     let mut p =
         envmap::cube_output_paths(out_dir, params.baked_levels(), params.layout, "prefilter");
     p.push(out_dir.join(REPORT_NAME));
+    if params.target == Target::Babylon {
+        p.push(out_dir.join(BABYLON_ENV_NAME));
+    }
     if params.target != Target::Gltf {
         p.push(out_dir.join(ibl_target::NOTE_NAME));
     }

@@ -4,11 +4,12 @@
 //! use, and a short how-to-load note. Every convention cites the engine source it was read in.
 //!
 //! [`lod`] holds the lookups' mappings, [`orient`] the exact cube re-orientations, [`sh`] the
-//! engines' SH forms.
+//! engines' SH forms, [`babylon`] the `.env` container.
 
 // Index loops read closer to the equations in the small numeric kernels.
 #![allow(clippy::needless_range_loop)]
 
+pub mod babylon;
 pub mod lod;
 pub mod orient;
 pub mod sh;

@@ -441,3 +441,39 @@ fn target_three_has_no_chain_to_bake() {
     );
     assert!(!out.exists());
 }
+
+#[test]
+fn target_babylon_writes_an_env_of_the_full_chain_or_refuses() {
+    let tmp = tempfile::tempdir().unwrap();
+    let input = fixture("hdri/sunset_256.exr");
+    let out = tmp.path().join("b");
+    let o = run(&[
+        input.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--size",
+        "16",
+        "--target",
+        "babylon",
+        "-q",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let env = std::fs::read(out.join("environment.env")).unwrap();
+    assert_eq!(&env[..8], &[0x86, 0x16, 0x87, 0x96, 0xf6, 0xd6, 0x96, 0x36]);
+    assert_eq!(report(&out)["levels"], 5);
+    // Babylon reads every level: a truncated chain is refused before any work.
+    let bad = tmp.path().join("c");
+    let o = run(&[
+        input.to_str().unwrap(),
+        "-o",
+        bad.to_str().unwrap(),
+        "--size",
+        "16",
+        "--levels",
+        "3",
+        "--target",
+        "babylon",
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(!bad.exists());
+}
