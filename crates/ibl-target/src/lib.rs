@@ -111,12 +111,16 @@ pub struct TargetSpec {
     pub orientation: Orientation,
     /// The engine's runtime level ↔ roughness mapping.
     pub lod: LodMapping,
-    /// Default level count of the specular chain.
+    /// Default level count of the specular chain, chosen on the runtime-error / bytes frontier
+    /// (bench/runtime.md): on 256² the linear lookup (Bevy) is best at 7 levels (last 4×4:
+    /// 2×2 faces cost 13% at r = 1), Filament's at 6 (cmgen's own full chain to 1×1 measured
+    /// 27–45% at r ≈ 1), Unity reads 7, Babylon a full chain. gltf keeps today's chain (down
+    /// to 8×8, 6 levels on 256²).
     pub levels: usize,
     /// Default base face size of the specular chain.
     pub size: usize,
-    /// Whether the engine's lookup fixes the level count (a different count would change the
-    /// roughness the engine reads, so `--levels` is refused).
+    /// Whether the engine's lookup fixes the level count: Unity reads mips 0–6 whatever the
+    /// file holds, Babylon a full chain (prefilter refuses another), three none.
     pub levels_fixed: bool,
     pub diffuse: DiffuseForm,
     pub files: FileNames,
@@ -180,7 +184,7 @@ impl Target {
                 zstd: Some(19),
                 orientation: Orientation::FLIP_Z,
                 lod: LodMapping::Linear,
-                levels: 6,
+                levels: 7,
                 size: 256,
                 levels_fixed: false,
                 diffuse: DiffuseForm::IrradianceCube,
@@ -205,7 +209,7 @@ impl Target {
                 zstd: None,
                 orientation: Orientation::TURN_Y_90,
                 lod: LodMapping::Filament,
-                levels: 9,
+                levels: 6,
                 size: 256,
                 levels_fixed: false,
                 diffuse: DiffuseForm::FilamentSh,
