@@ -3,7 +3,7 @@ CARGO ?= cargo
 OUT ?= out
 DEMO_INPUT ?= fixtures/hdri/city_512.exr
 
-.PHONY: all build demo test unit lint fmt fmt-check bench bench-quick fuzz conformance ray-test clean
+.PHONY: all build demo test unit lint fmt fmt-check bench bench-quick fuzz conformance ray-test conformance-engines clean
 
 all: build
 
@@ -58,6 +58,10 @@ ray-test: build
 # Coverage-guided fuzzing of every parser for a bounded time (FUZZ_SECONDS per target).
 fuzz:
 	scripts/fuzz.sh
+
+# three.js and Babylon.js (npm, in node) read what --target three|babylon bakes.
+conformance-engines:
+	conformance/engines/run.sh
 
 clean:
 	rm -rf $(OUT)

@@ -1,7 +1,7 @@
 //! `equirect-to-cube`: parse, call `ibl_env::equirect_to_cube`, write, report.
 
 use clap::Parser;
-use ibl_env::equirect_to_cube::{run, Params, CUBE_NAME};
+use ibl_env::equirect_to_cube::{run, Params};
 use std::path::PathBuf;
 
 /// Latitude-longitude HDR (or a cross, strip, face folder or KTX2 cube) to an area-filtered
@@ -30,7 +30,7 @@ fn main() {
         let outputs = if cli.params.to_equirect {
             ibl_cli::write_outputs(&baked.files)?
         } else {
-            ibl_cli::write_cube_outputs(ctx, &cli.output, CUBE_NAME, &baked.files)?
+            ibl_cli::write_cube_outputs(ctx, &cli.output, cli.params.cube_name(), &baked.files)?
         };
         Ok::<_, ibl_core::Error>((
             outputs,

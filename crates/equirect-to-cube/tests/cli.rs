@@ -424,3 +424,49 @@ fn every_fixture_is_byte_identical_with_one_and_two_threads() {
         assert!(outs[0] == outs[1], "{name}");
     }
 }
+
+/// `--target bevy` writes the cube as Bevy samples it (z negated: its +Z face is our −Z face
+/// mirrored left to right), `--target three` x-mirrored (its +X face our −X face mirrored).
+#[test]
+fn targets_turn_the_cube_as_the_engine_samples_it() {
+    let tmp = tempfile::tempdir().unwrap();
+    let input = fixture("hdri/sunset_256.exr");
+    let bake = |t: &str| {
+        let out = tmp.path().join(t);
+        let o = run(&[
+            input.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--size",
+            "16",
+            "--target",
+            t,
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        out
+    };
+    let read = |d: &Path, f: &str| {
+        io::read_image(&d.join(format!("{f}.exr")), ColorSpace::Linear).unwrap()
+    };
+    let (ours, bevy, three) = (bake("gltf"), bake("bevy"), bake("three"));
+    for (dir, file_face, our_face) in [
+        (&bevy, "pz", "nz"),
+        (&bevy, "nz", "pz"),
+        (&three, "px", "nx"),
+        (&three, "nx", "px"),
+    ] {
+        let (a, b) = (read(dir, file_face), read(&ours, our_face));
+        for j in 0..16 {
+            for i in 0..16 {
+                assert_eq!(a.rgb(i, j), b.rgb(15 - i, j), "{file_face} ({i}, {j})");
+            }
+        }
+    }
+    // +Y keeps its face but is flipped top to bottom: its rows run along z.
+    let (a, b) = (read(&bevy, "py"), read(&ours, "py"));
+    for j in 0..16 {
+        for i in 0..16 {
+            assert_eq!(a.rgb(i, j), b.rgb(i, 15 - j));
+        }
+    }
+}

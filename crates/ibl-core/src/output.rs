@@ -153,6 +153,8 @@ impl CubeOutput {
     /// when none), refused up front if the combination makes no sense.
     pub fn resolve(&self, defaults: Encoding) -> Result<Encoding> {
         let refuse = |what: String| Err(Error::param(format!("{what} ({VALID_COMBINATIONS})")));
+        let layout = self.layout.unwrap_or(defaults.layout);
+        let faces_ok = |f: PixelFormat| matches!(f, PixelFormat::Rgba32f | PixelFormat::Rgba16f);
         let format = match (self.format, self.half) {
             (Some(f), true) if f != PixelFormat::Rgba16f => {
                 return refuse(format!(
@@ -162,9 +164,12 @@ impl CubeOutput {
             }
             (_, true) => PixelFormat::Rgba16f,
             (Some(f), false) => f,
+            // A target's packed format cannot go into EXR faces the user asked for: float.
+            (None, false) if layout == Layout::Faces && !faces_ok(defaults.format) => {
+                PixelFormat::Rgba32f
+            }
             (None, false) => defaults.format,
         };
-        let layout = self.layout.unwrap_or(defaults.layout);
         // An explicit layout drops a default zstd that only a KTX2 could take.
         let zstd = match (self.zstd, self.layout) {
             (Some(z), _) => Some(z),
@@ -177,8 +182,7 @@ impl CubeOutput {
             zstd,
             bc6h_quality: self.bc6h_quality.unwrap_or(defaults.bc6h_quality),
         };
-        if layout == Layout::Faces && !matches!(format, PixelFormat::Rgba32f | PixelFormat::Rgba16f)
-        {
+        if layout == Layout::Faces && !faces_ok(format) {
             return refuse(format!(
                 "--format {} cannot be written as EXR faces: choose --layout ktx2, dds or ktx1",
                 format.name()

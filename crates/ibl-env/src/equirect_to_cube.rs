@@ -38,6 +38,9 @@ pub struct Params {
     /// Set NaN/Inf input texels to 0 instead of refusing the input.
     #[arg(long)]
     pub sanitize: bool,
+    /// Engine the cube is made for: its orientation (an exact face permutation with flips).
+    #[arg(long, value_enum, default_value_t = ibl_target::Target::Gltf)]
+    pub target: ibl_target::Target,
 }
 }
 
@@ -65,9 +68,15 @@ impl Params {
         Ok(())
     }
 
-    /// The output encoding asked for, checked.
+    /// The output encoding asked for, checked: the flags over the target's container and
+    /// format.
     pub fn encoding(&self) -> Result<Encoding> {
-        self.cube_output().resolve(Encoding::default())
+        self.cube_output().resolve(self.target.encoding())
+    }
+
+    /// Name (stem) of the cube's container: `cube`, or the target's file name.
+    pub fn cube_name(&self) -> &'static str {
+        self.target.spec().files.cube
     }
 }
 
@@ -85,13 +94,11 @@ pub struct Baked {
 /// Paths [`run`] writes for `params` into `out` (for planning, cleaning and stale files).
 pub fn output_paths(params: &Params, out: &Path) -> Result<Vec<PathBuf>> {
     let enc = params.encoding()?;
-    let mut p = output::cube_output_paths(out, 1, enc.layout, CUBE_NAME);
-    p.extend(output::encoding_sidecar_path(out, CUBE_NAME, &enc));
+    let mut p = output::cube_output_paths(out, 1, enc.layout, params.cube_name());
+    p.extend(output::encoding_sidecar_path(out, params.cube_name(), &enc));
     Ok(p)
 }
 
-/// Name of the cube container (`cube.ktx2`, `cube.dds`, `cube.ktx`).
-pub const CUBE_NAME: &str = "cube";
 
 /// Resamples a loaded environment to a cube (or an equirect with `to_equirect`) and encodes
 /// the outputs for `out_dir` (or the output file for equirect).
@@ -144,11 +151,13 @@ pub fn run(
     }
     let n = params.size.unwrap_or_else(|| input.env.natural_face_size());
     let cube = input.env.to_cube(n, params.filter, params.rotate, progress);
-    let encoded = output::encode_cube(out, &CubeMips { levels: vec![cube] }, &enc, CUBE_NAME, &[])?;
+    let cube = params.target.spec().orientation.apply(&cube);
+    let name = params.cube_name();
+    let encoded = output::encode_cube(out, &CubeMips { levels: vec![cube] }, &enc, name, &[])?;
     let mut files = encoded.files;
     files.extend(output::encoding_sidecar(
         out,
-        CUBE_NAME,
+        name,
         &enc,
         &encoded.levels,
     )?);

@@ -13,6 +13,7 @@ use ibl_core::progress::Progress;
 use ibl_core::sh::{self, cosine_lobe_zonal, num_coeffs};
 use ibl_core::traverse::{map_cube_texels, ordered_row_reduce};
 use ibl_core::{Error, Image, Result};
+use ibl_target::{DiffuseForm, Target};
 use std::path::{Path, PathBuf};
 
 /// Largest band count accepted (l ≤ 15).
@@ -56,6 +57,10 @@ pub struct Params {
     /// Set NaN/Inf input texels to 0 instead of refusing the input.
     #[arg(long)]
     pub sanitize: bool,
+    /// Engine the outputs are made for: the cube's orientation and its SH form as an extra
+    /// file (Filament sh.txt, three.js LightProbe.json, Unity SphericalHarmonicsL2.json).
+    #[arg(long, value_enum, default_value_t = Target::Gltf)]
+    pub target: Target,
 }
 }
 
@@ -87,26 +92,89 @@ impl Params {
             )));
         }
         ibl_core::params::check_rotate(self.rotate)?;
+        if self.bands < 3 && self.target_sh_file().is_some() {
+            return Err(Error::param(format!(
+                "--target {} takes 9 SH coefficients: --bands must be at least 3",
+                self.target.name()
+            )));
+        }
         self.encoding()?;
         Ok(())
     }
 
-    /// The irradiance cube's output encoding, checked.
+    /// The engine's own SH file, if the target takes one.
+    pub fn target_sh_file(&self) -> Option<&'static str> {
+        self.target.spec().files.sh
+    }
+
+    /// The irradiance cube's output encoding, checked: the flags over the target's container
+    /// and format.
     pub fn encoding(&self) -> Result<Encoding> {
-        self.cube_output().resolve(Encoding::default())
+        self.cube_output().resolve(self.target.encoding())
+    }
+
+    /// Name (stem) of the irradiance cube's container: `irradiance`, or the target's.
+    pub fn cube_name(&self) -> &'static str {
+        self.target.spec().files.irradiance.unwrap_or("irradiance")
+    }
+
+    /// Every file [`run`] writes into `out_dir` (for planning and cleaning).
+    pub fn output_paths(&self, out_dir: &Path) -> Result<Vec<PathBuf>> {
+        let enc = self.encoding()?;
+        let mut files = vec![out_dir.join(&self.sh_file)];
+        files.extend(output::cube_output_paths(out_dir, 1, enc.layout, self.cube_name()));
+        files.extend(output::encoding_sidecar_path(out_dir, self.cube_name(), &enc));
+        if let Some(name) = self.target_sh_file() {
+            files.push(out_dir.join(name));
+        }
+        if self.target != Target::Gltf {
+            files.push(out_dir.join(ibl_target::NOTE_NAME));
+        }
+        Ok(files)
     }
 }
 
-/// Name of the irradiance cube container (`irradiance.ktx2`, `.dds`, `.ktx`).
-pub const CUBE_NAME: &str = "irradiance";
-
-/// Paths [`run`] writes for `params` into `out` (for planning, cleaning and stale files).
-pub fn output_paths(params: &Params, out: &Path) -> Result<Vec<PathBuf>> {
-    let enc = params.encoding()?;
-    let mut p = vec![out.join(&params.sh_file)];
-    p.extend(output::cube_output_paths(out, 1, enc.layout, CUBE_NAME));
-    p.extend(output::encoding_sidecar_path(out, CUBE_NAME, &enc));
-    Ok(p)
+/// The engine's SH file for `target` from the 3-band irradiance coefficients (E/π, our basis
+/// and frame), or `None` when the engine takes the irradiance cube only.
+pub fn target_sh_bytes(target: Target, irradiance: &[[f32; 3]]) -> Option<Vec<u8>> {
+    use ibl_target::sh;
+    let spec = target.spec();
+    let json = |v: serde_json::Value| {
+        let mut b = serde_json::to_vec_pretty(&v).expect("JSON of numbers");
+        b.push(b'\n');
+        b
+    };
+    match spec.diffuse {
+        DiffuseForm::FilamentSh => Some(
+            sh::filament_sh_txt(&sh::prescaled_polynomial(irradiance, spec.orientation))
+                .into_bytes(),
+        ),
+        DiffuseForm::ThreeLightProbe => Some(json(sh::three_light_probe_json(irradiance))),
+        DiffuseForm::UnityShL2 => {
+            let l2 = sh::unity_sh_l2(irradiance);
+            let k = sh::unity_shader_constants(&l2);
+            let names = [
+                "unity_SHAr",
+                "unity_SHAg",
+                "unity_SHAb",
+                "unity_SHBr",
+                "unity_SHBg",
+                "unity_SHBb",
+                "unity_SHC",
+            ];
+            let shader: serde_json::Map<String, serde_json::Value> = names
+                .iter()
+                .zip(k)
+                .map(|(n, v)| (n.to_string(), serde_json::json!(v)))
+                .collect();
+            Some(json(serde_json::json!({
+                "SphericalHarmonicsL2": l2,
+                "layout": "sh[rgb][i], i = l(l+1)+m; pre-multiplied: E/pi(n) = sh[0] + sh[1] y + sh[2] z + sh[3] x + sh[4] xy + sh[5] yz + sh[6] (3z^2-1) + sh[7] xz + sh[8] (x^2-y^2) in Unity's left-handed frame",
+                "shader": shader,
+            })))
+        }
+        DiffuseForm::IrradianceCube | DiffuseForm::BabylonManifest => None,
+    }
 }
 
 /// The coefficients file: radiance projection L_lm and the coefficients of E/π.
@@ -423,20 +491,34 @@ pub fn run(
     let sh_path = out_dir.join(&params.sh_file);
     let mut files = vec![(sh_path.clone(), io::data::encode(&sh_path, &coefficients)?)];
     let enc = params.encoding()?;
+    // The engine's orientation: an exact texel permutation.
+    let cube = params.target.spec().orientation.apply(&cube);
     let encoded = output::encode_cube(
         out_dir,
         &CubeMips { levels: vec![cube] },
         &enc,
-        CUBE_NAME,
+        params.cube_name(),
         &[],
     )?;
     files.extend(encoded.files);
     files.extend(output::encoding_sidecar(
         out_dir,
-        CUBE_NAME,
+        params.cube_name(),
         &enc,
         &encoded.levels,
     )?);
+    if let (Some(name), Some(bytes)) = (
+        params.target_sh_file(),
+        target_sh_bytes(params.target, &coefficients.irradiance),
+    ) {
+        files.push((out_dir.join(name), bytes));
+    }
+    if params.target != Target::Gltf {
+        files.push((
+            out_dir.join(ibl_target::NOTE_NAME),
+            format!("{}\n", params.target.spec().note).into_bytes(),
+        ));
+    }
     Ok(Baked {
         files,
         coefficients,

@@ -4,6 +4,7 @@
 use crate::error::{Error, Result};
 use crate::filter::filter_level;
 use crate::kernel::{reference_level, SourceTexels};
+use crate::runtime::{self, Reference, RuntimeReport};
 use crate::samples::SampleTable;
 use crate::tree::{tree_level, CellTree, TreeParams};
 use ibl_core::bordered::BorderedMips;
@@ -15,6 +16,7 @@ use ibl_core::io::texture::LevelEncoding;
 use ibl_core::output::{self, Encoding};
 use ibl_core::progress::Progress;
 use ibl_core::{luminance, CubeMips};
+use ibl_target::Target;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -130,9 +132,13 @@ pub struct Params {
     /// Face size of level 0 in texels; level l is size/2^l.
     #[arg(long, value_name = "N", default_value_t = 256)]
     pub size: usize,
-    /// Number of levels N (default: down to 8×8 faces); level l has roughness l/(N−1).
+    /// Number of levels N (default: down to 8×8 faces, or the target's default); level l has
+    /// the roughness the target's lookup reads there (l/(N−1) for gltf and bevy).
     #[arg(long, value_name = "N")]
     pub levels: Option<usize>,
+    /// Engine the chain is made for: its level roughness, default level count and orientation.
+    #[arg(long, value_enum, default_value_t = Target::Gltf)]
+    pub target: Target,
     /// Accuracy preset (chosen from the benchmark against the brute-force reference).
     #[arg(long, value_enum, default_value_t = Quality::Default)]
     pub quality: Quality,
@@ -217,18 +223,52 @@ impl Params {
             }
         }
         ibl_core::params::check_rotate(self.rotate)?;
+        if self.target == Target::Babylon
+            && (!self.size.is_power_of_two() || self.baked_levels() != max_levels(self.size))
+        {
+            return Err(Error::Param(format!(
+                "--target babylon needs a power-of-two --size and its full chain down to 1×1 ({} levels for --size {}; no --max-roughness): Babylon's .env holds every level",
+                max_levels(self.size),
+                self.size
+            )));
+        }
+        if !self.target.spec().lod.reads_chain() {
+            return Err(Error::Param(format!(
+                "--target {} reads no prefiltered chain: three.js filters the environment itself (PMREMGenerator); bake its cube with equirect-to-cube --target three and its LightProbe with irradiance --target three",
+                self.target.name()
+            )));
+        }
         self.encoding()?;
         Ok(())
     }
 
-    /// The chain's output encoding, checked.
+    /// The chain's output encoding, checked: the flags over the target's container and format.
     pub fn encoding(&self) -> Result<Encoding> {
-        Ok(self.cube_output().resolve(Encoding::default())?)
+        Ok(self.cube_output().resolve(self.target.encoding())?)
     }
 
-    /// Levels of the full chain N.
+    /// Name (stem) of the chain's container: `prefilter`, or the target's file name.
+    pub fn chain_name(&self) -> &'static str {
+        self.target.spec().files.specular
+    }
+
+    /// Levels of the full chain N: --levels, else down to 8×8 faces (gltf) or the target's
+    /// default (a full chain to 1×1 for Babylon, whose lookup depends on the size alone).
     pub fn chain_levels(&self) -> usize {
-        self.levels.unwrap_or_else(|| mip_sizes(self.size, 8).len())
+        let m = max_levels(self.size);
+        self.levels.unwrap_or_else(|| match self.target {
+            Target::Gltf => mip_sizes(self.size, 8).len(),
+            Target::Babylon => m,
+            t => t.spec().levels.min(m),
+        })
+    }
+
+    /// Roughness of level `l` of the full chain, as the target's lookup reads it.
+    pub fn level_roughness(&self, l: usize) -> f32 {
+        self.target
+            .spec()
+            .lod
+            .level_roughness(l, self.chain_levels(), self.size)
     }
 
     /// Levels actually baked: all N, or those with r ≤ --max-roughness.
@@ -236,7 +276,7 @@ impl Params {
         let n = self.chain_levels();
         match self.max_roughness {
             Some(r) if n > 1 => (0..n)
-                .take_while(|&l| roughness_of_level(l, n) <= r + 1e-6)
+                .take_while(|&l| self.level_roughness(l) <= r + 1e-6)
                 .count()
                 .max(1),
             _ => n,
@@ -246,15 +286,6 @@ impl Params {
     /// Hammersley points per texel with --method fis.
     pub fn fis_samples(&self) -> u32 {
         self.samples.unwrap_or_else(|| self.quality.fis_samples())
-    }
-}
-
-/// r = l/(N−1) (Cocco et al. 2024, eq. 3); a one-level chain is the mirror.
-pub fn roughness_of_level(l: usize, n: usize) -> f32 {
-    if n <= 1 {
-        0.0
-    } else {
-        l as f32 / (n - 1) as f32
     }
 }
 
@@ -338,8 +369,14 @@ pub struct Report {
     pub size: usize,
     /// Levels written.
     pub levels: usize,
-    /// Levels N of the full chain (level l has roughness l/(N−1)).
+    /// Levels N of the full chain.
     pub chain_levels: usize,
+    /// The engine the chain is made for.
+    pub target: Target,
+    /// Its runtime level ↔ roughness mapping (the roughness of every level is in `level`).
+    pub lookup: &'static str,
+    /// Roughness of every level written.
+    pub level_roughness: Vec<f32>,
     /// "tree", "filtered-importance-sampling" or "reference" (brute force over every source
     /// texel).
     pub method: &'static str,
@@ -362,6 +399,8 @@ pub struct Report {
     /// The output encoding and what it cost per level against the float chain (filled by
     /// [`run`]; the bake alone leaves it empty).
     pub encoding: Option<serde_json::Value>,
+    /// The error the target's own lookup sees between levels (see [`crate::runtime`]).
+    pub runtime: Option<RuntimeReport>,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -370,6 +409,9 @@ pub struct LevelReport {
     pub size: usize,
     pub roughness: f32,
     pub alpha: f32,
+    /// Points per texel whose mean the texel stores (1: its centre; k² when the level's texels
+    /// are not much smaller than the lobe, see [`footprint_factor`]).
+    pub footprint_samples: usize,
     /// Kernel evaluations (tree cells or FIS samples) per texel, averaged over the level.
     pub evaluations_per_texel: f64,
     /// Error of this level's luminance against the exact kernel summed by brute force over
@@ -401,6 +443,8 @@ pub struct Chain {
     pub source_seconds: f64,
     /// Seconds spent on the error estimates.
     pub estimate_seconds: f64,
+    /// Seconds spent on the runtime-lookup error.
+    pub runtime_seconds: f64,
     /// Things the user should know (e.g. level 0 upsampled from a smaller input).
     pub warnings: Vec<String>,
 }
@@ -414,6 +458,9 @@ pub struct Baked {
     pub encoding: Vec<LevelEncoding>,
 }
 
+/// Name of the Babylon.js `.env` written with `--target babylon`.
+pub const BABYLON_ENV_NAME: &str = "environment.env";
+
 /// Name of the sidecar report.
 pub const REPORT_NAME: &str = "prefilter.json";
 
@@ -426,13 +473,30 @@ pub fn run(
 ) -> Result<Baked> {
     let enc = params.encoding()?;
     let mut chain = bake_chain(params, &input.env, progress)?;
-    let encoded = output::encode_cube(out_dir, &chain.mips, &enc, CHAIN_NAME, &[])?;
+    // The engine's orientation: an exact texel permutation of every level.
+    let oriented = params.target.spec().orientation.apply_mips(&chain.mips);
+    let metadata = target_metadata(params.target, &chain.mips);
+    let encoded = output::encode_cube(out_dir, &oriented, &enc, params.chain_name(), &metadata)?;
     chain.report.encoding = Some(output::encoding_report(&enc, &encoded.levels));
     chain.warnings.extend(encoded.warnings);
     let mut files = encoded.files;
     let json = out_dir.join(REPORT_NAME);
     let bytes = io::data::encode(&json, &chain.report)?;
     files.push((json, bytes));
+    if params.target == Target::Babylon {
+        // The .env carries the chain and the irradiance polynomial of the same environment.
+        let path = out_dir.join(BABYLON_ENV_NAME);
+        let irradiance = ibl_target::babylon::irradiance_sh(&chain.mips.levels[0]);
+        let orientation = params.target.spec().orientation;
+        let bytes = ibl_target::babylon::encode_env(&path, &oriented, &irradiance, orientation)?;
+        files.push((path, bytes));
+    }
+    if params.target != Target::Gltf {
+        files.push((
+            out_dir.join(ibl_target::NOTE_NAME),
+            format!("{}\n", params.target.spec().note).into_bytes(),
+        ));
+    }
     Ok(Baked {
         files,
         chain,
@@ -440,14 +504,37 @@ pub fn run(
     })
 }
 
-/// Name of the chain's container (`prefilter.ktx2`, `.dds`, `.ktx`).
-pub const CHAIN_NAME: &str = "prefilter";
+/// Key/value metadata a target's engine reads from the chain's container: Filament's cmgen
+/// puts the 9 pre-scaled irradiance SH in the KTX's `sh` key (google/filament
+/// `tools/cmgen/src/cmgen.cpp`, `setMetadata("sh", ...)`), computed here from level 0.
+fn target_metadata(target: Target, mips: &CubeMips) -> Vec<(String, Vec<u8>)> {
+    if target.spec().diffuse != ibl_target::DiffuseForm::FilamentSh {
+        return Vec::new();
+    }
+    let irradiance = ibl_target::babylon::irradiance_sh(&mips.levels[0]);
+    let p = ibl_target::sh::prescaled_polynomial(&irradiance, target.spec().orientation);
+    vec![(
+        "sh".to_string(),
+        ibl_target::sh::filament_ktx_sh_metadata(&p).into_bytes(),
+    )]
+}
 
 /// Paths [`run`] writes for `params` (for planning and cleaning).
 pub fn output_paths(params: &Params, out_dir: &Path) -> Result<Vec<PathBuf>> {
     let enc = params.encoding()?;
-    let mut p = output::cube_output_paths(out_dir, params.baked_levels(), enc.layout, CHAIN_NAME);
+    let mut p = output::cube_output_paths(
+        out_dir,
+        params.baked_levels(),
+        enc.layout,
+        params.chain_name(),
+    );
     p.push(out_dir.join(REPORT_NAME));
+    if params.target == Target::Babylon {
+        p.push(out_dir.join(BABYLON_ENV_NAME));
+    }
+    if params.target != Target::Gltf {
+        p.push(out_dir.join(ibl_target::NOTE_NAME));
+    }
     Ok(p)
 }
 
@@ -499,6 +586,7 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
         size,
         roughness: 0.0,
         alpha: 0.0,
+        footprint_samples: 1,
         evaluations_per_texel: 0.0,
         estimated_error: None,
     }];
@@ -507,34 +595,46 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
     for l in 1..n_baked {
         let t = Instant::now();
         let n = (size >> l).max(1);
-        let r = roughness_of_level(l, n_chain);
-        let (cube, work) = match &engine {
+        let r = params.level_roughness(l);
+        // Texels not much smaller than the lobe store the mean of the convolved radiance over
+        // their footprint: the level is computed k× finer and box-reduced (exact means of the
+        // fine texels, solid-angle weighted).
+        let k = footprint_factor(n, r);
+        let fine = n * k;
+        let (fine_cube, work) = match &engine {
             Engine::Reference => (
-                reference_level(&source, &texels, n, r, progress),
-                (6 * n * n * texels.len()) as u64,
+                reference_level(&source, &texels, fine, r, progress),
+                (6 * fine * fine * texels.len()) as u64,
             ),
             Engine::Tree(tree, p) => {
-                let (cube, w) = tree_level(tree, n, r, p, progress);
+                let (cube, w) = tree_level(tree, fine, r, p, progress);
                 (cube, w.cell_evaluations)
             }
             Engine::Fis(pyr, count) => {
                 let table = SampleTable::build(r, *count, pyr.size(), LOD_BIAS, pyr.max_lod());
                 (
-                    filter_level(pyr, &table, n, progress),
-                    (6 * n * n * table.len()) as u64,
+                    filter_level(pyr, &table, fine, progress),
+                    (6 * fine * fine * table.len()) as u64,
                 )
             }
         };
         level_seconds.push(t.elapsed().as_secs_f64());
         level_work.push(work);
         let te = Instant::now();
-        let estimated_error = (!params.reference).then(|| estimate_error(&cube, &texels, r));
+        // The estimate compares the computed texels (the fine ones when a footprint is
+        // averaged: the reduction itself is exact) with the brute force.
+        let estimated_error = (!params.reference).then(|| estimate_error(&fine_cube, &texels, r));
         estimate_seconds += te.elapsed().as_secs_f64();
+        let mut cube = fine_cube;
+        while cube.size > n {
+            cube = cube.downsample();
+        }
         reports.push(LevelReport {
             level: l,
             size: n,
             roughness: r,
             alpha: r * r,
+            footprint_samples: k * k,
             evaluations_per_texel: work as f64 / (6 * n * n) as f64,
             estimated_error,
         });
@@ -545,7 +645,7 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
             "--max-roughness {} stopped the chain at level {} (roughness {}) of {} levels; roughness spacing 1/{} of the full chain kept",
             params.max_roughness.unwrap_or(1.0),
             n_baked - 1,
-            roughness_of_level(n_baked - 1, n_chain),
+            params.level_roughness(n_baked - 1),
             n_chain,
             n_chain - 1
         )
@@ -565,7 +665,10 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
         chain_levels: n_chain,
         method,
         quality,
-        kernel: "D_GGX(n·h, α)·max(n·l, 0), h = normalize(n + l), n = v, α = r², r = l/(N−1), normalised to unit sum",
+        kernel: "D_GGX(n·h, α)·max(n·l, 0), h = normalize(n + l), n = v, α = r², r of each level as the target's lookup reads it, normalised to unit sum",
+        target: params.target,
+        lookup: params.target.spec().lod.name(),
+        level_roughness: (0..n_baked).map(|l| params.level_roughness(l)).collect(),
         source_size: src_size,
         tree: matches!(engine, Engine::Tree(..)).then(|| params.quality.tree_params()),
         fis_samples: matches!(engine, Engine::Fis(..)).then(|| params.fis_samples()),
@@ -575,17 +678,65 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
         note,
         level: reports,
         encoding: None,
+        runtime: None,
+    };
+    let mips = CubeMips { levels };
+    // The error the target's lookup sees, against the exact kernel (the cell tree at the
+    // default preset, 0.02% from brute force: far below the lookup errors it measures; built
+    // here when the method did not build one).
+    let tr = Instant::now();
+    let own_tree;
+    let tree = match &engine {
+        Engine::Tree(t, _) => t,
+        _ => {
+            own_tree = CellTree::new(&source);
+            &own_tree
+        }
+    };
+    let reference = Reference::Tree {
+        tree,
+        source: &source,
+        params: Quality::Default.tree_params(),
+    };
+    let runtime_report =
+        runtime::evaluate(&mips, params.target, runtime::REPORT_DIRECTIONS, &reference);
+    let runtime_seconds = tr.elapsed().as_secs_f64();
+    let report = Report {
+        runtime: Some(runtime_report),
+        ..report
     };
     Ok(Chain {
-        mips: CubeMips { levels },
+        mips,
         report,
         level_seconds,
         level_work,
         resample_seconds,
         source_seconds,
         estimate_seconds,
+        runtime_seconds,
         warnings,
     })
+}
+
+/// A texel's edge must be at most this fraction of the lobe's width α (radians) to be stored
+/// as its centre value; coarser texels store their footprint's mean.
+pub const FOOTPRINT_LOBE_FRACTION: f32 = 0.25;
+/// Finest face the footprint means are computed at (bounds their cost: a few thousand texels).
+pub const FOOTPRINT_MAX_SIZE: usize = 64;
+
+/// Sub-texels per edge k (a power of two) whose mean an n×n texel of roughness r stores: the
+/// smallest with a sub-texel edge (π/2)/(n·k) ≤ [`FOOTPRINT_LOBE_FRACTION`]·α, at most
+/// [`FOOTPRINT_MAX_SIZE`]/n; 1 (the centre value) where texels are already small next to the
+/// lobe. Mean over the footprint = ∫ over the texel of the convolved radiance / Ω, so the
+/// level keeps the environment's power whatever its size.
+pub fn footprint_factor(n: usize, roughness: f32) -> usize {
+    let alpha = (roughness * roughness).max(1e-6);
+    let edge = std::f32::consts::FRAC_PI_2 / n as f32;
+    let mut k = 1;
+    while edge / k as f32 > FOOTPRINT_LOBE_FRACTION * alpha && n * k * 2 <= FOOTPRINT_MAX_SIZE {
+        k *= 2;
+    }
+    k
 }
 
 /// Probe texels of an n×n level: a g×g grid on each face (fewer on tiny faces).
@@ -728,6 +879,63 @@ mod tests {
         assert_eq!(source_face_size(1024, 32), 64);
         assert_eq!(source_face_size(16, 32), 32);
         assert_eq!(source_face_size(100, 24), 48);
+    }
+
+    /// Σ L·Ω over the cube: the power of the environment.
+    fn power(c: &Cubemap) -> f64 {
+        let sa = ibl_core::cube::solid_angle_table(c.size);
+        c.faces
+            .iter()
+            .map(|f| {
+                f.data
+                    .chunks_exact(3)
+                    .zip(&sa)
+                    .map(|(t, s)| luminance([t[0], t[1], t[2]]) as f64 * *s as f64)
+                    .sum::<f64>()
+            })
+            .sum()
+    }
+
+    #[test]
+    fn a_one_texel_sun_keeps_its_power_at_every_level_down_to_1x1() {
+        use ibl_core::envmap::Environment;
+        use ibl_core::progress::NoProgress;
+        // One bright texel off every face's centre and axis on a dim sky.
+        let n = 32;
+        let mut src = Cubemap::constant(n, [0.002, 0.002, 0.002]);
+        let k = (11 * n + 20) * 3;
+        src.faces[Face::Py as usize].data[k..k + 3].copy_from_slice(&[5000.0, 4000.0, 3000.0]);
+        let p0 = power(&src);
+        for target in [Target::Gltf, Target::Filament, Target::Unity] {
+            let params = Params {
+                size: 16,
+                levels: Some(5),
+                target,
+                ..Default::default()
+            };
+            let chain = bake_chain(&params, &Environment::Cube(src.clone()), &NoProgress).unwrap();
+            assert_eq!(chain.mips.levels.last().unwrap().size, 1);
+            for (l, c) in chain.mips.levels.iter().enumerate() {
+                let e = power(c) / p0 - 1.0;
+                eprintln!("{target:?} level {l} ({}²): power {e:+.2e}", c.size);
+                assert!(e.abs() < 1e-3, "{target:?} level {l}: power off by {e:.2e}");
+            }
+            // Without the footprint means the coarse levels would be off (centre values).
+            let last = chain.report.level.last().unwrap();
+            assert!(last.footprint_samples > 1);
+        }
+    }
+
+    #[test]
+    fn footprint_factor_grows_only_where_texels_rival_the_lobe() {
+        assert_eq!(footprint_factor(256, 0.2), 1);
+        assert_eq!(footprint_factor(128, 0.25), 1);
+        assert_eq!(footprint_factor(1, 1.0), 8);
+        assert_eq!(footprint_factor(2, 0.9), 4);
+        for n in [1, 2, 4, 8, 16] {
+            let k = footprint_factor(n, 0.05);
+            assert!(k.is_power_of_two() && n * k <= FOOTPRINT_MAX_SIZE);
+        }
     }
 
     #[test]

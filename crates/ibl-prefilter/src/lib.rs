@@ -15,6 +15,7 @@ pub mod bake;
 pub mod error;
 pub mod filter;
 pub mod kernel;
+pub mod runtime;
 pub mod samples;
 pub mod tree;
 

@@ -625,6 +625,35 @@ pub struct TreeWork {
     pub cuts: u64,
 }
 
+/// The exact kernel of roughness r > 0 summed hierarchically around one direction (a cut of
+/// radius 0): what [`tree_level`] computes for a texel, at any direction. `stack`, `cut` and
+/// `scratch` are reusable buffers.
+pub fn tree_convolve(
+    tree: &CellTree,
+    d: Vec3,
+    roughness: f32,
+    p: &TreeParams,
+    buffers: &mut TreeBuffers,
+) -> Rgb {
+    let alpha = roughness * roughness;
+    let spec = CutSpec {
+        leaf: tree.leaf_level(alpha, p.kappa),
+        theta: p.theta,
+        horizon: p.horizon_at(roughness),
+    };
+    let n = d.normalize();
+    tree.cut(n, 1e-4, &spec, &mut buffers.cut, &mut buffers.stack);
+    buffers.cut.convolve(n, alpha, &mut buffers.scratch)
+}
+
+/// Reusable buffers of [`tree_convolve`].
+#[derive(Default)]
+pub struct TreeBuffers {
+    cut: CutList,
+    stack: Vec<(usize, usize)>,
+    scratch: Vec<f32>,
+}
+
 /// One level of the chain by the hierarchical sum: an n×n cube at roughness r > 0.
 pub fn tree_level(
     tree: &CellTree,

@@ -1,7 +1,7 @@
 //! `irradiance`: parse, call `ibl_env::irradiance`, write, report.
 
 use clap::Parser;
-use ibl_env::irradiance::{run, Params, CUBE_NAME};
+use ibl_env::irradiance::{run, Params};
 use std::path::PathBuf;
 
 /// Diffuse irradiance of an environment: DIR/sh.json (radiance projection and E/π
@@ -33,7 +33,7 @@ fn main() {
             ));
         }
         baked.warnings.iter().for_each(|w| ctx.warn(w.clone()));
-        let outputs = ibl_cli::write_cube_outputs(ctx, &cli.output, CUBE_NAME, &baked.files)?;
+        let outputs = ibl_cli::write_cube_outputs(ctx, &cli.output, cli.params.cube_name(), &baked.files)?;
         Ok::<_, ibl_core::Error>((
             outputs,
             serde_json::json!({

@@ -331,3 +331,154 @@ fn outputs_are_byte_identical_for_one_and_two_threads() {
     }
     assert!(outs[0] == outs[1]);
 }
+
+/// `--target`: the cube turned as the engine samples it and the engine's own SH file, whose
+/// values, evaluated the engine's way, reproduce our irradiance (the gltf cube).
+#[test]
+fn targets_write_the_engines_sh_forms_and_orientation() {
+    let tmp = tempfile::tempdir().unwrap();
+    let input = fixture("hdri/sunset_256.exr");
+    let bake = |t: &str| {
+        let out = tmp.path().join(t);
+        let o = run(&[
+            input.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--size",
+            "8",
+            "--target",
+            t,
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        out
+    };
+    let gltf = bake("gltf");
+    let face = |dir: &Path, f: &str| load_clamped(&dir.join(format!("{f}.exr")));
+    let ours: Vec<Image> = ["px", "nx", "py", "ny", "pz", "nz"]
+        .iter()
+        .map(|f| face(&gltf, f))
+        .collect();
+    let ours_at = |d: Vec3| {
+        let (f, sc, tc) = Face::from_direction(d);
+        let (i, j) = ibl_core::cube::face_texel_index(sc, tc, 8);
+        ours[f as usize].rgb(i, j)
+    };
+    assert!(
+        !gltf.join("LOAD.txt").exists(),
+        "gltf stays today's outputs"
+    );
+    // Filament: sh.txt lines "(r, g, b); // Llm, irradiance, pre-scaled base", evaluated as
+    // its shader does, in the file's frame: our direction (z, y, −x) at file direction t.
+    let fil = bake("filament");
+    let txt = std::fs::read_to_string(fil.join("sh.txt")).unwrap();
+    let sh: Vec<[f64; 3]> = txt
+        .lines()
+        .map(|l| {
+            let inside = &l[l.find('(').unwrap() + 1..l.find(')').unwrap()];
+            let v: Vec<f64> = inside
+                .split(',')
+                .map(|s| s.trim().parse().unwrap())
+                .collect();
+            [v[0], v[1], v[2]]
+        })
+        .collect();
+    assert_eq!(sh.len(), 9);
+    let fil_px = face(&fil, "px");
+    for j in 0..8 {
+        for i in 0..8 {
+            let t = texel_direction(Face::Px, i, j, 8).normalize();
+            let (x, y, z) = (t.x as f64, t.y as f64, t.z as f64);
+            let poly = [
+                1.0,
+                y,
+                z,
+                x,
+                y * x,
+                y * z,
+                3.0 * z * z - 1.0,
+                z * x,
+                x * x - y * y,
+            ];
+            let want = ours_at(Vec3::new(t.z, t.y, -t.x));
+            for c in 0..3 {
+                let e: f64 = (0..9).map(|k| sh[k][c] * poly[k]).sum();
+                assert!(
+                    (e - want[c] as f64).abs() < 1e-4 * want[c].max(1e-3) as f64 + 1e-6,
+                    "filament sh at {t:?}: {e} vs {}",
+                    want[c]
+                );
+            }
+            // The cube itself: the same permutation, texel for texel.
+            assert_eq!(fil_px.rgb(i, j), want);
+        }
+    }
+    assert!(std::fs::read_to_string(fil.join("LOAD.txt"))
+        .unwrap()
+        .contains("Filament"));
+    // Unity: SphericalHarmonicsL2 packed as PackSH and evaluated as SampleSH9, in Unity's
+    // left-handed frame (our z negated).
+    let uni = bake("unity");
+    let j: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(uni.join("SphericalHarmonicsL2.json")).unwrap())
+            .unwrap();
+    let k = |n: &str| -> Vec<f64> {
+        j["shader"][n]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect()
+    };
+    // At texel centres (our z-negated direction is one too), where the cube holds the SH value.
+    for (f, i, j) in [
+        (Face::Py, 2, 5),
+        (Face::Nz, 7, 0),
+        (Face::Px, 3, 3),
+        (Face::Ny, 1, 6),
+    ] {
+        let u = texel_direction(f, i, j, 8).normalize();
+        let (x, y, z) = (u.x as f64, u.y as f64, u.z as f64);
+        let want = ours_at(Vec3::new(u.x, u.y, -u.z));
+        for (c, (a, b)) in [
+            ("unity_SHAr", "unity_SHBr"),
+            ("unity_SHAg", "unity_SHBg"),
+            ("unity_SHAb", "unity_SHBb"),
+        ]
+        .iter()
+        .enumerate()
+        {
+            let (a, b, cc) = (k(a), k(b), k("unity_SHC"));
+            let e = a[0] * x
+                + a[1] * y
+                + a[2] * z
+                + a[3]
+                + b[0] * x * y
+                + b[1] * y * z
+                + b[2] * z * z
+                + b[3] * z * x
+                + cc[c] * (x * x - y * y);
+            assert!(
+                (e - want[c] as f64).abs() < 1e-4 * want[c] as f64 + 1e-6,
+                "unity {u:?} {e} vs {}",
+                want[c]
+            );
+        }
+    }
+    // three: the LightProbe document holds 27 numbers.
+    let three = bake("three");
+    let j: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(three.join("LightProbe.json")).unwrap()).unwrap();
+    assert_eq!(j["object"]["type"], "LightProbe");
+    assert_eq!(j["object"]["sh"].as_array().unwrap().len(), 27);
+    // Fewer than 3 bands cannot make an engine's 9 coefficients.
+    let o = run(&[
+        input.to_str().unwrap(),
+        "-o",
+        tmp.path().join("x").to_str().unwrap(),
+        "--bands",
+        "2",
+        "--target",
+        "unity",
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+}

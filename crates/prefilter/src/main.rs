@@ -1,7 +1,7 @@
 //! `prefilter`: parse, call `ibl_prefilter::run`, write atomically, report.
 
 use clap::Parser;
-use ibl_prefilter::bake::{run, Params, CHAIN_NAME};
+use ibl_prefilter::bake::{run, Params};
 use std::path::PathBuf;
 
 /// GGX prefiltered specular mip chain (split-sum radiance term): level l of N holds the
@@ -27,7 +27,7 @@ fn main() {
         cli.params.validate()?;
         let env = ctx.load_environment(&cli.input, cli.params.sanitize)?;
         let baked = run(&cli.params, &env, &cli.output, ctx.progress())?;
-        let outputs = ibl_cli::write_cube_outputs(ctx, &cli.output, CHAIN_NAME, &baked.files)?;
+        let outputs = ibl_cli::write_cube_outputs(ctx, &cli.output, cli.params.chain_name(), &baked.files)?;
         baked
             .chain
             .warnings
@@ -42,6 +42,7 @@ fn main() {
             "resample_seconds": baked.chain.resample_seconds,
             "source_seconds": baked.chain.source_seconds,
             "estimate_seconds": baked.chain.estimate_seconds,
+            "runtime_seconds": baked.chain.runtime_seconds,
             "level_seconds": baked.chain.level_seconds,
             "encoding": ibl_cli::encoding_details(&baked.encoding),
         });

@@ -518,3 +518,120 @@ fn damaged_containers_are_refused_cleanly() {
         );
     }
 }
+
+#[test]
+fn target_sets_level_roughness_orientation_and_the_runtime_report() {
+    let tmp = tempfile::tempdir().unwrap();
+    let input = fixture("hdri/sunset_256.exr");
+    let bake = |target: &str| {
+        let out = tmp.path().join(target);
+        let o = run(&[
+            input.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--size",
+            "16",
+            "--levels",
+            "5",
+            "--target",
+            target,
+            "--layout",
+            "faces",
+            "-q",
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        out
+    };
+    let gltf = bake("gltf");
+    let fil = bake("filament");
+    let rg = report(&gltf);
+    let rf = report(&fil);
+    assert_eq!(rg["target"], "gltf");
+    assert_eq!(rf["target"], "filament");
+    // cmgen's level roughness: 1 − √(1 − l/4).
+    for l in 0..5 {
+        let want = 1.0 - (1.0 - l as f64 / 4.0).sqrt();
+        let got = rf["level_roughness"][l].as_f64().unwrap();
+        assert!((got - want).abs() < 1e-6, "level {l}: {got}");
+        assert!((rf["level"][l]["roughness"].as_f64().unwrap() - want).abs() < 1e-6);
+        assert!((rg["level_roughness"][l].as_f64().unwrap() - l as f64 / 4.0).abs() < 1e-6);
+    }
+    // The runtime lookup error at 33 roughness values.
+    let rt = &rf["runtime"];
+    assert_eq!(rt["target"], "filament");
+    assert_eq!(rt["roughness"].as_array().unwrap().len(), 33);
+    let e: Vec<f64> = rt["mean_abs_rel"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    assert_eq!(e.len(), 33);
+    assert!(e.iter().all(|v| v.is_finite() && *v >= 0.0));
+    // Orientation: Filament's mirror level is ours turned 90° about +Y, (x, y, z) ↦ (z, y, −x):
+    // its +X face holds our −Z face... checked texel by texel through the directions.
+    let read = |dir: &Path, f: &str| {
+        io::read_image(&dir.join(format!("m0_{f}.exr")), ColorSpace::Linear).unwrap()
+    };
+    let ours_nz = read(&gltf, "nz");
+    let fil_px = read(&fil, "px");
+    // File direction on +X: (1, −tc, −sc) ↦ ours (−sc, −tc, −1), which is on −Z at (sc, tc):
+    // the same texel (i, j).
+    assert_eq!(fil_px.data, ours_nz.data);
+}
+
+#[test]
+fn target_three_has_no_chain_to_bake() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("t");
+    let o = run(&[
+        fixture("hdri/sunset_256.exr").to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--target",
+        "three",
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("PMREMGenerator") && err.lines().count() == 1,
+        "{err}"
+    );
+    assert!(!out.exists());
+}
+
+#[test]
+fn target_babylon_writes_an_env_of_the_full_chain_or_refuses() {
+    let tmp = tempfile::tempdir().unwrap();
+    let input = fixture("hdri/sunset_256.exr");
+    let out = tmp.path().join("b");
+    let o = run(&[
+        input.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--size",
+        "16",
+        "--target",
+        "babylon",
+        "-q",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let env = std::fs::read(out.join("environment.env")).unwrap();
+    assert_eq!(&env[..8], &[0x86, 0x16, 0x87, 0x96, 0xf6, 0xd6, 0x96, 0x36]);
+    assert_eq!(report(&out)["levels"], 5);
+    // Babylon reads every level: a truncated chain is refused before any work.
+    let bad = tmp.path().join("c");
+    let o = run(&[
+        input.to_str().unwrap(),
+        "-o",
+        bad.to_str().unwrap(),
+        "--size",
+        "16",
+        "--levels",
+        "3",
+        "--target",
+        "babylon",
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(!bad.exists());
+}

@@ -41,7 +41,7 @@ pub static EQUIRECT_TO_CUBE: Adapter<e2c::Params> = Adapter {
         if p.to_equirect {
             out.join("equirect.exr")
         } else {
-            cube_product(out, p.encoding(), e2c::CUBE_NAME)
+            cube_product(out, p.encoding(), p.cube_name())
         }
     },
     outputs: |p, _, out| {
@@ -76,7 +76,7 @@ pub static IRRADIANCE: Adapter<irr::Params> = Adapter {
     reads: Arity::one(ENVIRONMENT),
     out: super::in_dir,
     product: |_, out| out.to_path_buf(),
-    outputs: |p, _, out| Ok(irr::output_paths(p, out)?),
+    outputs: |p, _, out| Ok(p.output_paths(out)?),
     run: |p, inputs, out, progress: &dyn Progress| {
         let env = load_environment(one_input("irradiance", inputs)?, p.sanitize)?;
         let baked = irr::run(p, &env, out, progress)?;

@@ -13,7 +13,7 @@ pub static PREFILTER: Adapter<Params> = Adapter {
     package: "prefilter",
     reads: Arity::one(ENVIRONMENT),
     out: super::in_dir,
-    product: |p, out| cube_product(out, p.encoding(), pf::CHAIN_NAME),
+    product: |p, out| cube_product(out, p.encoding(), p.chain_name()),
     outputs: |p, _, out| Ok(pf::output_paths(p, out)?),
     run: |p, inputs, out, progress: &dyn Progress| {
         let env = load_environment(one_input("prefilter", inputs)?, p.sanitize)?;

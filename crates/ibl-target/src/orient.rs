@@ -1,0 +1,213 @@
+//! Orientations: the pure transform of our cube (DESIGN.md frame) that makes an engine show
+//! the environment as intended. Every engine's turn or mirror is a signed permutation of the
+//! axes, so it maps texel centres onto texel centres: applying it is an exact face permutation
+//! with flips, no resampling.
+
+use glam::Vec3;
+use ibl_core::cube::{face_texel_index, texel_direction, CubeMips, Cubemap, Face};
+
+/// A signed permutation matrix A: the texel of the engine's file in direction t holds our
+/// radiance in direction A·t.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+pub struct Orientation {
+    /// Rows of A; each row and column holds one ±1.
+    pub ours_from_file: [[i8; 3]; 3],
+}
+
+impl Orientation {
+    /// Our own frame (glTF viewers).
+    pub const IDENTITY: Orientation = Orientation {
+        ours_from_file: [[1, 0, 0], [0, 1, 0], [0, 0, 1]],
+    };
+    /// z negated: engines that sample cubes as left-handed (Bevy, Unity, Babylon's default
+    /// left-handed scene).
+    pub const FLIP_Z: Orientation = Orientation {
+        ours_from_file: [[1, 0, 0], [0, 1, 0], [0, 0, -1]],
+    };
+    /// x negated: three.js samples `CubeTexture`s at (flipEnvMap·x, y, z), flipEnvMap = −1.
+    pub const FLIP_X: Orientation = Orientation {
+        ours_from_file: [[-1, 0, 0], [0, 1, 0], [0, 0, 1]],
+    };
+    /// Our cube turned 90° about +Y: (x, y, z) ↦ (z, y, −x), what cmgen makes of the same
+    /// panorama (its equirect longitude atan2(x, z) after its default x mirror).
+    pub const TURN_Y_90: Orientation = Orientation {
+        ours_from_file: [[0, 0, 1], [0, 1, 0], [-1, 0, 0]],
+    };
+
+    /// Whether A is the identity.
+    pub fn is_identity(&self) -> bool {
+        *self == Self::IDENTITY
+    }
+
+    /// Our direction A·t for a direction t of the engine's file.
+    #[inline]
+    pub fn ours_from_file(&self, t: Vec3) -> Vec3 {
+        let r = |row: [i8; 3]| row[0] as f32 * t.x + row[1] as f32 * t.y + row[2] as f32 * t.z;
+        Vec3::new(
+            r(self.ours_from_file[0]),
+            r(self.ours_from_file[1]),
+            r(self.ours_from_file[2]),
+        )
+    }
+
+    /// The file direction holding our direction d: Aᵀ·d (A is orthogonal).
+    #[inline]
+    pub fn file_from_ours(&self, d: Vec3) -> Vec3 {
+        let a = self.ours_from_file;
+        let c = |k: usize| a[0][k] as f32 * d.x + a[1][k] as f32 * d.y + a[2][k] as f32 * d.z;
+        Vec3::new(c(0), c(1), c(2))
+    }
+
+    /// The cube the engine's file holds: texel t of the result is our texel at A·t (exact).
+    pub fn apply(&self, cube: &Cubemap) -> Cubemap {
+        if self.is_identity() {
+            return cube.clone();
+        }
+        let n = cube.size;
+        let mut out = Cubemap::new(n);
+        for face in Face::ALL {
+            for j in 0..n {
+                for i in 0..n {
+                    let (f, sc, tc) =
+                        Face::from_direction(self.ours_from_file(texel_direction(face, i, j, n)));
+                    let (si, sj) = face_texel_index(sc, tc, n);
+                    let c = cube.texel(f, si, sj);
+                    let k = (j * n + i) * 3;
+                    out.faces[face as usize].data[k..k + 3].copy_from_slice(&c);
+                }
+            }
+        }
+        out
+    }
+
+    /// [`Orientation::apply`] on every level of a chain.
+    pub fn apply_mips(&self, mips: &CubeMips) -> CubeMips {
+        CubeMips {
+            levels: mips.levels.iter().map(|c| self.apply(c)).collect(),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ibl_core::sampling::Pcg32;
+
+    const ALL: [Orientation; 4] = [
+        Orientation::IDENTITY,
+        Orientation::FLIP_Z,
+        Orientation::FLIP_X,
+        Orientation::TURN_Y_90,
+    ];
+
+    /// A smooth, direction-distinguishing radiance (no two axes alike).
+    fn field(d: Vec3) -> [f32; 3] {
+        let d = d.normalize();
+        [
+            2.0 + d.x + 0.3 * d.y * d.z,
+            2.0 + 0.7 * d.y - 0.2 * d.x * d.x,
+            2.0 + 0.5 * d.z + 0.4 * d.x * d.y,
+        ]
+    }
+
+    fn random_dirs(k: usize) -> Vec<Vec3> {
+        let mut rng = Pcg32::new(9, 1);
+        (0..k)
+            .map(|_| {
+                Vec3::new(
+                    rng.next_f32() - 0.5,
+                    rng.next_f32() - 0.5,
+                    rng.next_f32() - 0.5,
+                )
+            })
+            .filter(|d| d.length() > 1e-2)
+            .collect()
+    }
+
+    #[test]
+    fn matrices_are_signed_permutations_and_inverses_hold() {
+        for o in ALL {
+            for d in random_dirs(200) {
+                let back = o.file_from_ours(o.ours_from_file(d));
+                assert!((back - d).length() < 1e-6);
+                assert!((o.ours_from_file(d).length() - d.length()).abs() < 1e-5);
+            }
+        }
+        // TURN_Y_90 is a proper rotation (det +1), the flips are mirrors (det −1).
+        let det = |o: Orientation| {
+            let a = o.ours_from_file.map(|r| r.map(|v| v as i32));
+            a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1])
+                - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0])
+                + a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0])
+        };
+        assert_eq!(det(Orientation::TURN_Y_90), 1);
+        assert_eq!(det(Orientation::FLIP_Z), -1);
+        assert_eq!(det(Orientation::FLIP_X), -1);
+    }
+
+    #[test]
+    fn texels_move_whole_and_the_sampler_reads_our_direction() {
+        // Each texel of the file is one whole texel of ours, the one at A·t (a cube whose
+        // texels hold their own address shows which); between texels a seamless bilinear read
+        // of the file at t equals ours at A·t.
+        let n = 6;
+        let mut ids = Cubemap::new(n);
+        for face in Face::ALL {
+            for j in 0..n {
+                for i in 0..n {
+                    let k = (j * n + i) * 3;
+                    ids.faces[face as usize].data[k..k + 3].copy_from_slice(&[
+                        face as usize as f32,
+                        i as f32,
+                        j as f32,
+                    ]);
+                }
+            }
+        }
+        let ours = Cubemap::from_fn(n, field);
+        for o in ALL {
+            let moved = o.apply(&ids);
+            for face in Face::ALL {
+                for j in 0..n {
+                    for i in 0..n {
+                        let [f, si, sj] = moved.texel(face, i, j);
+                        let src = texel_direction(
+                            Face::from_index(f as usize),
+                            si as usize,
+                            sj as usize,
+                            n,
+                        );
+                        let want = o.ours_from_file(texel_direction(face, i, j, n));
+                        assert!((src - want).length() < 1e-6, "{o:?}");
+                    }
+                }
+            }
+            let file = o.apply(&ours);
+            // Away from face edges (where the sampler re-projects border texels, not a
+            // mirror-symmetric operation at corners).
+            let inner = |t: Vec3| {
+                let (_, sc, tc) = Face::from_direction(t);
+                sc.abs().max(tc.abs()) < 1.0 - 1.0 / n as f32
+            };
+            for t in random_dirs(2000).into_iter().filter(|&t| inner(t)) {
+                let a = file.sample_bilinear(t);
+                let b = ours.sample_bilinear(o.ours_from_file(t));
+                for k in 0..3 {
+                    assert!((a[k] - b[k]).abs() < 1e-4, "{o:?} {t:?} {a:?} {b:?}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn applying_twice_the_mirrors_is_the_identity_and_four_turns_are_too() {
+        let ours = Cubemap::from_fn(4, field);
+        for o in [Orientation::FLIP_X, Orientation::FLIP_Z] {
+            assert_eq!(o.apply(&o.apply(&ours)).faces, ours.faces);
+        }
+        let t = Orientation::TURN_Y_90;
+        let four = t.apply(&t.apply(&t.apply(&t.apply(&ours))));
+        assert_eq!(four.faces, ours.faces);
+        assert_ne!(t.apply(&ours).faces, ours.faces);
+    }
+}
