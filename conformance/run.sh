@@ -37,3 +37,19 @@ for tool in prefilter equirect-to-cube irradiance; do
 done
 echo "baked $(find "$BAKES" -type f | wc -l) files from $ENV_MAP"
 "$WORK/venv/bin/python" conformance/containers.py "$BAKES" "$BIN"
+
+# Engine targets as the engines' loaders read them: libktx (Filament's KTX1 and its `sh`
+# metadata, Bevy's and glTF's KTX2), then Bevy's own loader (bevy_image, built apart from the
+# workspace), then three.js and Babylon.js in node (conformance/engines).
+T="$WORK/targets"
+rm -rf "$T"
+for t in gltf bevy filament unity; do
+	"$BIN/prefilter" "$ENV_MAP" -o "$T/$t" --size 64 --target "$t" -q
+	"$BIN/irradiance" "$ENV_MAP" -o "$T/$t-irr" --size 16 --target "$t" -q
+	"$BIN/equirect-to-cube" "$ENV_MAP" -o "$T/$t-cube" --size 32 --target "$t" -q
+done
+"$BIN/prefilter" "$ENV_MAP" -o "$T/gltf-ktx2" --size 64 --layout ktx2 --half -q
+(cd conformance && "../$WORK/venv/bin/python" targets.py "../$T" "../$BAKES")
+CARGO_TARGET_DIR="$PWD/$WORK/bevy-target" cargo build --release -q --manifest-path conformance/bevy/Cargo.toml
+xargs "$WORK/bevy-target/release/bevy-conformance" < "$T/bevy-args.txt"
+bash conformance/engines/run.sh

@@ -33,7 +33,8 @@ fn main() {
             ));
         }
         baked.warnings.iter().for_each(|w| ctx.warn(w.clone()));
-        let outputs = ibl_cli::write_cube_outputs(ctx, &cli.output, cli.params.cube_name(), &baked.files)?;
+        let outputs =
+            ibl_cli::write_cube_outputs(ctx, &cli.output, cli.params.cube_name(), &baked.files)?;
         Ok::<_, ibl_core::Error>((
             outputs,
             serde_json::json!({
