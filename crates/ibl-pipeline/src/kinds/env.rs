@@ -52,9 +52,11 @@ pub static EQUIRECT_TO_CUBE: Adapter<e2c::Params> = Adapter {
     run: |p, inputs, out, progress: &dyn Progress| {
         let env = load_environment(one_input("equirect-to-cube", inputs)?, p.sanitize)?;
         let baked = e2c::run(p, &env, out, progress)?;
+        let mut warnings = env.warnings();
+        warnings.extend(baked.warnings);
         Ok(Baked {
             files: baked.files,
-            warnings: env.warnings(),
+            warnings,
         })
     },
     validate: |p| Ok(p.validate()?),
