@@ -918,6 +918,16 @@ fn not_a_pipeline_zero_jobs_and_json_errors() {
     let v: Value = serde_json::from_slice(&o.stdout).expect("a JSON error object");
     assert_eq!(v["exit_code"], 2);
     assert!(v["error"].as_str().unwrap().contains("not a RON pipeline"));
+    // An output folder that is an existing file: said before any stage runs.
+    w.write("notes.txt", "x");
+    w.write(
+        "f.ron",
+        r#"(output: "notes.txt", inputs: {}, stages: [(id: "dfg", kind: "dfg", params: (size: 8, samples: 32))])"#,
+    );
+    let o = w.bake(&["run", "f.ron"]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert!(e.contains("is an existing file"), "{e}");
     w.copy("pipelines/probe.ron");
     let o = w.bake(&["run", "pipelines/probe.ron", "--jobs", "0"]);
     let e = String::from_utf8_lossy(&o.stderr);

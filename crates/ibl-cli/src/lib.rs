@@ -48,6 +48,7 @@ pub struct Ctx {
     pub common: CommonArgs,
     progress: TerminalProgress,
     warnings: std::sync::Mutex<Vec<String>>,
+    json_printed: std::sync::atomic::AtomicBool,
 }
 
 impl Ctx {
@@ -61,6 +62,16 @@ impl Ctx {
             eprintln!("warning: {msg}");
         }
         self.warnings.lock().unwrap().push(msg);
+    }
+    /// Prints a `--json` summary now (a batch that failed part-way reports its counts): the
+    /// error object [`run`] would print is then left out, so stdout holds one JSON document.
+    pub fn print_json_summary(&self, summary: &Summary) {
+        self.json_printed
+            .store(true, std::sync::atomic::Ordering::Relaxed);
+        print_stdout(&format!(
+            "{}\n",
+            serde_json::to_string_pretty(summary).expect("summary serialises")
+        ));
     }
     /// Prints an informational line unless `--quiet` or `--json`.
     pub fn info(&self, msg: impl AsRef<str>) {
@@ -81,97 +92,8 @@ impl Ctx {
     }
 }
 
-/// What `-o` names: a folder the bake writes its files into, or one output file.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum OutputKind {
-    Folder,
-    File,
-}
-
-/// Checks, before any input is read, that the bake will be able to write where `-o` points:
-/// a bake of minutes must not end in "File exists" or "Permission denied". Refuses an
-/// existing file where a folder is needed (and the reverse), a file in the way of a folder
-/// to be created, and a folder that cannot be written; each message says what to do.
-pub fn check_output(path: &std::path::Path, kind: OutputKind) -> Result<(), ibl_core::Error> {
-    use ibl_core::Error;
-    let shown = path.display();
-    match (kind, std::fs::metadata(path)) {
-        (OutputKind::Folder, Ok(m)) if !m.is_dir() => {
-            return Err(Error::invalid(
-                path,
-                format!(
-                    "-o must name a folder, but {shown} is an existing file: choose another \
-                     name or remove the file"
-                ),
-            ))
-        }
-        (OutputKind::File, Ok(m)) if m.is_dir() => {
-            return Err(Error::invalid(
-                path,
-                format!(
-                    "-o must name a file, but {shown} is an existing folder: give a file name \
-                     such as {}",
-                    path.join("out.exr").display()
-                ),
-            ))
-        }
-        _ => {}
-    }
-    // The folder the files will be created in: `path` itself or its parent. Its nearest
-    // existing ancestor must be a folder (a file in the way cannot become one) and writable.
-    let dir = match kind {
-        OutputKind::Folder => path.to_path_buf(),
-        OutputKind::File => match path.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-            _ => std::path::PathBuf::from("."),
-        },
-    };
-    let mut existing = dir.as_path();
-    while std::fs::symlink_metadata(existing).is_err() {
-        match existing.parent() {
-            Some(p) if !p.as_os_str().is_empty() => existing = p,
-            _ => {
-                existing = std::path::Path::new(".");
-                break;
-            }
-        }
-    }
-    if !existing.is_dir() {
-        return Err(Error::invalid(
-            path,
-            format!(
-                "cannot create the output folder {}: {} is a file in the way (move it or \
-                 choose another -o)",
-                dir.display(),
-                existing.display()
-            ),
-        ));
-    }
-    // Writability as the writes will see it (permissions, read-only mounts, ACLs): create
-    // and remove a probe file.
-    let probe = existing.join(format!(".ibl-write-probe-{}", std::process::id()));
-    match std::fs::OpenOptions::new()
-        .write(true)
-        .create_new(true)
-        .open(&probe)
-    {
-        Ok(_) => {
-            let _ = std::fs::remove_file(&probe);
-            Ok(())
-        }
-        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => Ok(()),
-        Err(e) => Err(Error::io(
-            path,
-            std::io::Error::new(
-                e.kind(),
-                format!(
-                    "cannot write into {} ({e}): choose a writable -o",
-                    existing.display()
-                ),
-            ),
-        )),
-    }
-}
+/// Where outputs go, checked before any input is read (`ibl_core::io::check_output`).
+pub use ibl_core::io::{check_output, OutputKind};
 
 /// Writes a bake's encoded files as one atomic set and returns their paths for the summary.
 pub fn write_outputs(
@@ -202,6 +124,7 @@ where
         progress: TerminalProgress::new(show),
         common,
         warnings: Default::default(),
+        json_printed: Default::default(),
     };
     let start = Instant::now();
     match body(&ctx) {
@@ -238,7 +161,7 @@ where
         Err(e) => {
             let code = exit_code(e.class());
             eprintln!("{tool}: error: {}", error_chain(&e));
-            if ctx.common.json {
+            if ctx.common.json && !ctx.json_printed.into_inner() {
                 let warnings = ctx.warnings.into_inner().unwrap();
                 print_stdout(&json_error(tool, &error_chain(&e), code, &warnings));
             }

@@ -119,7 +119,7 @@ pub enum Objective {
     #[default]
     Log,
     /// From the eq. 13 solution, Gauss–Newton on the linear error relative per α group plus λ ×
-    /// the log-space error ([`crate::refine`]): the linear MSE the paper's log fit is a proxy of.
+    /// the log-space error (the refine module): the linear MSE the paper's log fit is a proxy of.
     Relative,
 }
 

@@ -84,10 +84,7 @@ fn main() {
                             warnings,
                             details,
                         };
-                        println!(
-                            "{}",
-                            serde_json::to_string_pretty(&summary).unwrap_or_default()
-                        );
+                        ctx.print_json_summary(&summary);
                     }
                     return Err(e);
                 }

@@ -510,17 +510,24 @@ fn output_problems_are_found_before_the_input_is_read() {
     std::fs::write(&in_the_way, "x").unwrap();
     let input = fixture("0008_128.png");
     // A folder where the output file should go, and a file in the way of its folder.
-    for (out, says) in [
-        (dir.path().to_path_buf(), "is an existing folder"),
-        (in_the_way.join("q.png"), "a file in the way"),
+    let folder = dir.path().join("out.png");
+    std::fs::create_dir(&folder).unwrap();
+    for (out, says, code) in [
+        (folder.clone(), "is an existing folder", 2),
+        (in_the_way.join("q.png"), "a file in the way", 4),
     ] {
         let o = run(&[input.to_str().unwrap(), "-o", out.to_str().unwrap()]);
         let e = stderr(&o);
-        assert_eq!(o.status.code(), Some(2), "{e}");
+        assert_eq!(o.status.code(), Some(code), "{e}");
         assert!(e.contains(says), "{e}");
     }
+    // A negative value reaches the range check instead of clap's "unexpected argument".
+    let o = run(&[input.to_str().unwrap(), "-o", "q.png", "--min-length", "-1"]);
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert!(e.contains("--min-length -1 is out of range"), "{e}");
     // Checked first: a missing input is not even opened.
-    let o = run(&["missing.png", "-o", dir.path().to_str().unwrap()]);
+    let o = run(&["missing.png", "-o", folder.to_str().unwrap()]);
     assert!(
         stderr(&o).contains("is an existing folder"),
         "{}",

@@ -8,7 +8,7 @@ pub mod ktx2;
 mod ldr;
 mod rgbe;
 
-pub use atomic::{write_atomic, write_many_atomic};
+pub use atomic::{check_output, write_atomic, write_many_atomic, OutputKind};
 
 use crate::error::{Error, Result};
 use crate::image::Image;
