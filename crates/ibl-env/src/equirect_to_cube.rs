@@ -131,7 +131,6 @@ pub fn output_paths(params: &Params, out: &Path) -> Result<Vec<PathBuf>> {
     Ok(p)
 }
 
-
 /// Resamples a loaded environment to a cube (or an equirect with `to_equirect`) and encodes
 /// the outputs for `out_dir` (or the output file for equirect).
 pub fn run(
@@ -187,12 +186,7 @@ pub fn run(
     let name = params.cube_name();
     let encoded = output::encode_cube(out, &CubeMips { levels: vec![cube] }, &enc, name, &[])?;
     let mut files = encoded.files;
-    files.extend(output::encoding_sidecar(
-        out,
-        name,
-        &enc,
-        &encoded.levels,
-    )?);
+    files.extend(output::encoding_sidecar(out, name, &enc, &encoded.levels)?);
     Ok(Baked {
         files,
         face_size: n,

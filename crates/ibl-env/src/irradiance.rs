@@ -122,8 +122,17 @@ impl Params {
     pub fn output_paths(&self, out_dir: &Path) -> Result<Vec<PathBuf>> {
         let enc = self.encoding()?;
         let mut files = vec![out_dir.join(&self.sh_file)];
-        files.extend(output::cube_output_paths(out_dir, 1, enc.layout, self.cube_name()));
-        files.extend(output::encoding_sidecar_path(out_dir, self.cube_name(), &enc));
+        files.extend(output::cube_output_paths(
+            out_dir,
+            1,
+            enc.layout,
+            self.cube_name(),
+        ));
+        files.extend(output::encoding_sidecar_path(
+            out_dir,
+            self.cube_name(),
+            &enc,
+        ));
         if let Some(name) = self.target_sh_file() {
             files.push(out_dir.join(name));
         }

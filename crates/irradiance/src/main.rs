@@ -34,7 +34,8 @@ fn main() {
             ));
         }
         baked.warnings.iter().for_each(|w| ctx.warn(w.clone()));
-        let outputs = ibl_cli::write_cube_outputs(ctx, &cli.output, cli.params.cube_name(), &baked.files)?;
+        let outputs =
+            ibl_cli::write_cube_outputs(ctx, &cli.output, cli.params.cube_name(), &baked.files)?;
         // Two different clamps, named apart: the input's negative texels (the input
         // policy's warning) and the output's negative irradiance (SH ringing).
         Ok::<_, ibl_core::Error>((

@@ -348,6 +348,9 @@ fn targets_write_the_engines_sh_forms_and_orientation() {
             "8",
             "--target",
             t,
+            // Faces here (each target's own container is checked by `make conformance`).
+            "--layout",
+            "faces",
         ]);
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         out

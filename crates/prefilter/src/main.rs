@@ -28,7 +28,8 @@ fn main() {
         ibl_cli::check_output(&cli.output, ibl_cli::OutputKind::Folder)?;
         let env = ctx.load_environment(&cli.input, cli.params.sanitize)?;
         let baked = run(&cli.params, &env, &cli.output, ctx.progress())?;
-        let outputs = ibl_cli::write_cube_outputs(ctx, &cli.output, cli.params.chain_name(), &baked.files)?;
+        let outputs =
+            ibl_cli::write_cube_outputs(ctx, &cli.output, cli.params.chain_name(), &baked.files)?;
         baked
             .chain
             .warnings

@@ -119,14 +119,16 @@ pub fn check_output(path: &std::path::Path, kind: OutputKind) -> Result<()> {
                 ),
             ))
         }
-        (OutputKind::File, Ok(m)) if m.is_dir() => return Err(Error::invalid(
-            path,
-            format!(
+        (OutputKind::File, Ok(m)) if m.is_dir() => {
+            return Err(Error::invalid(
+                path,
+                format!(
                 "the output must be a file, but {shown} is an existing folder: give a file name \
                      such as {}",
                 path.join("out.exr").display()
             ),
-        )),
+            ))
+        }
         _ => {}
     }
     // The folder the files will be created in: `path` itself or its parent. Its nearest
