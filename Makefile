@@ -23,11 +23,14 @@ demo: build
 	fi
 
 # Workspace tests (unit, stress and end-to-end), then clippy and rustfmt. Tests run in the
-# release profile so that `make test`, `make demo` and `make bench-quick` share one build.
+# release profile so that `make test`, `make demo` and `make bench-quick` share one build of
+# the dependencies and binaries. Only test targets are built here: the benchmark examples are
+# compiled (and linted) by clippy --all-targets and run by `make bench`, and no crate has
+# doctests, so building the examples and running rustdoc here would only cost time.
 test: unit lint fmt-check
 
 unit:
-	$(CARGO) test --release --workspace
+	$(CARGO) test --release --workspace --lib --bins --tests
 
 lint:
 	$(CARGO) clippy --workspace --all-targets -- -D warnings

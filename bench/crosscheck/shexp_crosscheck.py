@@ -1,4 +1,4 @@
-"""Independent cross-check of paper 002 §5.1 (SH-exp vs split-sum) in numpy.
+"""Independent cross-check of Silvennoinen et al. 2025 §5.1 (SH-exp vs split-sum) in numpy.
 
 Written apart from the Rust crates (own SH basis by Legendre recursion, own GGX/Smith, ground
 truth by summation over an equirect grid, an *ideal* split-sum prefiltered at the exact α with no

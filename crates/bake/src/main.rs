@@ -48,9 +48,11 @@ enum Cmd {
     },
     /// Run the pipeline: independent stages in parallel, unchanged ones skipped.
     Run {
+        /// The pipeline (.ron).
         file: PathBuf,
-        /// Stages run at once (default: the number of cores).
-        #[arg(short, long, value_name = "N")]
+        /// Stages run at once, at least 1 (default: the number of cores).
+        #[arg(short, long, value_name = "N",
+              value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
         jobs: Option<usize>,
         /// Re-run every needed stage even if up to date.
         #[arg(long)]
@@ -64,7 +66,9 @@ enum Cmd {
     },
     /// Remove what the pipeline produced and its cache.
     Clean {
+        /// The pipeline (.ron).
         file: PathBuf,
+        /// Print what was removed as JSON on stdout.
         #[arg(long)]
         json: bool,
     },
@@ -99,6 +103,7 @@ enum Cmd {
     },
     /// List the stage kinds this build knows, with their parameters and defaults.
     Kinds {
+        /// Print the kinds and their parameters as JSON on stdout.
         #[arg(long)]
         json: bool,
     },
@@ -119,12 +124,23 @@ fn exit_code(class: ErrorClass) -> i32 {
 }
 
 fn main() {
-    let cli = Cli::parse();
+    let cli = ibl_cli::parse::<Cli>("bake");
+    let json = matches!(
+        cli.cmd,
+        Cmd::Plan { json: true, .. }
+            | Cmd::Run { json: true, .. }
+            | Cmd::Clean { json: true, .. }
+            | Cmd::Kinds { json: true }
+    );
     let code = match run(cli) {
         Ok(code) => code,
         Err(e) => {
             eprintln!("bake: error: {e}");
-            exit_code(e.class())
+            let code = exit_code(e.class());
+            if json {
+                ibl_cli::print_stdout(&ibl_cli::json_error("bake", &e.to_string(), code, &[]));
+            }
+            code
         }
     };
     std::process::exit(code)
@@ -685,5 +701,14 @@ fn print_kinds(json: bool) {
                 .collect();
             println!("{:<18} params: ({})", "", ps.join(", "));
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn help_has_no_rustdoc_links_or_file_citations() {
+        let problems = ibl_cli::help_problems(<super::Cli as clap::CommandFactory>::command());
+        assert!(problems.is_empty(), "{problems:#?}");
     }
 }

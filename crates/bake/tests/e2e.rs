@@ -879,3 +879,133 @@ fn the_emitted_ninja_file_runs_the_same_bakes_as_run() {
         .unwrap();
     assert!(stdout(&out).contains("no work to do"), "{}", stdout(&out));
 }
+
+/// Runs `bake ARGS` with its stdout already closed (a `| head -1` whose reader went away).
+fn with_closed_stdout(w: &Work, args: &[&str]) -> Output {
+    let (reader, writer) = std::io::pipe().unwrap();
+    drop(reader);
+    w.cmd(args).stdout(writer).output().unwrap()
+}
+
+#[test]
+fn a_closed_stdout_ends_quietly_instead_of_panicking() {
+    let w = Work::new();
+    w.copy("pipelines/probe.ron");
+    w.copy("fixtures/hdri/city_512.exr");
+    for args in [
+        &["kinds"][..],
+        &["kinds", "--json"],
+        &["plan", "pipelines/probe.ron"],
+        &["plan", "pipelines/probe.ron", "--json"],
+        &["plan", "pipelines/probe.ron", "--emit", "dot"],
+    ] {
+        let o = with_closed_stdout(&w, args);
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(0), "{args:?}: {e}");
+        assert!(!e.contains("panicked"), "{args:?}: {e}");
+    }
+}
+
+#[test]
+fn not_a_pipeline_zero_jobs_and_json_errors() {
+    let w = Work::new();
+    w.copy("fixtures/hdri/city_512.exr");
+    let o = w.bake(&["run", "fixtures/hdri/city_512.exr"]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert!(e.contains("not a RON pipeline"), "{e}");
+    let o = w.bake(&["run", "fixtures/hdri/city_512.exr", "--json"]);
+    let v: Value = serde_json::from_slice(&o.stdout).expect("a JSON error object");
+    assert_eq!(v["exit_code"], 2);
+    assert!(v["error"].as_str().unwrap().contains("not a RON pipeline"));
+    // An output folder that is an existing file: said before any stage runs.
+    w.write("notes.txt", "x");
+    w.write(
+        "f.ron",
+        r#"(output: "notes.txt", inputs: {}, stages: [(id: "dfg", kind: "dfg", params: (size: 8, samples: 32))])"#,
+    );
+    let o = w.bake(&["run", "f.ron"]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert!(e.contains("is an existing file"), "{e}");
+    w.copy("pipelines/probe.ron");
+    let o = w.bake(&["run", "pipelines/probe.ron", "--jobs", "0"]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert!(e.contains("--jobs"), "{e}");
+}
+
+fn mtime(p: &Path) -> std::time::SystemTime {
+    std::fs::metadata(p).unwrap().modified().unwrap()
+}
+
+#[test]
+fn a_folder_converts_per_item_and_one_changed_map_rewrites_one_output() {
+    let w = Work::new();
+    // A flat folder of normal maps, one output per map ({stem}).
+    for (i, m) in ["brushed-steel", "frying-pan", "painted-metal"]
+        .iter()
+        .enumerate()
+    {
+        std::fs::create_dir_all(w.path("flat")).unwrap();
+        std::fs::copy(
+            root().join(format!("pipelines/materials/{m}/normal.png")),
+            w.path(&format!("flat/m{i}_normal.png")),
+        )
+        .unwrap();
+    }
+    w.write(
+        "flat.ron",
+        r#"(output: "out", inputs: {"maps": Folder("flat")}, stages: [
+            (id: "q", kind: "quat-map", reads: ["maps"], params: (bits: 8, input_name: "*_normal.png", output_name: "{stem}_quat.png")),
+        ])"#,
+    );
+    let st = w.run_ok("flat.ron", &[]);
+    assert_eq!(st["q"], "ran");
+    let outs: Vec<PathBuf> = (0..3)
+        .map(|i| w.path(&format!("out/q/m{i}_normal_quat.png")))
+        .collect();
+    let before: Vec<(Vec<u8>, std::time::SystemTime)> = outs
+        .iter()
+        .map(|p| (std::fs::read(p).unwrap(), mtime(p)))
+        .collect();
+    std::thread::sleep(Duration::from_millis(50));
+    // Change one map: its own output changes, the two others keep bytes and mtime.
+    std::fs::copy(
+        root().join("pipelines/materials/frying-pan/normal.png"),
+        w.path("flat/m0_normal.png"),
+    )
+    .unwrap();
+    let st = w.run_ok("flat.ron", &[]);
+    assert_eq!(st["q"], "ran");
+    assert_ne!(std::fs::read(&outs[0]).unwrap(), before[0].0);
+    for k in 1..3 {
+        assert_eq!(std::fs::read(&outs[k]).unwrap(), before[k].0, "output {k}");
+        assert_eq!(mtime(&outs[k]), before[k].1, "output {k} was rewritten");
+    }
+}
+
+#[cfg(unix)]
+#[test]
+fn symlinked_material_folders_are_followed_and_loops_refused() {
+    let w = Work::new();
+    w.copy("pipelines/materials/frying-pan");
+    std::fs::create_dir_all(w.path("mats")).unwrap();
+    std::os::unix::fs::symlink(w.path("pipelines/materials/frying-pan"), w.path("mats/pan"))
+        .unwrap();
+    w.write(
+        "m.ron",
+        r#"(output: "out", inputs: {"mats": Folder("mats")}, stages: [
+            (id: "q", kind: "quat-map", reads: ["mats"], params: (bits: 8)),
+        ])"#,
+    );
+    let st = w.run_ok("m.ron", &[]);
+    assert_eq!(st["q"], "ran");
+    assert!(w.path("out/q/pan/quaternion.png").is_file());
+    std::os::unix::fs::symlink(w.path("mats"), w.path("mats/pan/loop")).unwrap_or(());
+    std::os::unix::fs::symlink(w.path("mats"), w.path("mats/loop")).unwrap();
+    let o = w.bake(&["run", "m.ron"]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "{e}");
+    assert!(e.contains("symbolic link loop"), "{e}");
+}

@@ -24,6 +24,13 @@ fn main() {
     let cli = ibl_cli::parse::<Cli>("equirect-to-cube");
     ibl_cli::run("equirect-to-cube", cli.common.clone(), |ctx| {
         cli.params.validate()?;
+        // --to-equirect writes a file, or DIR/equirect.exr when -o has no extension.
+        let kind = if cli.params.to_equirect && cli.output.extension().is_some() {
+            ibl_cli::OutputKind::File
+        } else {
+            ibl_cli::OutputKind::Folder
+        };
+        ibl_cli::check_output(&cli.output, kind)?;
         let env = ctx.load_environment(&cli.input, cli.params.sanitize)?;
         let baked = run(&cli.params, &env, &cli.output, ctx.progress())?;
         baked.warnings.iter().for_each(|w| ctx.warn(w.clone()));
@@ -40,4 +47,13 @@ fn main() {
             }),
         ))
     })
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn help_has_no_rustdoc_links_or_file_citations() {
+        let problems = ibl_cli::help_problems(<super::Cli as clap::CommandFactory>::command());
+        assert!(problems.is_empty(), "{problems:#?}");
+    }
 }

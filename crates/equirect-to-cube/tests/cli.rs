@@ -313,7 +313,7 @@ fn unwritable_output_fails_and_keeps_previous_files() {
 
 #[test]
 fn rotate_applies_to_the_equirect_output_too() {
-    // DESIGN.md: --rotate turns the environment before any bake, --to-equirect included. A
+    // docs/CONVENTIONS.md: --rotate turns the environment before any bake, --to-equirect included. A
     // 90° turn about +Y moves the equirect content by a quarter of its width.
     let dir = tempfile::tempdir().unwrap();
     let src = dir.path().join("src.exr");
@@ -342,7 +342,7 @@ fn rotate_applies_to_the_equirect_output_too() {
         .any(|(x, y)| (x - y).abs() > 1e-3);
     assert!(differs, "--rotate 90 left the equirect output unchanged");
     // The turned image is the unturned one shifted by a quarter turn in longitude (either
-    // direction, per DESIGN.md's sign), up to resampling.
+    // direction, per docs/CONVENTIONS.md's sign), up to resampling.
     let shifted = |k: isize| -> f32 {
         let mut worst = 0.0f32;
         for y in 4..12 {
@@ -441,6 +441,8 @@ fn targets_turn_the_cube_as_the_engine_samples_it() {
             "16",
             "--target",
             t,
+            "--layout",
+            "faces",
         ]);
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         out
@@ -468,5 +470,31 @@ fn targets_turn_the_cube_as_the_engine_samples_it() {
         for i in 0..16 {
             assert_eq!(a.rgb(i, j), b.rgb(i, 15 - j));
         }
+    }
+}
+
+#[test]
+fn truncated_jpeg_environments_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut rgb = image::RgbImage::new(128, 64);
+    for (i, p) in rgb.pixels_mut().enumerate() {
+        p.0 = [(i % 256) as u8, (i * 7 % 256) as u8, 128];
+    }
+    let mut bytes = Vec::new();
+    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut bytes, 95)
+        .encode_image(&rgb)
+        .unwrap();
+    let out = dir.path().join("cube");
+    for cut in [bytes.len() / 4, bytes.len() / 2, bytes.len() - 1] {
+        let t = dir.path().join("env.jpg");
+        std::fs::write(&t, &bytes[..cut]).unwrap();
+        let o = run(&[t.to_str().unwrap(), "-o", out.to_str().unwrap()]);
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "cut {cut}: {e}");
+        assert!(
+            e.contains("env.jpg: truncated JPEG") && e.lines().count() == 1,
+            "{e}"
+        );
+        assert!(!out.exists());
     }
 }

@@ -1,5 +1,5 @@
 //! End-to-end tests of `hv-lut`: the LUT against an independent implementation of the
-//! thesis formulas (paper 004 §4.3.2), the sidecar, PNG 8/16-bit and thesis file names,
+//! thesis formulas (Marcolongo 2020 §4.3.2), the sidecar, PNG 8/16-bit and thesis file names,
 //! finiteness over the exponent range, and one-line errors with no output.
 
 use ibl_core::io::{read_image, ColorSpace};

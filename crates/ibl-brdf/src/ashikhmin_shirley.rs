@@ -1,13 +1,13 @@
 //! The Ashikhmin-Shirley anisotropic Phong half-vector distribution (Ashikhmin & Shirley
-//! 2000; paper 004 §2.4 and §4.3.2): its half-vector pdf p_h, the thesis's sampling of it (and
+//! 2000; Marcolongo 2020 §2.4 and §4.3.2): its half-vector pdf p_h, the thesis's sampling of it (and
 //! the inverse), the AS specular BRDF, and the same lobe as a [`Microfacet`] distribution.
 //!
 //! p_h(h) = √((n_u+1)(n_v+1))/(2π) (n·h)^{e(h)}, e(h) = (n_u (t·h)² + n_v (b·h)²)/(1 − (n·h)²),
 //! is a normalised density over the solid angle of h: ∫ p_h dω = 1 because
 //! ∫₀^{2π} dφ/((n_u+1)cos²φ + (n_v+1)sin²φ) = 2π/√((n_u+1)(n_v+1)).
-//! As a microfacet distribution (paper 001's D with ∫ D(m)(n·m) dm = 1) this is
+//! As a microfacet distribution (Atanasov et al. 2022's D with ∫ D(m)(n·m) dm = 1) this is
 //! D_AS(m) = p_h(m)/(n·m) — the normalised form pbrt gives, with exponents shifted by one;
-//! paper 003 §2 notes the original AS "D" ignored this cosine. AS has no closed-form Smith Λ,
+//! Kurt et al. 2010 §2 notes the original AS "D" ignored this cosine. AS has no closed-form Smith Λ,
 //! so [`AshikhminShirley`]'s Λ is a numerical integral (a few thousand evaluations: fine for
 //! validation and tables of Λ, not for inner loops).
 //!
@@ -70,12 +70,12 @@ impl AshikhminShirley {
         (self.exponent(h.x, h.y) * 0.5 * (-s2).ln_1p()).exp()
     }
 
-    /// The half-vector density of paper 004 §2.4 (solid angle of h); 0 below the horizon.
+    /// The half-vector density of Marcolongo 2020 §2.4 (solid angle of h); 0 below the horizon.
     pub fn pdf_h(&self, h: DVec3) -> f64 {
         self.pdf_h_at_normal() * self.pdf_ratio(h)
     }
 
-    /// φ_red(t) = arctan(√((n_u+1)/(n_v+1)) tan(πt/2)) (paper 004 §4.3.2), as an atan2 so that
+    /// φ_red(t) = arctan(√((n_u+1)/(n_v+1)) tan(πt/2)) (Marcolongo 2020 §4.3.2), as an atan2 so that
     /// t = 1 gives π/2 instead of tan(π/2).
     fn phi_reduced(&self, t: f64) -> f64 {
         let (s, c) = (FRAC_PI_2 * t.clamp(0.0, 1.0)).sin_cos();
@@ -84,7 +84,7 @@ impl AshikhminShirley {
             .min(FRAC_PI_2)
     }
 
-    /// Paper 004 §4.3.2: φ(ξ1) by quadrant from φ_red, cos θ = (1−ξ2)^{1/(e(φ)+1)}.
+    /// Marcolongo 2020 §4.3.2: φ(ξ1) by quadrant from φ_red, cos θ = (1−ξ2)^{1/(e(φ)+1)}.
     /// ξ1 = 1 gives φ = 2π ≡ 0, ξ2 = 1 the horizon, ξ2 = 0 the normal; never NaN or ∞ for
     /// exponents up to 10⁶ and beyond.
     pub fn sample(&self, xi1: f64, xi2: f64) -> HalfVectorSample {
@@ -148,7 +148,7 @@ impl AshikhminShirley {
         (xi1.clamp(0.0, 1.0), xi2.clamp(0.0, 1.0))
     }
 
-    /// The AS specular BRDF with Schlick Fresnel (paper 004 §2.4):
+    /// The AS specular BRDF with Schlick Fresnel (Marcolongo 2020 §2.4):
     /// f_s = p_h(h) F(v·h) / (4 (v·h) max(n·v, n·l)); 0 below either horizon.
     pub fn brdf(&self, v: DVec3, l: DVec3, f0: f64) -> f64 {
         if v.z <= 0.0 || l.z <= 0.0 {

@@ -1,11 +1,11 @@
 //! Beckmann, isotropic and the anisotropic normalised model of Kurt, Szirmay-Kalos and
-//! Křivánek (paper 003, eqs. 4–7, sampling eqs. 16–18, 20), with its Smith Λ (Walter et al.
+//! Křivánek (Kurt et al. 2010, eqs. 4–7, sampling eqs. 16–18, 20), with its Smith Λ (Walter et al.
 //! 2007 eq. 27 with the projected roughness of Heitz 2014 eq. 80) and visible-normal
 //! sampling (Heitz & d'Eon 2014, the slope-space inversion).
 //!
 //! Kurt's m_x, m_y are the α_x, α_y here.
 //!
-//! Erratum (paper 003 eq. 17): φ_h = arctan((m_y/m_x) tan(2πξ₂)) returns only (−π/2, π/2), so
+//! Erratum (Kurt et al. 2010 eq. 17): φ_h = arctan((m_y/m_x) tan(2πξ₂)) returns only (−π/2, π/2), so
 //! taken literally it samples half of the azimuths twice; φ_h must lie in the quadrant of
 //! 2πξ₂, i.e. φ_h = atan2(m_y sin 2πξ₂, m_x cos 2πξ₂), which is what Ward's sampling (and
 //! Walter's notes the paper cites) intends. With that fix the density is exactly eq. 20's
@@ -50,7 +50,7 @@ pub fn lambda_beckmann(a: f64) -> f64 {
 }
 
 impl Microfacet for Beckmann {
-    /// Paper 003 eqs. 4–5: D(h) = exp(−tan²θ (cos²φ/m_x² + sin²φ/m_y²)) / (π m_x m_y cos⁴θ),
+    /// Kurt et al. 2010 eqs. 4–5: D(h) = exp(−tan²θ (cos²φ/m_x² + sin²φ/m_y²)) / (π m_x m_y cos⁴θ),
     /// written with the components of h: exp(−(h_x²/m_x² + h_y²/m_y²)/h_z²).
     fn d(&self, m: Vec3) -> f32 {
         if m.z <= 0.0 {
@@ -76,7 +76,7 @@ impl Microfacet for Beckmann {
         lambda_beckmann(z / t) as f32
     }
 
-    /// Paper 003 eqs. 16–18 (with the quadrant fix of eq. 17): tan²θ (cos²φ/m_x² + sin²φ/m_y²)
+    /// Kurt et al. 2010 eqs. 16–18 (with the quadrant fix of eq. 17): tan²θ (cos²φ/m_x² + sin²φ/m_y²)
     /// = −ln u1, φ = atan2(m_y sin 2πu2, m_x cos 2πu2). Written as the unnormalised normal
     /// (m_x √(−ln u1) cos 2πu2, m_y √(−ln u1) sin 2πu2, 1); u1 = 0 gives the horizon.
     fn sample_d(&self, u1: f32, u2: f32) -> Vec3 {

@@ -1,6 +1,6 @@
-//! Schlick's Fresnel approximation (Schlick 1994; paper 003 eq. 12, paper 002 eq. 4).
+//! Schlick's Fresnel approximation (Schlick 1994; Kurt et al. 2010 eq. 12, Silvennoinen et al. 2025 eq. 4).
 
-/// Schlick's weight (1 − cos θ)⁵, the "Fresnel tail" χ of paper 004 §4.3.3 and paper 002 eq. 7.
+/// Schlick's weight (1 − cos θ)⁵, the "Fresnel tail" χ of Marcolongo 2020 §4.3.3 and Silvennoinen et al. 2025 eq. 7.
 /// `cos_theta` is clamped to [0, 1].
 #[inline]
 pub fn schlick_weight(cos_theta: f32) -> f32 {

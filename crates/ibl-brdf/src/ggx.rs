@@ -96,7 +96,7 @@ pub fn g2(n_dot_v: f32, n_dot_l: f32, alpha: f32) -> f32 {
     4.0 * n_dot_v * n_dot_l * v_smith(n_dot_v, n_dot_l, alpha)
 }
 
-/// The visibility V = G2/(4 n·v n·l) of paper 002 eq. 3 for height-correlated GGX:
+/// The visibility V = G2/(4 n·v n·l) of Silvennoinen et al. 2025 eq. 3 for height-correlated GGX:
 /// 0.5 / (n·l sqrt(n·v²(1−α²)+α²) + n·v sqrt(n·l²(1−α²)+α²)) (Heitz 2014; Filament),
 /// finite at grazing angles and 0 when both cosines are 0.
 #[inline]
@@ -112,7 +112,7 @@ pub fn v_smith(n_dot_v: f32, n_dot_l: f32, alpha: f32) -> f32 {
     }
 }
 
-/// The Fresnel-free GGX BRDF f_DV = D(h) V(v, l) (paper 002 eq. 8) in tangent space.
+/// The Fresnel-free GGX BRDF f_DV = D(h) V(v, l) (Silvennoinen et al. 2025 eq. 8) in tangent space.
 #[inline]
 pub fn f_dv(v: Vec3, l: Vec3, alpha: f32) -> f32 {
     if v.z <= 0.0 || l.z <= 0.0 {
@@ -190,7 +190,7 @@ pub fn sample_vndf_aniso(v: Vec3, u1: f32, u2: f32, alpha_x: f32, alpha_y: f32) 
 }
 
 /// Anisotropic GGX with roughness α_x along the tangent and α_y along the bitangent
-/// (Heitz 2014 §5.2; paper 001 eq. 7 with the GGX profile). `Ggx::isotropic(α)` is the
+/// (Heitz 2014 §5.2; Atanasov et al. 2022 eq. 7 with the GGX profile). `Ggx::isotropic(α)` is the
 /// distribution of [`d_ggx`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Ggx {

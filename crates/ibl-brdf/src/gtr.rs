@@ -1,4 +1,4 @@
-//! The Generalized Trowbridge-Reitz distribution GTR_γ (Burley 2012; paper 001 Appendix A,
+//! The Generalized Trowbridge-Reitz distribution GTR_γ (Burley 2012; Atanasov et al. 2022 Appendix A,
 //! eqs. 32–33) with Dimov's Smith masking for the integer tails γ ∈ {0,1,2,3,4} (eqs. 34–39)
 //! and a natural cubic spline in γ between them (as Appendix A recommends), and sampling of
 //! D(m)(n·m) by inverting its CDF in cos²θ.
@@ -55,7 +55,7 @@ impl Gtr {
         q(l) / (PI * q((1.0 - self.gamma as f64) * l))
     }
 
-    /// Dimov's average visibility S_γ(μ), μ = |cot θ_v| (paper 001 eqs. 35–39) for
+    /// Dimov's average visibility S_γ(μ), μ = |cot θ_v| (Atanasov et al. 2022 eqs. 35–39) for
     /// γ ∈ {0,…,4}, G1 = χ⁺ S_γ (eq. 34).
     pub fn s_integer(gamma: u32, mu: f64, alpha: f64) -> f64 {
         if mu.is_infinite() {
@@ -100,7 +100,7 @@ impl Gtr {
     }
 
     /// S_γ(μ) for any γ ∈ [0, 4]: the integer formulas, or the natural cubic spline through
-    /// S_0 … S_4 at this μ (paper 001 Appendix A, after eq. 39).
+    /// S_0 … S_4 at this μ (Atanasov et al. 2022 Appendix A, after eq. 39).
     pub fn s(&self, mu: f64) -> f64 {
         let g = (self.gamma as f64).clamp(0.0, 4.0);
         let alpha = self.alpha as f64;
@@ -132,7 +132,7 @@ impl Gtr {
 }
 
 impl Microfacet for Gtr {
-    /// Paper 001 eq. 32: D = c / (1 + (α²−1) cos²θ)^γ, the base written sin²θ + α² cos²θ.
+    /// Atanasov et al. 2022 eq. 32: D = c / (1 + (α²−1) cos²θ)^γ, the base written sin²θ + α² cos²θ.
     /// Evaluated as exp(ln c − γ ln base), since for large γ c underflows while base^−γ
     /// overflows (γ = 100, α = 0.01: c ≈ e⁻⁹⁰⁸, base^−γ up to e⁹²¹).
     fn d(&self, m: Vec3) -> f32 {

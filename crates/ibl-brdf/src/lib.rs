@@ -3,10 +3,10 @@
 //!
 //! - [`ggx`]: GGX isotropic (free functions on cosines: `d_ggx`, `lambda`, `g1`, `g2`,
 //!   `v_smith`, sampling triples) and anisotropic ([`ggx::Ggx`]), VNDF (Heitz 2018).
-//! - [`beckmann`]: anisotropic normalised Beckmann of Kurt et al. (paper 003), VNDF.
-//! - [`gtr`]: Generalized Trowbridge-Reitz with Dimov's Smith G1 (paper 001 App. A).
-//! - [`ashikhmin_shirley`]: the AS half-vector pdf and its sampling (paper 004).
-//! - [`transformed`]: linearly transformed microsurfaces of any of them (paper 001 §4).
+//! - [`beckmann`]: anisotropic normalised Beckmann of Kurt et al. (Kurt et al. 2010), VNDF.
+//! - [`gtr`]: Generalized Trowbridge-Reitz with Dimov's Smith G1 (Atanasov et al. 2022 App. A).
+//! - [`ashikhmin_shirley`]: the AS half-vector pdf and its sampling (Marcolongo 2020).
+//! - [`transformed`]: linearly transformed microsurfaces of any of them (Atanasov et al. 2022 §4).
 //! - [`microfacet::Microfacet`]: the trait they share; [`fresnel`]: Schlick.
 
 pub mod ashikhmin_shirley;

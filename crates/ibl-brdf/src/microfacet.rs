@@ -1,7 +1,7 @@
 //! The common interface of microfacet distributions: D, Smith Λ, G1, height-correlated G2,
 //! and sampling of D(m)(n·m) (and of visible normals where a closed form exists).
 //!
-//! Tangent space has the macro-normal n on +z. Every distribution is normalised as paper 001
+//! Tangent space has the macro-normal n on +z. Every distribution is normalised as Atanasov et al. 2022
 //! eq. 3 requires, ∫ D(m)(n·m) dm = 1, and its Λ satisfies the weak white furnace (eq. 2),
 //! ∫ D(m) G1(v,m) max(0, v·m) dm = v·n; the unit tests of each module check both.
 
@@ -32,13 +32,13 @@ pub trait Microfacet {
         }
     }
 
-    /// Samples a visible normal, m ~ D_v(m) = G1(v,m) max(0, v·m) D(m) / (v·n) (paper 001
+    /// Samples a visible normal, m ~ D_v(m) = G1(v,m) max(0, v·m) D(m) / (v·n) (Atanasov et al. 2022
     /// eq. 27), where the distribution has a closed-form sampler; `None` otherwise.
     fn sample_visible(&self, _v: Vec3, _u1: f32, _u2: f32) -> Option<Vec3> {
         None
     }
 
-    /// Density of [`Microfacet::sample_visible`]: D_v(m) of paper 001 eq. 27.
+    /// Density of [`Microfacet::sample_visible`]: D_v(m) of Atanasov et al. 2022 eq. 27.
     fn pdf_visible(&self, v: Vec3, m: Vec3) -> f32 {
         if v.z <= 0.0 || m.z <= 0.0 {
             return 0.0;
@@ -75,7 +75,7 @@ pub fn reflect(v: Vec3, m: Vec3) -> Vec3 {
 }
 
 /// Density of l = reflect(v, h) from the density of h: p_l = p_h / (4 |v·h|)
-/// (the half-vector Jacobian, Walter et al. 2007 eq. 14; paper 004 §2.4).
+/// (the half-vector Jacobian, Walter et al. 2007 eq. 14; Marcolongo 2020 §2.4).
 #[inline]
 pub fn pdf_reflected(pdf_h: f32, v_dot_h: f32) -> f32 {
     let d = 4.0 * v_dot_h.abs();

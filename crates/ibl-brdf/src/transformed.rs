@@ -1,11 +1,11 @@
-//! Linearly transformed microsurfaces (paper 001 §4): for any base distribution and an
+//! Linearly transformed microsurfaces (Atanasov et al. 2022 §4): for any base distribution and an
 //! invertible tangential transform M (eq. 9), the distribution D_M (eq. 22), the masking
 //! G1_M (eq. 12), and sampling through (M⁻¹)ᵀ (eq. 26, and eq. 28 for visible normals).
 
 use crate::microfacet::Microfacet;
 use glam::{DVec3, Vec3};
 
-/// The tangential transform of paper 001 eq. 9, M = [[a, c, 0], [b, d, 0], [0, 0, 1]].
+/// The tangential transform of Atanasov et al. 2022 eq. 9, M = [[a, c, 0], [b, d, 0], [0, 0, 1]].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TangentTransform {
     pub a: f64,
@@ -24,7 +24,7 @@ impl TangentTransform {
         self.a * self.d - self.b * self.c
     }
 
-    /// Mᵀ m = (a m_x + b m_y, c m_x + d m_y, m_z) (paper 001, after eq. 13).
+    /// Mᵀ m = (a m_x + b m_y, c m_x + d m_y, m_z) (Atanasov et al. 2022, after eq. 13).
     pub fn transpose_mul(&self, m: DVec3) -> DVec3 {
         DVec3::new(
             self.a * m.x + self.b * m.y,
@@ -43,7 +43,7 @@ impl TangentTransform {
         )
     }
 
-    /// (M⁻¹)ᵀ u, the transform of normals (paper 001 eq. 10).
+    /// (M⁻¹)ᵀ u, the transform of normals (Atanasov et al. 2022 eq. 10).
     pub fn inverse_transpose_mul(&self, u: DVec3) -> DVec3 {
         let k = 1.0 / self.det();
         DVec3::new(
@@ -54,7 +54,7 @@ impl TangentTransform {
     }
 }
 
-/// The base microsurface transformed by M (paper 001's "LTMD").
+/// The base microsurface transformed by M (Atanasov et al. 2022's "LTMD").
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Transformed<D> {
     pub base: D,
@@ -199,7 +199,7 @@ mod tests {
 
     #[test]
     fn diagonal_transform_of_isotropic_ggx_is_anisotropic_ggx() {
-        // Paper 001 eq. 29: M = diag(α/α_x, α/α_y) turns GGX(α) into GGX(α_x, α_y).
+        // Atanasov et al. 2022 eq. 29: M = diag(α/α_x, α/α_y) turns GGX(α) into GGX(α_x, α_y).
         let (alpha, ax, ay) = (0.3f32, 0.1f32, 0.6f32);
         let tr = Transformed::new(
             Ggx::isotropic(alpha),

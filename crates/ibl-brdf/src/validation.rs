@@ -1,4 +1,4 @@
-//! Test harness of paper 001 §4.3: deterministic quadratures of the normalisation (eq. 3) and
+//! Test harness of Atanasov et al. 2022 §4.3: deterministic quadratures of the normalisation (eq. 3) and
 //! the weak white furnace (eq. 2), χ² tests of samplers against their pdfs, and round trips of
 //! sample/invert. Used by the unit tests of every distribution (compiled for tests only).
 //!
@@ -67,7 +67,7 @@ fn integrate_plane(a: [f64; 4], n_psi: usize, f: impl Fn(Vec3, f64) -> f64) -> f
     total * det
 }
 
-/// Paper 001 eq. 3: ∫ D(m)(n·m) dm, which must be 1.
+/// Atanasov et al. 2022 eq. 3: ∫ D(m)(n·m) dm, which must be 1.
 pub fn normalisation_with(d: &dyn Microfacet, a: [f64; 4]) -> f64 {
     integrate_plane(a, 256, |m, c| d.d(m) as f64 * c * c * c * c)
 }
@@ -76,7 +76,7 @@ pub fn normalisation(d: &dyn Microfacet, scale: [f64; 2]) -> f64 {
     normalisation_with(d, diag(scale))
 }
 
-/// Paper 001 eq. 2: (∫ D(m) G1(v,m) max(0, v·m) dm, v·n), which must agree.
+/// Atanasov et al. 2022 eq. 2: (∫ D(m) G1(v,m) max(0, v·m) dm, v·n), which must agree.
 /// Λ(v) is evaluated once (G1 = χ⁺/(1+Λ(v)) depends on m only through χ⁺; some Λ are
 /// quadratures themselves). No distribution overrides `Microfacet::g1`, so the trait's
 /// 1/(1+Λ) is what is integrated here; a type that overrides it must test it on its own.

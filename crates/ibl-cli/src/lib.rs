@@ -48,6 +48,7 @@ pub struct Ctx {
     pub common: CommonArgs,
     progress: TerminalProgress,
     warnings: std::sync::Mutex<Vec<String>>,
+    json_printed: std::sync::atomic::AtomicBool,
 }
 
 impl Ctx {
@@ -61,6 +62,16 @@ impl Ctx {
             eprintln!("warning: {msg}");
         }
         self.warnings.lock().unwrap().push(msg);
+    }
+    /// Prints a `--json` summary now (a batch that failed part-way reports its counts): the
+    /// error object [`run`] would print is then left out, so stdout holds one JSON document.
+    pub fn print_json_summary(&self, summary: &Summary) {
+        self.json_printed
+            .store(true, std::sync::atomic::Ordering::Relaxed);
+        print_stdout(&format!(
+            "{}\n",
+            serde_json::to_string_pretty(summary).expect("summary serialises")
+        ));
     }
     /// Prints an informational line unless `--quiet` or `--json`.
     pub fn info(&self, msg: impl AsRef<str>) {
@@ -80,6 +91,9 @@ impl Ctx {
         Ok(env)
     }
 }
+
+/// Where outputs go, checked before any input is read (`ibl_core::io::check_output`).
+pub use ibl_core::io::{check_output, OutputKind};
 
 /// Writes a bake's encoded files as one atomic set and returns their paths for the summary.
 pub fn write_outputs(
@@ -141,6 +155,7 @@ where
         progress: TerminalProgress::new(show),
         common,
         warnings: Default::default(),
+        json_printed: Default::default(),
     };
     let start = Instant::now();
     match body(&ctx) {
@@ -151,13 +166,17 @@ where
                 outputs,
                 seconds: start.elapsed().as_secs_f64(),
                 warnings: ctx.warnings.into_inner().unwrap(),
-                details,
+                details: {
+                    let mut d = details;
+                    ibl_core::io::data::shortest_f32(&mut d);
+                    d
+                },
             };
             if ctx.common.json {
-                println!(
-                    "{}",
+                print_stdout(&format!(
+                    "{}\n",
                     serde_json::to_string_pretty(&summary).expect("summary serialises")
-                );
+                ));
             } else if !ctx.common.quiet {
                 eprintln!(
                     "{tool}: wrote {} file(s) in {:.3} s",
@@ -171,10 +190,65 @@ where
             std::process::exit(0)
         }
         Err(e) => {
+            let code = exit_code(e.class());
             eprintln!("{tool}: error: {}", error_chain(&e));
-            std::process::exit(exit_code(e.class()))
+            if ctx.common.json && !ctx.json_printed.into_inner() {
+                let warnings = ctx.warnings.into_inner().unwrap();
+                print_stdout(&json_error(tool, &error_chain(&e), code, &warnings));
+            }
+            std::process::exit(code)
         }
     }
+}
+
+/// The JSON object a `--json` run prints on stdout when it fails, so that a script reading
+/// stdout gets an answer either way: `{"tool", "version", "error", "exit_code", "warnings"}`.
+pub fn json_error(tool: &str, error: &str, exit_code: i32, warnings: &[String]) -> String {
+    let v = serde_json::json!({
+        "tool": tool,
+        "version": ibl_core::TOOL_VERSION,
+        "error": error,
+        "exit_code": exit_code,
+        "warnings": warnings,
+    });
+    format!(
+        "{}\n",
+        serde_json::to_string_pretty(&v).expect("error serialises")
+    )
+}
+
+/// Writes to stdout; a reader that went away (`| head -1`) ends the process quietly with
+/// exit 0 instead of the panic `println!` gives on a closed pipe.
+pub fn print_stdout(text: &str) {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    if let Err(e) = out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
+        if e.kind() == std::io::ErrorKind::BrokenPipe {
+            std::process::exit(0);
+        }
+        eprintln!("error: cannot write to stdout: {e}");
+        std::process::exit(4);
+    }
+}
+
+/// Makes `println!` on a closed stdout end the process quietly (exit 0) instead of printing a
+/// panic and a backtrace: the standard library panics with "failed printing to stdout" when
+/// the reader of a pipe went away (`bake kinds | head -1`). [`parse`] installs it, so every
+/// binary has it before it prints anything.
+pub fn exit_quietly_on_closed_stdout() {
+    let previous = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let msg = info
+            .payload()
+            .downcast_ref::<String>()
+            .map(String::as_str)
+            .or_else(|| info.payload().downcast_ref::<&str>().copied())
+            .unwrap_or("");
+        if msg.starts_with("failed printing to stdout") && msg.contains("Broken pipe") {
+            std::process::exit(0);
+        }
+        previous(info)
+    }));
 }
 
 /// "outer: cause: root cause" on one line (`ibl_core::error::chain`).
@@ -222,8 +296,13 @@ impl Progress for TerminalProgress {
 
 /// Parses the command line; usage errors become one line `tool: …` on stderr and exit code 2
 /// (`--help` and `--version` print as usual). Every binary parses through this.
+///
+/// Every argument that takes a value accepts negative numbers (`--max-roughness -0.5` reaches
+/// the parameter's range check instead of clap's "unexpected argument '-0'"), lists too
+/// (`--roughness -0.1,0.5`).
 pub fn parse<P: clap::Parser>(tool: &str) -> P {
-    match P::try_parse() {
+    exit_quietly_on_closed_stdout();
+    match try_parse_from::<P, _, _>(std::env::args_os()) {
         Ok(p) => p,
         Err(e) => {
             use clap::error::ErrorKind;
@@ -241,6 +320,72 @@ pub fn parse<P: clap::Parser>(tool: &str) -> P {
     }
 }
 
+/// Parses `args` (program name first) with negative values allowed, as [`parse`] does.
+pub fn try_parse_from<P, I, T>(args: I) -> Result<P, clap::Error>
+where
+    P: clap::Parser,
+    I: IntoIterator<Item = T>,
+    T: Into<std::ffi::OsString> + Clone,
+{
+    let mut cmd = negative_values(P::command());
+    let mut matches = cmd.try_get_matches_from_mut(args)?;
+    P::from_arg_matches_mut(&mut matches).map_err(|e| e.format(&mut cmd))
+}
+
+/// Lets every value-taking argument of `cmd` (and of its subcommands) take a value that
+/// starts with '-' when it is a number, or, for comma lists, any value: clap otherwise reads
+/// `-0.5` as a flag.
+pub fn negative_values(cmd: clap::Command) -> clap::Command {
+    cmd.mut_args(|a| {
+        if !a.get_action().takes_values() || a.is_positional() {
+            return a;
+        }
+        if a.get_value_delimiter().is_some() {
+            a.allow_hyphen_values(true)
+        } else {
+            a.allow_negative_numbers(true)
+        }
+    })
+    .mut_subcommands(negative_values)
+}
+
+/// What must not appear in `--help`: rustdoc link syntax (doc comments become help text, and
+/// "see [`crate::area`]" means nothing to a user) and citations by file number instead of by
+/// author and year (docs/BIBLIOGRAPHY.md).
+pub fn help_problems(cmd: clap::Command) -> Vec<String> {
+    let mut cmd = cmd;
+    cmd.build();
+    let mut problems = Vec::new();
+    let mut stack = vec![cmd];
+    while let Some(mut c) = stack.pop() {
+        let help = c.render_long_help().to_string();
+        let name = c.get_name().to_string();
+        for line in help.lines() {
+            let bad = [
+                "[`",
+                "`]",
+                "](",
+                "crate::",
+                "super::",
+                "paper 00",
+                "thesis 00",
+            ]
+            .iter()
+            .any(|k| line.contains(k))
+                || line.contains(concat!("..", "/shared"));
+            if bad {
+                problems.push(format!("{name}: {}", line.trim()));
+            }
+        }
+        stack.extend(
+            c.get_subcommands()
+                .filter(|s| s.get_name() != "help")
+                .cloned(),
+        );
+    }
+    problems
+}
+
 /// The first paragraph of a clap error, joined into one line.
 fn usage_error_line(text: &str) -> String {
     let lines: Vec<&str> = text
@@ -255,6 +400,68 @@ fn usage_error_line(text: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use clap::Parser;
+
+    #[derive(Parser, Debug)]
+    struct T {
+        #[arg(long)]
+        x: Option<f32>,
+        #[arg(long, value_delimiter = ',')]
+        list: Vec<f32>,
+        #[arg(long)]
+        flag: bool,
+        #[command(subcommand)]
+        sub: Option<Sub>,
+    }
+    #[derive(clap::Subcommand, Debug)]
+    enum Sub {
+        S {
+            #[arg(long)]
+            n: Option<i64>,
+        },
+    }
+
+    #[test]
+    fn negative_numbers_are_values_not_flags() {
+        let t: T = try_parse_from(["t", "--x", "-0.5", "--list", "-0.1,0.5", "--flag"]).unwrap();
+        assert_eq!(t.x, Some(-0.5));
+        assert_eq!(t.list, vec![-0.1, 0.5]);
+        assert!(t.flag);
+        let t: T = try_parse_from(["t", "s", "--n", "-1"]).unwrap();
+        assert!(matches!(t.sub, Some(Sub::S { n: Some(-1) })));
+        // A real flag after a numeric option is still a flag, and a word still an error.
+        assert!(try_parse_from::<T, _, _>(["t", "--x", "--flag"]).is_err());
+        let e = try_parse_from::<T, _, _>(["t", "--x", "-abc"]).unwrap_err();
+        assert!(e.to_string().contains("unexpected argument"), "{e}");
+    }
+
+    #[test]
+    fn outputs_are_checked_before_the_bake() {
+        let dir = std::env::temp_dir().join(format!("ibl-cli-out-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("notes.txt");
+        std::fs::write(&file, "x").unwrap();
+        let msg = |p: &std::path::Path, k| check_output(p, k).unwrap_err().to_string();
+        assert!(msg(&file, OutputKind::Folder).contains("is an existing file"));
+        assert!(msg(&dir, OutputKind::File).contains("is an existing folder"));
+        assert!(msg(&file.join("cube"), OutputKind::Folder).contains("a file in the way"));
+        assert!(msg(&file.join("a.exr"), OutputKind::File).contains("a file in the way"));
+        check_output(&dir.join("new/deeper"), OutputKind::Folder).unwrap();
+        check_output(&dir.join("a.exr"), OutputKind::File).unwrap();
+        check_output(&file, OutputKind::File).unwrap();
+        assert!(!dir
+            .join(format!(".ibl-write-probe-{}", std::process::id()))
+            .exists());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn json_errors_are_one_object() {
+        let v: serde_json::Value =
+            serde_json::from_str(&json_error("t", "a.png: truncated", 2, &[])).unwrap();
+        assert_eq!(v["error"], "a.png: truncated");
+        assert_eq!(v["exit_code"], 2);
+    }
 
     #[test]
     fn usage_errors_fold_to_one_line() {

@@ -1,4 +1,4 @@
-//! Cube faces and directions (DESIGN.md table), exact texel solid angles, cubemaps with mip
+//! Cube faces and directions (docs/CONVENTIONS.md table), exact texel solid angles, cubemaps with mip
 //! levels, seamless bilinear sampling across faces and solid-angle-weighted downsampling.
 
 use crate::error::{Error, Result};
@@ -29,7 +29,7 @@ impl Face {
         Face::ALL[i]
     }
 
-    /// Unnormalised direction of face coordinates (sc, tc) ∈ [−1, 1]² (DESIGN.md table).
+    /// Unnormalised direction of face coordinates (sc, tc) ∈ [−1, 1]² (docs/CONVENTIONS.md table).
     #[inline]
     pub fn direction(self, sc: f32, tc: f32) -> Vec3 {
         match self {

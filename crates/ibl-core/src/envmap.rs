@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 #[allow(clippy::large_enum_variant)]
 #[derive(Clone, Debug)]
 pub enum Environment {
-    /// Latitude-longitude image (DESIGN.md mapping).
+    /// Latitude-longitude image (docs/CONVENTIONS.md mapping).
     Equirect(Image),
     /// A cubemap (from faces, a cross, a strip or a KTX2 file's level 0).
     Cube(Cubemap),

@@ -1,4 +1,4 @@
-//! The latitude-longitude mapping of DESIGN.md, equirect pixel solid angles, rotation about
+//! The latitude-longitude mapping of docs/CONVENTIONS.md, equirect pixel solid angles, rotation about
 //! +Y, and area-filtered conversion between equirect images and cubemaps.
 
 use crate::cube::{texel_coord, Cubemap};
@@ -138,7 +138,7 @@ pub fn sample_bilinear(img: &Image, d: Vec3) -> Rgb {
 #[serde(rename_all = "kebab-case")]
 pub enum Filter {
     /// Mean radiance over each output texel's footprint: the source read as piecewise
-    /// constant and integrated exactly between its pixel boundaries (see [`crate::area`]).
+    /// constant and integrated exactly between its pixel boundaries, in closed form.
     #[default]
     Area,
     /// One bilinear tap at the texel centre (aliases when down-sizing; for comparison).

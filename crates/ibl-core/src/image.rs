@@ -146,7 +146,7 @@ impl TexelReport {
     }
 }
 
-/// The HDR input policy of DESIGN.md: NaN/Inf values are an error unless `sanitize` (then 0);
+/// The HDR input policy of docs/CONVENTIONS.md: NaN/Inf values are an error unless `sanitize` (then 0);
 /// negative values (left by lossy codecs) are clamped to 0 and counted.
 pub fn check_texels(image: &mut Image, path: &Path, sanitize: bool) -> Result<TexelReport> {
     let mut report = TexelReport::default();

@@ -1,4 +1,4 @@
-//! Core of the baking toolchain: the conventions of DESIGN.md implemented once.
+//! Core of the baking toolchain: the conventions of docs/CONVENTIONS.md implemented once.
 //!
 //! Images and cubemaps ([`image`], [`cube`]), the equirect mapping ([`equirect`]),
 //! texel solid angles, low-discrepancy sequences ([`sampling`]), the real SH basis ([`sh`]),
@@ -20,6 +20,7 @@ pub mod progress;
 pub mod sampling;
 pub mod sh;
 pub mod traverse;
+pub mod walk;
 
 pub use cube::{CubeMips, Cubemap, Face};
 pub use error::{Error, Result};

@@ -1,4 +1,4 @@
-//! Real spherical harmonics of DESIGN.md: orthonormal, no Condon–Shortley phase, index
+//! Real spherical harmonics of docs/CONVENTIONS.md: orthonormal, no Condon–Shortley phase, index
 //! i = l(l+1)+m, +z the polar axis, evaluated on the direction's own x, y, z.
 
 use glam::Vec3;
@@ -19,7 +19,7 @@ pub const fn index(l: usize, m: isize) -> usize {
 ///
 /// Uses the sin^|m|θ-free associated Legendre recurrence and the polynomial recurrences
 /// C_m = x C_{m−1} − y S_{m−1}, S_m = x S_{m−1} + y C_{m−1} (C_m = sin^mθ cos mφ), so no
-/// trigonometry is evaluated. Bands 0–2 reproduce the constants of DESIGN.md.
+/// trigonometry is evaluated. Bands 0–2 reproduce the constants of docs/CONVENTIONS.md.
 pub fn eval_basis(d: Vec3, bands: usize, out: &mut [f32]) {
     if bands <= 3 {
         let all = eval_basis3(d);
@@ -70,7 +70,7 @@ pub fn eval_basis(d: Vec3, bands: usize, out: &mut [f32]) {
     }
 }
 
-/// The first three bands in closed form (the DESIGN.md polynomials with full-precision
+/// The first three bands in closed form (the docs/CONVENTIONS.md polynomials with full-precision
 /// constants): the hot path of irradiance projection.
 #[inline]
 pub fn eval_basis3(d: Vec3) -> [f32; 9] {

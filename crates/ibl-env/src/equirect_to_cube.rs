@@ -59,7 +59,9 @@ impl Params {
         if let Some(n) = self.size {
             if n == 0 || n > MAX_FACE_SIZE {
                 return Err(Error::param(format!(
-                    "--size {n} is out of range 1..={MAX_FACE_SIZE}"
+                    "--size {n} is out of range 1..={MAX_FACE_SIZE} (six faces of n² texels \
+                     must stay within the 2^28-texel image limit, so that the cube can be read \
+                     back, e.g. from a KTX2 file)"
                 )));
             }
         }
@@ -87,8 +89,38 @@ pub struct Baked {
     pub face_size: usize,
     /// What the output encoding cost (one entry for the cube; none for --to-equirect).
     pub encoding: Vec<LevelEncoding>,
-    /// Things the user should know (clamped values).
+    /// What the user should know: a face size above the source's resolution, values the
+    /// output format clamped.
     pub warnings: Vec<String>,
+}
+
+/// The face size that holds the source's detail: a face spans a quarter of an equirect's
+/// width (90°); a cube's own faces. Not rounded to a power of two, unlike
+/// [`Environment::natural_face_size`].
+fn source_face_texels(env: &Environment) -> f64 {
+    match env {
+        Environment::Equirect(img) => img.width as f64 / 4.0,
+        Environment::Cube(c) => c.size as f64,
+    }
+}
+
+/// A warning when face size `n` upsamples the source: the bake then costs n² per face and adds
+/// no detail (`prefilter` warns the same way).
+pub fn upsampling_warning(input: &LoadedEnvironment, n: usize) -> Option<String> {
+    let have = source_face_texels(&input.env);
+    (n as f64 > have * 1.001).then(|| {
+        let what = match &input.env {
+            Environment::Equirect(img) => format!("a {}×{} equirect", img.width, img.height),
+            Environment::Cube(c) => format!("a cube of {0}×{0} faces", c.size),
+        };
+        format!(
+            "{}: face size {n} upsamples {what} (about {:.0} texels per face) {:.1}×: no detail \
+             is added; omit --size for the source's own size",
+            input.path.display(),
+            have,
+            n as f64 / have
+        )
+    })
 }
 
 /// Paths [`run`] writes for `params` into `out` (for planning, cleaning and stale files).
@@ -115,7 +147,7 @@ pub fn run(
         FloatDepth::F32
     };
     if params.to_equirect {
-        // --rotate turns the environment before any bake (DESIGN.md), this one included.
+        // --rotate turns the environment before any bake (docs/CONVENTIONS.md), this one included.
         let base = match &input.env {
             Environment::Cube(c) if params.rotate == 0.0 => c.clone(),
             _ => input.env.to_cube(
@@ -159,7 +191,10 @@ pub fn run(
         files,
         face_size: n,
         encoding: encoded.levels,
-        warnings: encoded.warnings,
+        warnings: upsampling_warning(input, n)
+            .into_iter()
+            .chain(encoded.warnings)
+            .collect(),
     })
 }
 

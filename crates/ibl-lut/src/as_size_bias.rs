@@ -1,4 +1,4 @@
-//! The Ashikhmin-Shirley "size/bias" table of paper 004 §4.3.3 (`brdfIntegration.exe`).
+//! The Ashikhmin-Shirley "size/bias" table of Marcolongo 2020 §4.3.3 (`brdfIntegration.exe`).
 //!
 //! With Schlick's F = F0(1 − χ) + χ, χ = (1 − v·h)⁵, and the AS BRDF written through the
 //! light density p_l = p_h/(4 v·h) as f_s = p_l(l) F / max(n·v, n·l) (§2.4), the split-sum
@@ -10,7 +10,7 @@
 //! that lost energy is the darkening the thesis describes for rough exponents.
 //! Erratum (§4.3.3): the printed sums lack their 1/N.
 //!
-//! Layout (DESIGN.md, thesis): column s = (2/π) atan(|b·v|/|t·v|), row t = √(n·v), at texel
+//! Layout (docs/CONVENTIONS.md, thesis): column s = (2/π) atan(|b·v|/|t·v|), row t = √(n·v), at texel
 //! centres; inverse (t·v, b·v, n·v) = (cos(πs/2)√(1−t⁴), sin(πs/2)√(1−t⁴), t²). AS has
 //! rectangular symmetry, so the quarter of azimuths covers them all. R = size, G = bias
 //! (PNG adds B = 0, as the thesis does).
@@ -47,7 +47,7 @@ use std::path::{Path, PathBuf};
 )]
 #[serde(rename_all = "snake_case")]
 pub enum Sampler {
-    /// The AS sampling formulas (paper 004 §4.3.2) evaluated in f64.
+    /// The AS sampling formulas (Marcolongo 2020 §4.3.2) evaluated in f64.
     #[default]
     Direct,
     /// A float half-vector LUT of `hv_size`² texels, read bilinearly (the thesis's route).
@@ -61,10 +61,20 @@ pub enum Sampler {
 #[serde(deny_unknown_fields, default)]
 pub struct Params {
     /// Shininess exponent n_u along the tangent (1 ..= 1e6).
-    #[arg(long, value_name = "NU", allow_negative_numbers = true)]
+    #[arg(
+        long,
+        value_name = "NU",
+        required = true,
+        allow_negative_numbers = true
+    )]
     pub nu: Option<f64>,
     /// Shininess exponent n_v along the bitangent (1 ..= 1e6).
-    #[arg(long, value_name = "NV", allow_negative_numbers = true)]
+    #[arg(
+        long,
+        value_name = "NV",
+        required = true,
+        allow_negative_numbers = true
+    )]
     pub nv: Option<f64>,
     /// Table side in texels (size × size).
     #[arg(
@@ -216,7 +226,8 @@ pub fn size_bias_table(set: &SampleSet, size: usize, progress: &dyn Progress) ->
 
 pub fn describe(params: &Params) -> Describe<'static> {
     Describe {
-        table: "Ashikhmin-Shirley size/bias (paper 004 section 4.3.3): integral = F0*size + bias",
+        table:
+            "Ashikhmin-Shirley size/bias (Marcolongo 2020 section 4.3.3): integral = F0*size + bias",
         channels: &["size s(v)", "bias b(v)"],
         s: "(2/pi) atan(|b.v|/|t.v|) at texel centres (i+0.5)/W",
         t: "sqrt(n.v) at texel centres (j+0.5)/H, row 0 first",

@@ -1,4 +1,4 @@
-//! The split-sum DFG table (Karis 2013; paper 002 §3.2; DESIGN.md): for view cosine s = n·v
+//! The split-sum DFG table (Karis 2013; Silvennoinen et al. 2025 §3.2; docs/CONVENTIONS.md): for view cosine s = n·v
 //! (columns) and perceptual roughness t = r (rows), both at texel centres, GGX with α = r²
 //! and height-correlated Smith G2,
 //!   R = A = ∫ f_DV (1 − χ) (n·l) dl,   G = B = ∫ f_DV χ (n·l) dl,   χ = (1 − v·h)⁵,

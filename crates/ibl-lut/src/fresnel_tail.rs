@@ -1,4 +1,4 @@
-//! The Fresnel-tail table of the SH-exponential paper (paper 002 §4.2, eq. 15): over
+//! The Fresnel-tail table of the SH-exponential paper (Silvennoinen et al. 2025 §4.2, eq. 15): over
 //! s = n·v (columns) and t = roughness r (rows), at texel centres like the DFG table,
 //!   R = T(v, α) = ∫ f_DV(v, l) (1 − v·h)⁵ (n·l) dl     (the integral printed in eq. 15),
 //!   G = T / E_dir,   E_dir = ∫ f_DV (n·l) dl              (the same integral per unit albedo).
@@ -8,7 +8,7 @@
 //! comes from the same estimators (VNDF by default), so `tail_value` equals
 //! `dfg::dfg_value(..)[1]` bit for bit.
 //!
-//! Erratum (paper 002 eq. 15): under its own premise — a constant environment L — eq. 6 gives
+//! Erratum (Silvennoinen et al. 2025 eq. 15): under its own premise — a constant environment L — eq. 6 gives
 //! E0 = L·E_dir and eq. 7 gives E1 = L·T, so E1 = E0 · T / E_dir. The printed
 //! E1 ≈ E0 ∫ f_DV (1 − v·h)⁵ (n·l) dl omits the division by E_dir (it reads E0 as if it were L);
 //! the G channel is that normalised ratio, for callers who want the self-consistent form.
@@ -61,7 +61,7 @@ impl Params {
     }
 }
 
-/// T(n·v, r) = ∫ f_DV (1 − v·h)⁵ (n·l) dl (paper 002 eq. 15's integral) with `samples`
+/// T(n·v, r) = ∫ f_DV (1 − v·h)⁵ (n·l) dl (Silvennoinen et al. 2025 eq. 15's integral) with `samples`
 /// Hammersley samples; the value the table stores in R at that texel.
 pub fn tail_value(n_dot_v: f32, roughness: f32, samples: u32) -> f32 {
     tail_and_albedo(n_dot_v, roughness, samples)[0]
@@ -95,7 +95,7 @@ pub fn tail_table_with(
 pub fn describe(params: &Params) -> Describe<'static> {
     Describe {
         table:
-            "Fresnel tail of paper 002 eq. 15 (GGX, height-correlated Smith, alpha = roughness^2)",
+            "Fresnel tail of Silvennoinen et al. 2025 eq. 15 (GGX, height-correlated Smith, alpha = roughness^2)",
         channels: &[
             "T = integral of f_DV (1-v.h)^5 (n.l) dl",
             "T / E_dir (E_dir = integral of f_DV (n.l) dl)",

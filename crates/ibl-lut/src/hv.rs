@@ -1,4 +1,4 @@
-//! The Ashikhmin-Shirley half-vector LUT of paper 004 §4.3.2 (`halfVectorSampling.exe`):
+//! The Ashikhmin-Shirley half-vector LUT of Marcolongo 2020 §4.3.2 (`halfVectorSampling.exe`):
 //! texel (i, j) holds the half vector sampled from (ξ1, ξ2) = ((i+0.5)/W, (j+0.5)/H), i.e. at
 //! texel centres with row 0 first (ξ2 = 0.5/H, next to the normal):
 //!   RGB = h·0.5 + 0.5 in tangent space (R along t, G along b, B along n),
@@ -60,10 +60,20 @@ pub fn thesis_or_plain_path(
 #[serde(deny_unknown_fields, default)]
 pub struct Params {
     /// Shininess exponent n_u along the tangent (1 ..= 1e6).
-    #[arg(long, value_name = "NU", allow_negative_numbers = true)]
+    #[arg(
+        long,
+        value_name = "NU",
+        required = true,
+        allow_negative_numbers = true
+    )]
     pub nu: Option<f64>,
     /// Shininess exponent n_v along the bitangent (1 ..= 1e6).
-    #[arg(long, value_name = "NV", allow_negative_numbers = true)]
+    #[arg(
+        long,
+        value_name = "NV",
+        required = true,
+        allow_negative_numbers = true
+    )]
     pub nv: Option<f64>,
     /// LUT side in texels (size × size).
     #[arg(
@@ -202,7 +212,7 @@ pub fn run(params: &Params, out: &Path, progress: &dyn Progress) -> Result<Baked
     };
     let bytes = io::encode_image(&image_path, &image, &opts)?;
     let sidecar = Sidecar {
-        table: "Ashikhmin-Shirley half-vector LUT (paper 004 section 4.3.2)".into(),
+        table: "Ashikhmin-Shirley half-vector LUT (Marcolongo 2020 section 4.3.2)".into(),
         tool_version: ibl_core::TOOL_VERSION.into(),
         nu: a.nu,
         nv: a.nv,

@@ -2,9 +2,9 @@
 //! and a pure `run` that returns encoded files:
 //!
 //! - [`dfg`]: the split-sum DFG table (GGX, height-correlated Smith; optional E_ss channel);
-//! - [`fresnel_tail`]: the Fresnel-tail integral of paper 002 eq. 15;
-//! - [`as_size_bias`]: the Ashikhmin-Shirley size/bias table of paper 004 §4.3.3;
-//! - [`hv`]: the Ashikhmin-Shirley half-vector LUT of paper 004 §4.3.2.
+//! - [`fresnel_tail`]: the Fresnel-tail integral of Silvennoinen et al. 2025 eq. 15;
+//! - [`as_size_bias`]: the Ashikhmin-Shirley size/bias table of Marcolongo 2020 §4.3.3;
+//! - [`hv`]: the Ashikhmin-Shirley half-vector LUT of Marcolongo 2020 §4.3.2.
 //!
 //! [`reference`] holds the independent quadratures the tests and the benchmark compare with.
 

@@ -110,7 +110,7 @@ impl DfgReference {
     }
 }
 
-/// A quadrature rule for the Ashikhmin-Shirley size/bias integrals of paper 004 §4.3.3.
+/// A quadrature rule for the Ashikhmin-Shirley size/bias integrals of Marcolongo 2020 §4.3.3.
 pub struct AsReference {
     beta: Vec<(f64, f64)>,
     phi: Vec<(f64, f64)>,

@@ -15,7 +15,7 @@ pub const MAX_SIZE: usize = 4096;
 /// Largest sample count accepted by the bakes (per texel).
 pub const MAX_SAMPLES: u32 = 1 << 24;
 
-/// The coordinate of texel `i` of `n`: (i + 0.5)/n (DESIGN.md, "LUT axes at texel centres").
+/// The coordinate of texel `i` of `n`: (i + 0.5)/n (docs/CONVENTIONS.md, "LUT axes at texel centres").
 #[inline]
 pub fn texel_centre(i: usize, n: usize) -> f64 {
     (i as f64 + 0.5) / n as f64

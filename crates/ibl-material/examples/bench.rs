@@ -186,10 +186,10 @@ fn bench(
     })
 }
 
-/// Accuracy on the real normal maps in ../shared/fixtures/normals (when present): what the
+/// Accuracy on the real normal maps in fixtures/normals: what the
 /// check reports at 16 and 8 bits, and what the input holds.
 fn real_maps(root: &Path, md: &mut String) {
-    let dir = root.join("../shared/fixtures/normals");
+    let dir = root.join("fixtures/normals");
     let Ok(entries) = std::fs::read_dir(&dir) else {
         return;
     };
@@ -200,7 +200,7 @@ fn real_maps(root: &Path, md: &mut String) {
     files.sort();
     let _ = writeln!(
         md,
-        "\n## Real normal maps (`../shared/fixtures/normals`, 8-bit lossy sources)\n"
+        "\n## Real normal maps (`fixtures/normals`, 8-bit lossy sources)\n"
     );
     let _ = writeln!(md, "| map | size | decoded length min–max | z < 0 | degenerate | y-up agreement | max n' err 16-bit (rad) | max n' err 8-bit (rad) | max Gram err 8-bit | left-handed |");
     let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|---|");

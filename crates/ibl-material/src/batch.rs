@@ -1,4 +1,4 @@
-//! Batch conversion of material folders (thesis 004 §5.2: `material/normal.*` →
+//! Batch conversion of material folders (Marcolongo 2020 §5.2: `material/normal.*` →
 //! `material/quaternion.png`), in parallel, skipping what is up to date, one failure per
 //! bad file rather than per batch. The pipeline runner calls [`run`] in-process.
 //!
@@ -32,19 +32,53 @@ pub fn validate(params: &Params) -> ibl_core::Result<()> {
             params.input_name
         )));
     }
+    let per_file = params.output_name.contains(STEM);
     if !plain(&params.output_name) || params.output_name.contains(['*', '?']) {
         return Err(Error::param(format!(
             "--output-name '{}' must be a plain file name",
             params.output_name
         )));
     }
-    if glob_match(&params.input_name, &params.output_name) {
+    // With {stem}, a file whose name fits the output name is an output and never an input,
+    // so "*.png" may hold both; a fixed output name must not match the inputs.
+    if !per_file && glob_match(&params.input_name, &params.output_name) {
         return Err(Error::param(format!(
-            "--output-name '{}' matches --input-name '{}'",
+            "--output-name '{}' matches --input-name '{}' (name outputs after their input \
+             with {STEM}, e.g. '{STEM}_quat.png')",
             params.output_name, params.input_name
         )));
     }
-    params.validate_output(Path::new(&params.output_name))
+    params.validate_output(Path::new(&output_name(&params.output_name, Path::new("x"))))
+}
+
+/// The placeholder of `--output-name` for the input's file stem.
+pub const STEM: &str = "{stem}";
+
+/// The output file name for `input`: `pattern` with {stem} replaced by the input's stem.
+pub fn output_name(pattern: &str, input: &Path) -> String {
+    let stem = input
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    pattern.replace(STEM, &stem)
+}
+
+/// The normal maps among `files` (one folder's) for `input_name`, with their outputs: files
+/// that are outputs themselves (named as `output_name` says) are left out.
+pub fn inputs_in<'a>(
+    files: &'a [PathBuf],
+    input_name: &str,
+    output_name_pattern: &str,
+) -> Vec<(&'a PathBuf, String)> {
+    let output_glob = output_name_pattern.replace(STEM, "*");
+    files
+        .iter()
+        .filter_map(|f| {
+            let name = f.file_name()?.to_string_lossy().into_owned();
+            (glob_match(input_name, &name) && !glob_match(&output_glob, &name))
+                .then(|| (f, output_name(output_name_pattern, f)))
+        })
+        .collect()
 }
 
 /// Case-insensitive match of a file name against a pattern with `*` and `?`.
@@ -168,29 +202,6 @@ fn stale_reason(input: &Path, output: &Path, key: &serde_json::Value) -> Option<
     None
 }
 
-/// Sorted entries of a folder: (sub-folders, files). Hidden entries are left out and
-/// symbolic links to folders are not followed (no cycles).
-fn list(dir: &Path) -> std::io::Result<(Vec<PathBuf>, Vec<PathBuf>)> {
-    let mut dirs = Vec::new();
-    let mut files = Vec::new();
-    for e in std::fs::read_dir(dir)? {
-        let e = e?;
-        let name = e.file_name();
-        if name.to_string_lossy().starts_with('.') {
-            continue;
-        }
-        let ft = e.file_type()?;
-        if ft.is_dir() {
-            dirs.push(e.path());
-        } else if ft.is_file() || (ft.is_symlink() && e.path().is_file()) {
-            files.push(e.path());
-        }
-    }
-    dirs.sort();
-    files.sort();
-    Ok((dirs, files))
-}
-
 /// Walks `root` and decides, for every folder holding a file that matches the input name,
 /// whether to convert, skip or fail it. Jobs come in path order.
 pub fn plan(params: &Params, root: &Path) -> Result<Vec<Job>> {
@@ -205,66 +216,57 @@ pub fn plan(params: &Params, root: &Path) -> Result<Vec<Job>> {
     }
     let key = params.output_key();
     let mut jobs = Vec::new();
-    let mut stack = vec![root.to_path_buf()];
-    while let Some(dir) = stack.pop() {
-        let (dirs, files) = match list(&dir) {
-            Ok(l) => l,
-            Err(e) if dir == root => return Err(Error::io(root, e).into()),
+    let per_file = params.output_name.contains(STEM);
+    ibl_core::walk::folders(root, &mut |dir, listing| {
+        let files = match listing {
+            Ok(l) => &l.files,
             Err(e) => {
                 jobs.push(Job {
-                    input: dir.clone(),
+                    input: dir.to_path_buf(),
                     output: dir.join(&params.output_name),
                     action: Action::Unlistable(format!("cannot list folder: {e}")),
                     reason: String::new(),
                 });
-                continue;
+                return;
             }
         };
-        stack.extend(dirs.into_iter().rev());
-        let output = dir.join(&params.output_name);
-        let inputs: Vec<&PathBuf> = files
-            .iter()
-            .filter(|f| {
-                f.file_name()
-                    .is_some_and(|n| glob_match(&params.input_name, &n.to_string_lossy()))
-            })
-            .filter(|f| **f != output)
-            .collect();
-        match inputs.as_slice() {
-            [] => {}
-            [input] => {
-                let (action, reason) = match (params.force, stale_reason(input, &output, &key)) {
-                    (true, _) => (Action::Convert, "forced".to_string()),
-                    (false, Some(r)) => (Action::Convert, r),
-                    (false, None) => (Action::Skip, "up to date".to_string()),
-                };
-                jobs.push(Job {
-                    input: input.to_path_buf(),
-                    output,
-                    action,
-                    reason,
-                });
-            }
-            many => {
-                let names: Vec<String> = many
-                    .iter()
-                    .filter_map(|p| p.file_name())
-                    .map(|n| n.to_string_lossy().into_owned())
-                    .collect();
-                jobs.push(Job {
-                    input: dir.clone(),
-                    output,
-                    action: Action::Fail(format!(
-                        "{} files match '{}': {}",
-                        many.len(),
-                        params.input_name,
-                        names.join(", ")
-                    )),
-                    reason: String::new(),
-                });
-            }
+        let inputs = inputs_in(files, &params.input_name, &params.output_name);
+        if inputs.len() > 1 && !per_file {
+            let names: Vec<String> = inputs
+                .iter()
+                .filter_map(|(p, _)| p.file_name())
+                .map(|n| n.to_string_lossy().into_owned())
+                .collect();
+            jobs.push(Job {
+                input: dir.to_path_buf(),
+                output: dir.join(&params.output_name),
+                action: Action::Fail(format!(
+                    "{} files match '{}': {} (give each its own output with --output-name \
+                     '{STEM}_quat.png')",
+                    inputs.len(),
+                    params.input_name,
+                    names.join(", ")
+                )),
+                reason: String::new(),
+            });
+            return;
         }
-    }
+        for (input, name) in inputs {
+            let output = dir.join(name);
+            let (action, reason) = match (params.force, stale_reason(input, &output, &key)) {
+                (true, _) => (Action::Convert, "forced".to_string()),
+                (false, Some(r)) => (Action::Convert, r),
+                (false, None) => (Action::Skip, "up to date".to_string()),
+            };
+            jobs.push(Job {
+                input: input.to_path_buf(),
+                output,
+                action,
+                reason,
+            });
+        }
+    })
+    .map_err(|e| Error::io(root, e))?;
     jobs.sort_by(|a, b| a.input.cmp(&b.input));
     Ok(jobs)
 }

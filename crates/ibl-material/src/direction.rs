@@ -1,5 +1,5 @@
-//! Anisotropy direction fields for TPR maps (thesis 004 §3.5): presets in closed form, angle
-//! and direction maps (paper 000 Fig. 22: a value in [0, 1] is an angle in [0, π)), and
+//! Anisotropy direction fields for TPR maps (Marcolongo 2020 §3.5): presets in closed form, angle
+//! and direction maps (Cocco et al. 2024 Fig. 22: a value in [0, 1] is an angle in [0, π)), and
 //! resampling of such line fields.
 //!
 //! A field returns the rotated tangent t = (x, y) in tangent-space components, unnormalised
@@ -162,7 +162,7 @@ impl<'de> serde::Deserialize<'de> for Preset {
     }
 }
 
-/// Angle in [0, π) stored as a value in [0, 1] (paper 000 Fig. 22) → unit tangent.
+/// Angle in [0, π) stored as a value in [0, 1] (Cocco et al. 2024 Fig. 22) → unit tangent.
 #[inline]
 pub fn tangent_from_angle_value(value: f64) -> [f64; 2] {
     let (s, c) = (value * PI).sin_cos();

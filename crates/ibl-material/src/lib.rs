@@ -1,4 +1,4 @@
-//! Material maps (thesis 004, Marcolongo 2020, §3.2–3.5 and §5.2): the quaternion map that
+//! Material maps (Marcolongo 2020, Marcolongo 2020, §3.2–3.5 and §5.2): the quaternion map that
 //! carries a normal map's perturbation of the whole tangent frame ([`quat_map`], math in
 //! [`quaternion`]), the tangent-plane rotation map of anisotropy directions and directional
 //! roughnesses ([`tpr_map`], fields in [`direction`], user formulas in [`expr`]), and batch

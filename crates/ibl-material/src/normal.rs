@@ -1,5 +1,5 @@
 //! Reading normal maps and decoding their texels into unit tangent-space normals
-//! (thesis 004 §3.3: a vector (x, y, z) is stored as (x, y, z)·0.5 + 0.5).
+//! (Marcolongo 2020 §3.3: a vector (x, y, z) is stored as (x, y, z)·0.5 + 0.5).
 
 use crate::quaternion::Vec3;
 use ibl_core::traverse::ordered_row_reduce;

@@ -1,4 +1,4 @@
-//! The `quat-map` bake (thesis 004 §3.4): a normal map to the map of the quaternions that
+//! The `quat-map` bake (Marcolongo 2020 §3.4): a normal map to the map of the quaternions that
 //! rotate the tangent frame onto each texel's normal, stored as q·0.5 + 0.5 in RGB, with a
 //! `--check` that decodes what was written back to frames and measures it.
 
@@ -53,7 +53,9 @@ pub struct Params {
     /// Batch: file name of the normal map in each material folder (case-insensitive, * and ?).
     #[arg(long, value_name = "GLOB", default_value = "normal.*")]
     pub input_name: String,
-    /// Batch: file name of the quaternion map written beside it (.png or .exr).
+    /// Batch: file name of the quaternion map written beside it (.png or .exr); {stem} stands
+    /// for the input's name without its extension, one output per matching file, so a flat
+    /// folder converts in one go: --input-name "*_normal.png" --output-name "{stem}_quat.png".
     #[arg(long, value_name = "NAME", default_value = "quaternion.png")]
     pub output_name: String,
     /// Batch: convert even the outputs that are up to date.

@@ -1,11 +1,11 @@
-//! The quaternion of a normal-map texel (thesis 004 §3.4) and the tangent frame it encodes.
+//! The quaternion of a normal-map texel (Marcolongo 2020 §3.4) and the tangent frame it encodes.
 //!
 //! A quaternion q = a + b·i + c·j (d = 0: the rotation axis lies in the tangent plane) acts
 //! on a vector v as r_q(v) = q̄·v·q. [`quat_from_normal`] picks the shortest rotation taking
 //! n = (0, 0, 1) to the texel's normal n'; [`frame_from_quat`] is what a shader does with the
 //! stored q to get the whole perturbed frame (t', b', n').
 //!
-//! Erratum (thesis 004 §3.4, the b' line): the thesis prints b' = (2bc, a²−b²+c², 2ab).
+//! Erratum (Marcolongo 2020 §3.4, the b' line): the thesis prints b' = (2bc, a²−b²+c², 2ab).
 //! Rotating j by q̄·j·q gives b' = (2bc, a²−b²+c², −2ab); with the printed sign
 //! t'·b' = 8a²bc ≠ 0 and the frame is not orthonormal. [`frame_from_quat`] uses the
 //! rotation's sign; the tests check it against an independent Hamilton-product rotation.
@@ -16,7 +16,7 @@ pub type Quat3 = [f64; 3];
 pub type Vec3 = [f64; 3];
 
 /// Shortest-arc unit quaternion with q̄·k·q = n for a unit normal n = (x, y, z),
-/// thesis 004 §3.4: a = sqrt((z+1)/2), b = y/(2a), c = −x/(2a), a ≥ 0.
+/// Marcolongo 2020 §3.4: a = sqrt((z+1)/2), b = y/(2a), c = −x/(2a), a ≥ 0.
 /// See [`quat_from_vector`], which this calls with n's own length (any length works: where
 /// the length under- or overflows, the fallback scales n by its largest component first).
 pub fn quat_from_normal(n: Vec3) -> Quat3 {
@@ -81,7 +81,7 @@ fn quat_from_scaled_vector(v: Vec3) -> Quat3 {
     [t * inv, y / r * inv, -x / r * inv]
 }
 
-/// The rotated tangent frame (t', b', n') = (q̄·i·q, q̄·j·q, q̄·k·q), thesis 004 §3.4 with the
+/// The rotated tangent frame (t', b', n') = (q̄·i·q, q̄·j·q, q̄·k·q), Marcolongo 2020 §3.4 with the
 /// b' erratum fixed:
 /// t' = (a²+b²−c², 2bc, 2ac), b' = (2bc, a²−b²+c², −2ab), n' = (−2ac, 2ab, a²−b²−c²).
 ///

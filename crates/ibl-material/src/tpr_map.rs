@@ -1,8 +1,8 @@
-//! The `tpr-map` bake (thesis 004 §3.5): an RGBA map whose RG hold the rotated tangent
+//! The `tpr-map` bake (Marcolongo 2020 §3.5): an RGBA map whose RG hold the rotated tangent
 //! (x, y)·0.5 + 0.5 in tangent space and whose BA hold the two directional roughnesses,
 //! from a preset, an angle/direction map or expressions in u, v.
 //!
-//! Deviation from the thesis, by DESIGN.md: B and A store perceptual roughness r along t
+//! Deviation from the thesis, by docs/CONVENTIONS.md: B and A store perceptual roughness r along t
 //! and b (α = r²) unless `--store-alpha` asks for the thesis's α. The default roughness is
 //! the thesis's α_x = 0.1, α_y = 1.0 as perceptual values (0.31623, 1).
 
@@ -178,7 +178,16 @@ pub struct Params {
     /// Output size W or WxH (with --angle-map: defaults to the map's size).
     #[arg(long, value_name = "W[xH]")]
     pub size: Option<Size>,
-    /// Direction-field preset: constant:DEG, linear:DEG, radial[:CX,CY], spiral[:CX,CY,TURNS], wave.
+    /// Direction-field preset, NAME[:ARGS]:
+    ///   constant:DEG — the tangent turned by DEG about n (from +t towards +b);
+    ///   linear:DEG — straight strokes at DEG counter-clockwise from the image's +x, as seen on
+    ///     the image (constant:DEG for +y-up tangent spaces);
+    ///   radial[:CX,CY] — concentric circles about (CX, CY) in texture coordinates (v down,
+    ///     default 0.5,0.5), counter-clockwise: a CD, a pan bottom;
+    ///   spiral[:CX,CY,TURNS] — the Archimedean spiral r = φ/(4π·TURNS) about (CX, CY): TURNS
+    ///     grooves from the centre to half the larger side; 0 gives straight rays, negative
+    ///     winds the other way (default 0.5,0.5,8);
+    ///   wave — Marcolongo 2020's example, x = cos πv, y = sin πv.
     #[arg(long, value_name = "NAME[:ARGS]", conflicts_with_all = ["angle_map", "expr"])]
     pub preset: Option<Preset>,
     /// Direction field from an image: a grey angle map (value·π from +t towards +b, in [0, π))
@@ -314,7 +323,7 @@ pub struct Inputs {
     pub warnings: Vec<String>,
 }
 
-/// Reads a map and applies the input policy of DESIGN.md: NaN/Inf texels are an error
+/// Reads a map and applies the input policy of docs/CONVENTIONS.md: NaN/Inf texels are an error
 /// unless `sanitize` (then 0), negative values are clamped to 0 (both reported).
 fn load_map(
     path: &Path,

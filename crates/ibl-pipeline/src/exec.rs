@@ -142,6 +142,9 @@ impl Session {
 
     /// [`Session::open`] for an output folder.
     pub fn open_output(output: &Path) -> Result<Session> {
+        // Before anything is baked: an `output:` that is a file, lies under a file or cannot
+        // be written is said now, with what to do, not as "File exists" after the work.
+        ibl_core::io::check_output(output, ibl_core::io::OutputKind::Folder)?;
         let cache = CacheDir::new(output);
         std::fs::create_dir_all(&cache.root).map_err(|e| Error::io(&cache.root, e))?;
         take_lock(&cache.lock_path())?;
@@ -722,6 +725,7 @@ pub(crate) fn commit(
 ) -> Result<Vec<PathBuf>> {
     let s = &graph.stages[i];
     let output = &graph.pipeline.output;
+    let staged = keep_unchanged(&s.dir, staged);
     let rel_dir = s
         .dir
         .strip_prefix(output)
@@ -744,7 +748,7 @@ pub(crate) fn commit(
     };
     let renames: Vec<(PathBuf, PathBuf)> = staged
         .iter()
-        .map(|(p, rel, _)| (p.clone(), s.dir.join(rel)))
+        .filter_map(|(p, rel, _)| p.as_ref().map(|p| (p.clone(), s.dir.join(rel))))
         .collect();
     let _g = commit_lock();
     let journal_path = session
@@ -774,7 +778,42 @@ pub(crate) fn commit(
         session.cache.save_manifest(&m)?;
     }
     let _ = std::fs::remove_file(&journal_path);
-    Ok(renames.into_iter().map(|(_, t)| t).collect())
+    Ok(staged.iter().map(|(_, rel, _)| s.dir.join(rel)).collect())
+}
+
+/// Leaves in place every output whose file already holds the new bytes: a stage that re-runs
+/// because one of its inputs changed (one normal map of a material folder) rewrites only the
+/// outputs that differ, and the others keep their bytes and modification times. The staged
+/// copy of a kept file is dropped (None) and its stamp takes the file's own time.
+#[allow(clippy::type_complexity)]
+fn keep_unchanged(
+    dir: &Path,
+    staged: Vec<(PathBuf, String, cache::FileStamp)>,
+) -> Vec<(Option<PathBuf>, String, cache::FileStamp)> {
+    staged
+        .into_iter()
+        .map(|(path, rel, stamp)| {
+            let target = dir.join(&rel);
+            let same = std::fs::metadata(&target)
+                .ok()
+                .filter(|m| m.is_file() && m.len() == stamp.size)
+                .and_then(|m| {
+                    let bytes = std::fs::read(&target).ok()?;
+                    (cache::hash_bytes(&bytes) == stamp.hash).then_some(m)
+                });
+            match same {
+                Some(m) => {
+                    let _ = std::fs::remove_file(&path);
+                    let stamp = cache::FileStamp {
+                        mtime_ns: cache::mtime_ns(&m),
+                        ..stamp
+                    };
+                    (None, rel, stamp)
+                }
+                None => (Some(path), rel, stamp),
+            }
+        })
+        .collect()
 }
 
 /// What `clean` removed.

@@ -571,26 +571,10 @@ fn resolve_input(p: &Pipeline, input: &Input) -> std::result::Result<ResolvedInp
     })
 }
 
-/// Files under `dir`, recursively, sorted, skipping hidden entries.
+/// Files under `dir`, recursively, sorted, skipping hidden entries: the workspace's one
+/// walker and symlink policy (`ibl_core::walk`), shared with `quat-map --batch`.
 pub fn walk(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
-    let mut out = Vec::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d)? {
-            let e = e?;
-            if e.file_name().to_string_lossy().starts_with('.') {
-                continue;
-            }
-            let t = e.file_type()?;
-            if t.is_dir() {
-                stack.push(e.path());
-            } else if t.is_file() || t.is_symlink() {
-                out.push(e.path());
-            }
-        }
-    }
-    out.sort();
-    Ok(out)
+    ibl_core::walk::files(dir)
 }
 
 #[cfg(test)]

@@ -275,7 +275,16 @@ fn find_in(src: &str, part: &str, needle: &str) -> usize {
 
 /// Reads and parses a pipeline file.
 pub fn load(file: &Path) -> Result<Pipeline> {
-    let src = std::fs::read_to_string(file).map_err(|e| Error::io(file, e))?;
+    let bytes = std::fs::read(file).map_err(|e| Error::io(file, e))?;
+    // An image or any other binary file handed to `bake run` is a usage mistake (exit 2),
+    // not a file-system error: say what the file is not.
+    let src = String::from_utf8(bytes).map_err(|_| {
+        Error::invalid(Diagnostic::global(
+            file,
+            "not a RON pipeline (the file is binary, not text; `bake run` takes a .ron \
+             pipeline such as pipelines/probe.ron)",
+        ))
+    })?;
     parse(file, src)
 }
 
@@ -611,6 +620,19 @@ mod tests {
     fn bad_parameter_values_are_refused_by_the_bakes_validation() {
         let d = diags("(stages: [(id: \"a\", kind: \"equirect-to-cube\", params: (size: 0))])");
         assert!(d[0].message.contains("out of range"), "{}", d[0]);
+    }
+
+    #[test]
+    fn a_binary_file_is_not_a_pipeline_and_an_invalid_input() {
+        let dir = tempfile::tempdir().unwrap();
+        let f = dir.path().join("forest.exr");
+        std::fs::write(&f, [0x76, 0x2f, 0x31, 0x01, 0xff, 0xfe, 0x00]).unwrap();
+        let e = load(&f).unwrap_err();
+        assert!(e.to_string().contains("not a RON pipeline"), "{e}");
+        assert_eq!(
+            ibl_core::error::Classify::class(&e),
+            ibl_core::error::ErrorClass::InvalidInput
+        );
     }
 
     #[test]

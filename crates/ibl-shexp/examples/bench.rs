@@ -1,6 +1,6 @@
 //! Benchmark of the SH-exp fit and evaluator (writes bench/shexp.md under the workspace root):
 //! fit time breakdown, the §5.1 win-rate table on the fixtures, the ablation of what was tried
-//! to lift it, and MSE for P orders 2–6 × Q orders 1–3 (paper 002 Fig. 8).
+//! to lift it, and MSE for P orders 2–6 × Q orders 1–3 (Silvennoinen et al. 2025 Fig. 8).
 //!
 //! cargo run --release -p ibl-shexp --example bench-ibl-shexp -- [--quick]
 
@@ -47,7 +47,7 @@ fn main() {
     let mut md = String::new();
     let _ = writeln!(
         md,
-        "# SH-exponential glossy reflections (paper 002): benchmark\n"
+        "# SH-exponential glossy reflections (Silvennoinen et al. 2025): benchmark\n"
     );
     let _ = writeln!(
         md,
@@ -80,9 +80,10 @@ fn main() {
             )
         })
         .collect();
-    let big = root.join("../shared/fixtures/hdri/city.exr");
-    if big.exists() && !quick {
-        timing_inputs.push(("city (shared, 256²)".into(), big, Some(256)));
+    // A full-size source (e.g. city.exr of Debian's blender-data) when IBL_BENCH_HDRI names one.
+    let big = std::env::var_os("IBL_BENCH_HDRI").map(std::path::PathBuf::from);
+    if let Some(big) = big.filter(|b| b.exists() && !quick) {
+        timing_inputs.push(("IBL_BENCH_HDRI at 256²".into(), big, Some(256)));
     } else {
         timing_inputs.push((
             "city_512 resampled to 256²".into(),

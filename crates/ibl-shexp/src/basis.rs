@@ -1,4 +1,4 @@
-//! The reflection / half-reflection parameterisation (paper 002 eq. 10), the vMF-damped SH
+//! The reflection / half-reflection parameterisation (Silvennoinen et al. 2025 eq. 10), the vMF-damped SH
 //! features of eq. 11/14, and the deterministic direction sets the fit samples.
 
 use glam::Vec3;
@@ -11,13 +11,13 @@ pub const fn coeffs_of_order(order: usize) -> usize {
 }
 
 /// Unknowns per channel: all (p+1)² of P and the (q+1)² − 1 of Q without its DC term
-/// (paper 002, end of §4.1: the DC would appear twice).
+/// (Silvennoinen et al. 2025, end of §4.1: the DC would appear twice).
 #[inline]
 pub const fn num_unknowns(p_order: usize, q_order: usize) -> usize {
     coeffs_of_order(p_order) + coeffs_of_order(q_order) - 1
 }
 
-/// Paper 002 eq. 12 with κ = 1/α: vMF_l = exp(−l(l+1)·α/2).
+/// Silvennoinen et al. 2025 eq. 12 with κ = 1/α: vMF_l = exp(−l(l+1)·α/2).
 ///
 /// α is the GGX α = roughness² (the reading that reproduces the paper's behaviour; with
 /// κ = 1/roughness the damping is far too strong at low roughness).
@@ -27,7 +27,7 @@ pub fn vmf_band(l: usize, alpha: f32) -> f32 {
 }
 
 /// Linear ("hat") interpolation weights of the α knots of the piecewise-linear extension
-/// (`coeffs::AlphaKnots`, not in paper 002): coefficients(α) = w₀·c[s] + w₁·c[s+1] with the
+/// (`coeffs::AlphaKnots`, not in Silvennoinen et al. 2025): coefficients(α) = w₀·c[s] + w₁·c[s+1] with the
 /// segment s whose knots bracket α, α clamped to the knot range. Returns ((s, w₀), (s+1, w₁));
 /// one knot gives ((0, 1), (0, 0)). `knots` must be non-empty and strictly increasing.
 pub fn knot_weights(knots: &[f32], alpha: f32) -> ((usize, f32), (usize, f32)) {
@@ -48,7 +48,7 @@ pub fn band_of(i: usize) -> usize {
 }
 
 /// The reflection r of `v` about `n` and the half-reflection vector h_r = normalize(n + r)
-/// (paper 002 eq. 10). For r = −n (only when v = −n) h_r falls back to n.
+/// (Silvennoinen et al. 2025 eq. 10). For r = −n (only when v = −n) h_r falls back to n.
 #[inline]
 pub fn reflection_pair(n: Vec3, v: Vec3) -> (Vec3, Vec3) {
     let r = (2.0 * n.dot(v) * n - v).normalize_or(n);

@@ -1,5 +1,5 @@
 //! The fitted SH-exponential probe (what `shexp-fit` writes) and its reconstruction,
-//! paper 002 eq. 11: E0(v, n, α) ≈ exp(⟨vMF(1/α) ⊙ Y(r), p⟩ + ⟨vMF(1/α) ⊙ Y(h_r), q⟩).
+//! Silvennoinen et al. 2025 eq. 11: E0(v, n, α) ≈ exp(⟨vMF(1/α) ⊙ Y(r), p⟩ + ⟨vMF(1/α) ⊙ Y(h_r), q⟩).
 
 use crate::basis::{band_of, coeffs_of_order, knot_weights, reflection_pair, vmf_band};
 use crate::dfg::FresnelTail;
@@ -10,7 +10,7 @@ use std::path::Path;
 
 /// Coefficients of one probe and how they were fitted.
 ///
-/// `p` holds (p_order+1)² RGB coefficients in DESIGN.md SH order from index 0 (evaluated at
+/// `p` holds (p_order+1)² RGB coefficients in docs/CONVENTIONS.md SH order from index 0 (evaluated at
 /// the reflection r); `q` holds (q_order+1)² − 1 from index 1 (its DC dropped, evaluated at
 /// h_r = normalize(n + r)). Band l of both is damped by exp(−l(l+1)·α/2), α the GGX α = r².
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -41,7 +41,7 @@ pub struct Coeffs {
     /// How E1 is derived from E0 by consumers of this probe (eq. 15 printed or B/(A+B)).
     #[serde(default)]
     pub fresnel: FresnelTail,
-    /// What exp(P·Q) reconstructs: E0 itself (paper 002, the default) or E0 / (A+B).
+    /// What exp(P·Q) reconstructs: E0 itself (Silvennoinen et al. 2025, the default) or E0 / (A+B).
     #[serde(default)]
     pub target: Target,
     /// What the solve minimised.
@@ -57,7 +57,7 @@ pub struct Coeffs {
     pub alpha_knots: Option<AlphaKnots>,
 }
 
-/// Coefficients that vary with roughness (not in paper 002): at GGX α the probe uses
+/// Coefficients that vary with roughness (not in Silvennoinen et al. 2025): at GGX α the probe uses
 /// p(α) = w₀·p[s] + w₁·p[s+1] (likewise q), the hat weights of [`crate::basis::knot_weights`],
 /// in eq. 11 unchanged. Why: eq. 11 ties every α to one coefficient set through the vMF damping
 /// alone, so its DC (undamped) cannot follow the directional albedo's fall with α, and the
@@ -92,7 +92,7 @@ pub struct AlphaKnots {
 )]
 #[serde(rename_all = "snake_case")]
 pub enum Target {
-    /// E0(v, n, α) itself (paper 002 eqs. 11, 13).
+    /// E0(v, n, α) itself (Silvennoinen et al. 2025 eqs. 11, 13).
     #[default]
     E0,
     /// E0 / (A+B)(n·v, r): the environment's share of E0 once the directional albedo of the
@@ -115,11 +115,11 @@ pub enum Target {
 )]
 #[serde(rename_all = "snake_case")]
 pub enum Objective {
-    /// Squared log-space error, paper 002 eq. 13 (one linear least-squares solve).
+    /// Squared log-space error, Silvennoinen et al. 2025 eq. 13 (one linear least-squares solve).
     #[default]
     Log,
     /// From the eq. 13 solution, Gauss–Newton on the linear error relative per α group plus λ ×
-    /// the log-space error ([`crate::refine`]): the linear MSE the paper's log fit is a proxy of.
+    /// the log-space error (the refine module): the linear MSE the paper's log fit is a proxy of.
     Relative,
 }
 
@@ -128,7 +128,7 @@ pub const MAX_ORDER: usize = 8;
 
 /// The convention string written into every probe.
 pub const CONVENTION: &str = "E0(v,n,alpha) = exp(sum_i vmf(l_i,alpha) Y_i(r) p_i + sum_{i>=1} vmf(l_i,alpha) Y_i(h_r) q_{i-1}); \
-r = 2(n.v)n - v, h_r = normalize(n + r), Y = DESIGN.md real orthonormal SH (i = l(l+1)+m, no Condon-Shortley phase), \
+r = 2(n.v)n - v, h_r = normalize(n + r), Y = docs/CONVENTIONS.md real orthonormal SH (i = l(l+1)+m, no Condon-Shortley phase), \
 vmf(l,alpha) = exp(-l(l+1)*alpha/2), alpha = GGX alpha = roughness^2";
 
 impl Coeffs {
@@ -244,7 +244,7 @@ impl Coeffs {
         }
     }
 
-    /// The probe as paper 002 writes it: p and q alone, any `alpha_knots` dropped.
+    /// The probe as Silvennoinen et al. 2025 writes it: p and q alone, any `alpha_knots` dropped.
     pub fn eq11(&self) -> Coeffs {
         Coeffs {
             alpha_knots: None,
@@ -267,7 +267,7 @@ impl Coeffs {
         (lerp(&k.p[s0], &k.p[s1]), lerp(&k.q[s0], &k.q[s1]))
     }
 
-    /// Paper 002 eq. 11: the reconstructed base reflectance at normal `n`, view `v` (unit,
+    /// Silvennoinen et al. 2025 eq. 11: the reconstructed base reflectance at normal `n`, view `v` (unit,
     /// pointing away from the surface) and GGX α.
     pub fn e0(&self, n: Vec3, v: Vec3, alpha: f32) -> Rgb {
         if self.alpha_knots.is_some() {
@@ -288,7 +288,7 @@ impl Coeffs {
 /// Most α knots a probe may carry.
 pub const MAX_KNOTS: usize = 8;
 
-/// Paper 002 eq. 11 for explicit coefficient sets.
+/// Silvennoinen et al. 2025 eq. 11 for explicit coefficient sets.
 fn e0_with(
     p_order: usize,
     q_order: usize,

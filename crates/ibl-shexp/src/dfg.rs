@@ -1,5 +1,5 @@
-//! The split-sum DFG table (DESIGN.md layout: s = n·v, t = roughness at texel centres,
-//! specular = F0·A + B) and the SH-exp Fresnel-tail factor derived from it (paper 002 eq. 15).
+//! The split-sum DFG table (docs/CONVENTIONS.md layout: s = n·v, t = roughness at texel centres,
+//! specular = F0·A + B) and the SH-exp Fresnel-tail factor derived from it (Silvennoinen et al. 2025 eq. 15).
 //!
 //! The table itself comes from `ibl-lut` ([`Dfg::standard`]: `ibl_lut::dfg::dfg_table`, whose
 //! B channel is also the R channel of its `fresnel-tail` table, and whose B/(A+B) is that
@@ -46,7 +46,7 @@ pub fn dfg_integrals(n_dot_v: f32, alpha: f32, samples: u32) -> (f64, f64) {
 )]
 #[serde(rename_all = "kebab-case")]
 pub enum FresnelTail {
-    /// Paper 002 eq. 15 as printed: E1 ≈ E0 · ∫ f_DV (1−v·h)⁵ (n·l) = E0 · B.
+    /// Silvennoinen et al. 2025 eq. 15 as printed: E1 ≈ E0 · ∫ f_DV (1−v·h)⁵ (n·l) = E0 · B.
     Printed,
     /// Exact for a constant environment: E1 ≈ E0 · B / (A + B).
     #[default]
@@ -98,7 +98,7 @@ impl Dfg {
         })
     }
 
-    /// A table from an image in the DESIGN.md layout (R = A, G = B).
+    /// A table from an image in the docs/CONVENTIONS.md layout (R = A, G = B).
     pub fn from_image(img: &ibl_core::Image) -> Self {
         let data = (0..img.width * img.height).map(|k| {
             let t = img.texel(k % img.width, k / img.width);
@@ -131,7 +131,7 @@ impl Dfg {
     }
 
     /// The factor E/E0 of the SH-exp path for base reflectance `f0`:
-    /// E = F0·E0 + (1−F0)·E1 with E1 from `tail` (paper 002 eqs. 5, 15).
+    /// E = F0·E0 + (1−F0)·E1 with E1 from `tail` (Silvennoinen et al. 2025 eqs. 5, 15).
     pub fn shexp_fresnel_factor(
         &self,
         n_dot_v: f32,

@@ -1,5 +1,5 @@
 //! Monte-Carlo estimation of the base reflectance E0(v, n, α) = ∫ L(l) f_DV (n·l) dl
-//! (paper 002 eq. 6) with visible-normal samples read through filtered importance sampling
+//! (Silvennoinen et al. 2025 eq. 6) with visible-normal samples read through filtered importance sampling
 //! (Colbert & Křivánek 2007) from a mip chain.
 //!
 //! The per-sample table (reflected directions in tangent space, weights G2/G1(v), lods) depends

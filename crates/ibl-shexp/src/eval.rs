@@ -1,4 +1,4 @@
-//! The `shexp-eval` evaluator: paper 002 §5.1 on any environment. Spheres seen from several
+//! The `shexp-eval` evaluator: Silvennoinen et al. 2025 §5.1 on any environment. Spheres seen from several
 //! views at several roughnesses, for chrome (F0 = 1) and a dielectric (F0 = 0.04); each pixel's
 //! reflected radiance E = F0·E0 + (1−F0)·E1 computed three ways:
 //! - ground truth: exact summation of f_DV·L·(n·l) over every texel of the environment resampled
@@ -37,11 +37,16 @@ pub struct Params {
     #[arg(long, default_value_t = 32)]
     pub truth_size: usize,
     /// Perceptual roughness values of the cases (α = r²); default r = 0.5 … 1 (α = 0.25 … 1,
-    /// the perceptual spacing of paper 002 §5.1).
-    #[arg(long, value_delimiter = ',', default_values_t = vec![0.5f32, 0.6, 0.7, 0.8, 0.9, 1.0])]
+    /// the perceptual spacing of Silvennoinen et al. 2025 §5.1).
+    #[arg(long, value_delimiter = ',', default_value = "0.5,0.6,0.7,0.8,0.9,1")]
     pub roughness: Vec<f32>,
     /// Camera azimuths in degrees (horizontal views).
-    #[arg(long, value_delimiter = ',', default_values_t = vec![0.0f32, 90.0, 180.0, 270.0], allow_negative_numbers = true)]
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "0,90,180,270",
+        allow_negative_numbers = true
+    )]
     pub views: Vec<f32>,
     /// Level-0 face size of the split-sum chain baked when no --prefiltered folder is given.
     #[arg(long, default_value_t = 128)]
@@ -593,7 +598,7 @@ pub fn markdown(reports: &[EnvReport]) -> String {
     let mut s = String::new();
     let total: usize = reports.iter().map(|r| r.cases.len()).sum();
     let wins: usize = reports.iter().map(|r| r.wins).sum();
-    let _ = writeln!(s, "# SH-exp vs split-sum (paper 002 §5.1)\n");
+    let _ = writeln!(s, "# SH-exp vs split-sum (Silvennoinen et al. 2025 §5.1)\n");
     let wins_d: usize = reports.iter().map(|r| r.wins_display).sum();
     let _ = writeln!(
         s,

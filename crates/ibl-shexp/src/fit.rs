@@ -1,5 +1,5 @@
 //! The `shexp-fit` bake: an environment to the 33 (by default) SH-exponential coefficients per
-//! colour channel of paper 002, by linear least squares in log space (eqs. 13–14).
+//! colour channel of Silvennoinen et al. 2025, by linear least squares in log space (eqs. 13–14).
 //!
 //! Rows: `normals` spherical-Fibonacci normals × `views` Fibonacci views uniform over each
 //! normal's hemisphere (turned by a golden-ratio azimuth per normal) × every α of `alphas`.
@@ -68,7 +68,12 @@ pub struct Params {
     #[arg(long, default_value_t = 64)]
     pub normals: usize,
     /// GGX α values of the rows (α = roughness², NOT perceptual roughness), comma-separated.
-    #[arg(long, value_delimiter = ',', default_values_t = vec![0.2f32, 0.4667, 0.7333, 1.0], allow_negative_numbers = true)]
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "0.2,0.4667,0.7333,1",
+        allow_negative_numbers = true
+    )]
     pub alphas: Vec<f32>,
     /// E0 samples per row (visible-normal samples, filtered importance sampling).
     #[arg(long, default_value_t = 1024)]
@@ -109,10 +114,10 @@ pub struct Params {
     /// Fresnel tail consumers should apply (recorded in the output): eq. 15 printed or B/(A+B).
     #[arg(long, value_enum, default_value_t = FresnelTail::Ratio)]
     pub fresnel: FresnelTail,
-    /// What exp(P·Q) reconstructs: E0 (paper 002) or E0 divided by the DFG albedo A+B (ablation).
+    /// What exp(P·Q) reconstructs: E0 (Silvennoinen et al. 2025) or E0 divided by the DFG albedo A+B (ablation).
     #[arg(long, value_enum, default_value_t = Target::E0)]
     pub target: Target,
-    /// Beyond eq. 11 (not in paper 002): also fit coefficient sets at these GGX α knots,
+    /// Beyond eq. 11 (not in Silvennoinen et al. 2025): also fit coefficient sets at these GGX α knots,
     /// interpolated linearly in α (2–8 increasing values, e.g. 0.2,1), written as
     /// `alpha_knots` beside the eq. 11 `p` and `q`. Best measured with `--cosine-weight
     /// --log-weight 0` (bench/shexp.md); every knot needs a value of --alphas beside it.

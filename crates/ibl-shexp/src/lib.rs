@@ -1,9 +1,9 @@
 //! Spherical-harmonic-exponential glossy reflections (Silvennoinen, Sloan, Iwanicki,
-//! Nowrouzezahrai 2025, "paper 002"): the log-space least-squares fit of the base reflectance
+//! Nowrouzezahrai 2025, "Silvennoinen et al. 2025"): the log-space least-squares fit of the base reflectance
 //! E0 (§4.1, eqs. 9–14), its reconstruction (eq. 11), the Fresnel tail (eq. 15), an exact
 //! ground truth, the split-sum baseline and the §5.1 evaluator, and GLSL/HLSL emission.
 //!
-//! Errata and readings of paper 002 (also in the report):
+//! Errata and readings of Silvennoinen et al. 2025 (also in the report):
 //! - α everywhere is the GGX α = roughness² ("linear roughness"), κ = 1/α in eq. 12.
 //! - Eq. 15 as printed, E1 ≈ E0 · ∫ f_DV (1−v·h)⁵ (n·l), is not exact even for a constant
 //!   environment: there E1 = E0 · B/(A+B) (B/(A+B) of the DFG table). Both are implemented

@@ -1,4 +1,4 @@
-//! The Fresnel-free GGX BRDF f_DV = D·V of paper 002 eq. 8 (eq. 3: V = G2/(4 n·v n·l) with
+//! The Fresnel-free GGX BRDF f_DV = D·V of Silvennoinen et al. 2025 eq. 8 (eq. 3: V = G2/(4 n·v n·l) with
 //! Smith's height-correlated G2), and visible-normal sampling of it.
 //!
 //! D, Smith Λ / G1 / G2, V, VNDF sampling and the reflected-direction density are the shared
@@ -10,7 +10,7 @@ pub use ibl_brdf::ggx::{
     d_ggx, f_dv, g1, g2, lambda, pdf_vndf, pdf_vndf_reflected, sample_vndf, v_smith,
 };
 
-/// Mirror reflection 2(v·m)m − v and Schlick's tail weight (1 − v·h)⁵ (paper 002 eq. 4), shared.
+/// Mirror reflection 2(v·m)m − v and Schlick's tail weight (1 − v·h)⁵ (Silvennoinen et al. 2025 eq. 4), shared.
 pub use ibl_brdf::fresnel::schlick_weight as schlick_tail;
 pub use ibl_brdf::reflect;
 

@@ -1,7 +1,7 @@
 //! Linear-space refinement of the log-space fit: damped Gauss–Newton on the weighted relative
 //! MSE of exp(A·x) against E0, started from the eq. 13 solution.
 //!
-//! Why: paper 002 fits log E0 (eq. 13) as "a proxy of relative MSE in linear space" (§1), but the
+//! Why: Silvennoinen et al. 2025 fits log E0 (eq. 13) as "a proxy of relative MSE in linear space" (§1), but the
 //! proxy weighs a row's relative error the same whether the row is a sunlit highlight or a dark
 //! corner, while a rendered sphere's MSE is dominated by its bright pixels. Minimising the linear
 //! error itself, normalised per roughness group so that every α counts alike, measures better

@@ -1,5 +1,5 @@
-//! The split-sum baseline (Karis 2013; paper 002 §3.2): a GGX-prefiltered mip chain looked up
-//! at the reflection vector with lod = roughness·(N−1) (DESIGN.md), times the DFG table:
+//! The split-sum baseline (Karis 2013; Silvennoinen et al. 2025 §3.2): a GGX-prefiltered mip chain looked up
+//! at the reflection vector with lod = roughness·(N−1) (docs/CONVENTIONS.md), times the DFG table:
 //! specular = L_pref(r, roughness) · (F0·A + B).
 //!
 //! The chain normally comes from `ibl-prefilter` (or a folder it wrote); [`prefilter_chain`]

@@ -1,4 +1,4 @@
-//! Ground truth of the reflection integrals E0 and E1 (paper 002 eqs. 6–7) by exact summation of
+//! Ground truth of the reflection integrals E0 and E1 (Silvennoinen et al. 2025 eqs. 6–7) by exact summation of
 //! f_DV · L · (n·l) over every texel of a cube (texel-centre direction, exact texel solid angle):
 //! the midpoint rule of the piecewise-constant environment, exact up to the variation of the
 //! BRDF inside one texel (measured by comparing two cube sizes, see `eval`).

@@ -24,6 +24,7 @@ fn main() {
     let cli = ibl_cli::parse::<Cli>("irradiance");
     ibl_cli::run("irradiance", cli.common.clone(), |ctx| {
         cli.params.validate()?;
+        ibl_cli::check_output(&cli.output, ibl_cli::OutputKind::Folder)?;
         let env = ctx.load_environment(&cli.input, cli.params.sanitize)?;
         let baked = run(&cli.params, &env, &cli.output, ctx.progress())?;
         if baked.negative_clamped > 0 {
@@ -35,13 +36,25 @@ fn main() {
         baked.warnings.iter().for_each(|w| ctx.warn(w.clone()));
         let outputs =
             ibl_cli::write_cube_outputs(ctx, &cli.output, cli.params.cube_name(), &baked.files)?;
+        // Two different clamps, named apart: the input's negative texels (the input
+        // policy's warning) and the output's negative irradiance (SH ringing).
         Ok::<_, ibl_core::Error>((
             outputs,
             serde_json::json!({
                 "coefficients": baked.coefficients,
-                "negative_clamped": baked.negative_clamped,
+                "input_negative_clamped": env.report.negative_clamped,
+                "ringing_negative_clamped": baked.negative_clamped,
                 "encoding": ibl_cli::encoding_details(&baked.encoding),
             }),
         ))
     })
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn help_has_no_rustdoc_links_or_file_citations() {
+        let problems = ibl_cli::help_problems(<super::Cli as clap::CommandFactory>::command());
+        assert!(problems.is_empty(), "{problems:#?}");
+    }
 }

@@ -1,5 +1,5 @@
 //! End-to-end tests of the `irradiance` binary against independent references: an explicit
-//! f64 projection with the DESIGN.md constants, and a brute-force cosine convolution.
+//! f64 projection with the docs/CONVENTIONS.md constants, and a brute-force cosine convolution.
 // Index loops over coefficients and channels mirror the sums of the reference formulas.
 #![allow(clippy::needless_range_loop)]
 
@@ -35,7 +35,7 @@ fn load_clamped(p: &Path) -> Image {
     img
 }
 
-/// The 9 basis functions exactly as DESIGN.md prints them, in f64.
+/// The 9 basis functions exactly as docs/CONVENTIONS.md prints them, in f64.
 fn y9(d: [f64; 3]) -> [f64; 9] {
     let [x, y, z] = d;
     [
@@ -348,6 +348,9 @@ fn targets_write_the_engines_sh_forms_and_orientation() {
             "8",
             "--target",
             t,
+            // Faces here (each target's own container is checked by `make conformance`).
+            "--layout",
+            "faces",
         ]);
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         out

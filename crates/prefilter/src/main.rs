@@ -25,6 +25,7 @@ fn main() {
     let cli = ibl_cli::parse::<Cli>("prefilter");
     ibl_cli::run("prefilter", cli.common.clone(), |ctx| {
         cli.params.validate()?;
+        ibl_cli::check_output(&cli.output, ibl_cli::OutputKind::Folder)?;
         let env = ctx.load_environment(&cli.input, cli.params.sanitize)?;
         let baked = run(&cli.params, &env, &cli.output, ctx.progress())?;
         let outputs =
@@ -49,4 +50,13 @@ fn main() {
         });
         Ok::<_, ibl_prefilter::Error>((outputs, details))
     })
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn help_has_no_rustdoc_links_or_file_citations() {
+        let problems = ibl_cli::help_problems(<super::Cli as clap::CommandFactory>::command());
+        assert!(problems.is_empty(), "{problems:#?}");
+    }
 }

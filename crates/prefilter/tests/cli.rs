@@ -635,3 +635,33 @@ fn target_babylon_writes_an_env_of_the_full_chain_or_refuses() {
     assert_eq!(o.status.code(), Some(2));
     assert!(!bad.exists());
 }
+
+#[test]
+fn negative_values_reach_the_range_check_and_outputs_are_checked_first() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = fixture("hdri/studio_256.exr");
+    let out = dir.path().join("o");
+    let o = run(&[
+        input.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--max-roughness",
+        "-0.5",
+    ]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert!(e.contains("--max-roughness -0.5 is out of range"), "{e}");
+    assert!(!e.contains("unexpected argument"), "{e}");
+    // An existing file where the output folder should be: said before the bake, with what
+    // to do, in one line.
+    let notes = dir.path().join("notes.txt");
+    std::fs::write(&notes, "x").unwrap();
+    let o = run(&[input.to_str().unwrap(), "-o", notes.to_str().unwrap()]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert!(
+        e.contains("is an existing file: choose another name"),
+        "{e}"
+    );
+    assert_eq!(e.lines().count(), 1, "{e}");
+}

@@ -5,10 +5,16 @@ use clap::Parser;
 use ibl_material::{batch, normal, quat_map, MaterialError};
 use std::path::PathBuf;
 
-/// Normal map → quaternion map (thesis 004 §3.4): per texel the shortest rotation q = a + b·i + c·j
-/// taking +z to the normal, stored as RGB = q·0.5 + 0.5 (16-bit PNG by default, or EXR).
-/// A shader rebuilds the whole perturbed frame from it: t' = (a²+b²−c², 2bc, 2ac),
-/// b' = (2bc, a²−b²+c², −2ab), n' = (−2ac, 2ab, a²−b²−c²).
+/// Normal map → quaternion map (Marcolongo 2020 §3.4): per texel the unit quaternion
+/// q = a + b·i + c·j (no k part) of the shortest rotation from +z to the normal, stored as
+/// RGB = (a, b, c)·0.5 + 0.5 (16-bit PNG by default, or EXR).
+///
+/// Convention: q rotates a vector v as q̄·v·q (conjugate first), so the normal is
+/// n' = q̄·(0, 0, 1)·q. A shader decodes (a, b, c) = 2·RGB − 1 and rebuilds the whole perturbed
+/// frame: t' = (a²+b²−c², 2bc, 2ac), b' = (2bc, a²−b²+c², −2ab), n' = (−2ac, 2ab, a²−b²−c²).
+/// A quaternion library rotates as q·v·q̄ instead (glam's Quat::mul_vec3, three.js
+/// applyQuaternion, Eigen): give it the conjugate, e.g. glam Quat::from_xyzw(−b, −c, 0, a);
+/// passing (b, c, 0, a) unchanged mirrors the normals (x and y negated).
 ///
 /// With --batch DIR every folder under DIR holding normal.* gets quaternion.png beside it;
 /// outputs that are newer than their input and made with the same options are skipped
@@ -78,10 +84,7 @@ fn main() {
                             warnings,
                             details,
                         };
-                        println!(
-                            "{}",
-                            serde_json::to_string_pretty(&summary).unwrap_or_default()
-                        );
+                        ctx.print_json_summary(&summary);
                     }
                     return Err(e);
                 }
@@ -97,6 +100,7 @@ fn main() {
                 return Err(ibl_core::Error::param("give NORMAL -o OUT, or --batch DIR").into());
             };
             params.validate_output(output)?;
+            ibl_cli::check_output(output, ibl_cli::OutputKind::File)?;
             let normal = normal::load(input)?;
             let baked = quat_map::run(params, &normal, output, ctx.progress())?;
             baked
@@ -127,4 +131,13 @@ fn main() {
             ))
         },
     )
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn help_has_no_rustdoc_links_or_file_citations() {
+        let problems = ibl_cli::help_problems(<super::Cli as clap::CommandFactory>::command());
+        assert!(problems.is_empty(), "{problems:#?}");
+    }
 }

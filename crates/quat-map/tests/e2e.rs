@@ -461,3 +461,174 @@ fn refuses_to_overwrite_its_input() {
         assert_eq!(std::fs::read(&input).unwrap(), before, "{out}");
     }
 }
+
+/// A real JPEG of a fixture normal map (quality 95), and the same bytes cut short.
+fn jpeg_of(png: &Path) -> Vec<u8> {
+    let img = image::open(png).unwrap().to_rgb8();
+    let mut out = Vec::new();
+    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut out, 95)
+        .encode_image(&img)
+        .unwrap();
+    out
+}
+
+#[test]
+fn truncated_jpegs_are_refused_with_one_line_and_no_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let bytes = jpeg_of(&fixture("0008_128.png"));
+    let whole = dir.path().join("n.jpg");
+    std::fs::write(&whole, &bytes).unwrap();
+    let q = dir.path().join("q.png");
+    let o = run(&[
+        whole.to_str().unwrap(),
+        "-o",
+        q.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for f in [0.2, 0.5, 0.8, 0.97] {
+        let cut = (bytes.len() as f64 * f) as usize;
+        let t = dir.path().join(format!("t{cut}.jpg"));
+        std::fs::write(&t, &bytes[..cut]).unwrap();
+        let out = dir.path().join(format!("q{cut}.png"));
+        let o = run(&[t.to_str().unwrap(), "-o", out.to_str().unwrap()]);
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "cut {cut}: {e}");
+        assert_eq!(e.lines().count(), 1, "{e}");
+        assert!(
+            e.contains("truncated JPEG") && e.contains(&format!("t{cut}.jpg")),
+            "{e}"
+        );
+        assert!(!out.exists());
+    }
+}
+
+#[test]
+fn output_problems_are_found_before_the_input_is_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let in_the_way = dir.path().join("notes.txt");
+    std::fs::write(&in_the_way, "x").unwrap();
+    let input = fixture("0008_128.png");
+    // A folder where the output file should go, and a file in the way of its folder.
+    let folder = dir.path().join("out.png");
+    std::fs::create_dir(&folder).unwrap();
+    for (out, says, code) in [
+        (folder.clone(), "is an existing folder", 2),
+        (in_the_way.join("q.png"), "a file in the way", 4),
+    ] {
+        let o = run(&[input.to_str().unwrap(), "-o", out.to_str().unwrap()]);
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(code), "{e}");
+        assert!(e.contains(says), "{e}");
+    }
+    // A negative value reaches the range check instead of clap's "unexpected argument".
+    let o = run(&[input.to_str().unwrap(), "-o", "q.png", "--min-length", "-1"]);
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert!(e.contains("--min-length -1 is out of range"), "{e}");
+    // Checked first: a missing input is not even opened.
+    let o = run(&["missing.png", "-o", folder.to_str().unwrap()]);
+    assert!(
+        stderr(&o).contains("is an existing folder"),
+        "{}",
+        stderr(&o)
+    );
+}
+
+#[test]
+fn json_failure_prints_an_error_object_and_a_closed_stdout_is_quiet() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = run(&["missing.png", "-o", "q.png", "--json"]);
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("JSON on stdout");
+    assert_eq!(v["exit_code"], 4);
+    assert!(v["error"].as_str().unwrap().contains("missing.png"));
+    // stdout closed before the summary is printed: no panic, no backtrace.
+    let q = dir.path().join("q.png");
+    let (reader, writer) = std::io::pipe().unwrap();
+    drop(reader);
+    let o = Command::new(BIN)
+        .args([fixture("0008_128.png").to_str().unwrap(), "-o"])
+        .arg(&q)
+        .args(["--json", "--quiet"])
+        .stdout(writer)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(!stderr(&o).contains("panicked"), "{}", stderr(&o));
+}
+
+#[test]
+fn help_convention_holds_for_a_shader_and_for_a_quaternion_library() {
+    // The written map decoded both ways --help states: the shader's n' = (−2ac, 2ab,
+    // a²−b²−c²), and glam (q·v·q̄) given the conjugate (−b, −c, 0, a). Passing (b, c, 0, a)
+    // unchanged must give the mirror image, as the help warns.
+    let dir = tempfile::tempdir().unwrap();
+    let input = fixture("0008_128.png");
+    let out = dir.path().join("q.exr");
+    let o = run(&[
+        input.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let help = String::from_utf8_lossy(&run(&["--help"]).stdout).into_owned();
+    assert!(help.contains("Quat::from_xyzw(−b, −c, 0, a)"), "{help}");
+    let n_img = read_image(&input, ColorSpace::Linear).unwrap();
+    let q_img = read_image(&out, ColorSpace::Linear).unwrap();
+    let (mut shader, mut library, mut mirrored, mut count) = (0.0f64, 0.0f64, 0.0f64, 0);
+    for (t, s) in n_img
+        .data
+        .chunks(n_img.channels)
+        .zip(q_img.data.chunks(q_img.channels))
+    {
+        let n = glam::DVec3::from_array([0, 1, 2].map(|k| 2.0 * t[k] as f64 - 1.0));
+        if n.length() < 0.5 {
+            continue;
+        }
+        let n = n.normalize();
+        let [a, b, c] = [0, 1, 2].map(|k| 2.0 * s[k] as f64 - 1.0);
+        let np = glam::DVec3::new(-2.0 * a * c, 2.0 * a * b, a * a - b * b - c * c);
+        shader = shader.max((np - n).length());
+        let lib = glam::DQuat::from_xyzw(-b, -c, 0.0, a).normalize() * glam::DVec3::Z;
+        library = library.max((lib - n).length());
+        let naive = glam::DQuat::from_xyzw(b, c, 0.0, a).normalize() * glam::DVec3::Z;
+        mirrored = mirrored.max((naive - glam::DVec3::new(-n.x, -n.y, n.z)).length());
+        count += 1;
+    }
+    assert!(count > 1000);
+    // The EXR holds q in float32: both decodes agree with the input to its precision.
+    assert!(shader < 1e-5 && library < 1e-5, "{shader} {library}");
+    assert!(mirrored < 1e-5, "{mirrored}");
+}
+
+#[test]
+fn a_flat_folder_converts_with_stem_output_names() {
+    let dir = tempfile::tempdir().unwrap();
+    for name in ["0003_256.png", "0008_128.png"] {
+        let stem = name.trim_end_matches(".png");
+        std::fs::copy(fixture(name), dir.path().join(format!("{stem}_normal.png"))).unwrap();
+    }
+    let args = [
+        "--batch",
+        dir.path().to_str().unwrap(),
+        "--input-name",
+        "*.png",
+        "--output-name",
+        "{stem}_quat.png",
+        "--quiet",
+    ];
+    let o = run(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for stem in ["0003_256", "0008_128"] {
+        let out = dir.path().join(format!("{stem}_normal_quat.png"));
+        let (angle, _, _) = measure(&dir.path().join(format!("{stem}_normal.png")), &out, false);
+        assert!(angle < 5.3e-5, "{stem}: {angle}");
+    }
+    // The outputs fit "*.png" too, but are never taken as inputs: a second run has nothing
+    // new to convert and writes no *_quat_quat.png.
+    let o = run(&[&args[..], &["--json"]].concat());
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["details"]["skipped"].as_array().unwrap().len(), 2, "{v}");
+    assert!(!dir.path().join("0003_256_normal_quat_quat.png").exists());
+}

@@ -1,4 +1,4 @@
-//! `shexp-eval`: paper 002 §5.1 on any environment — ground truth, split-sum and SH-exp on
+//! `shexp-eval`: Silvennoinen et al. 2025 §5.1 on any environment — ground truth, split-sum and SH-exp on
 //! rendered spheres, with MSEs, win share, memory, PNG montages and a markdown report.
 
 use clap::Parser;
@@ -45,14 +45,15 @@ fn main() {
                 "--coeffs and --prefiltered apply to a single environment",
             )));
         }
+        ibl_cli::check_output(&cli.out, ibl_cli::OutputKind::Folder)?;
         let fit_params: fit::Params = match &cli.fit_params {
-            Some(p) => ibl_core::io::data::read(p)?,
+            Some(p) => ibl_core::io::data::read_as(p, "an SH-exp fit-parameter file")?,
             None => fit::Params::default(),
         };
         fit_params.validate()?;
         let coeffs: Option<Coeffs> = match &cli.coeffs {
             Some(p) => {
-                let c: Coeffs = ibl_core::io::data::read(p)?;
+                let c: Coeffs = ibl_core::io::data::read_as(p, "an SH-exp coefficient file")?;
                 c.validate(p)?;
                 Some(c)
             }
@@ -117,4 +118,13 @@ fn main() {
         });
         Ok::<_, ibl_shexp::Error>((outputs, details))
     })
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn help_has_no_rustdoc_links_or_file_citations() {
+        let problems = ibl_cli::help_problems(<super::Cli as clap::CommandFactory>::command());
+        assert!(problems.is_empty(), "{problems:#?}");
+    }
 }

@@ -253,3 +253,28 @@ fn reports_are_identical_for_any_thread_count() {
         "reports differ between 1 and 2 threads"
     );
 }
+
+#[test]
+fn negative_list_values_reach_the_range_check_and_other_files_are_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let env = dir.path().join("env.exr");
+    write_env(&env);
+    let o = run(&[env.to_str().unwrap(), "--roughness", "-0.1,0.5"]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert!(e.contains("--roughness needs values in (0, 1]"), "{e}");
+    // Another tool's JSON sidecar handed over as coefficients.
+    let hv = dir.path().join("hv.json");
+    std::fs::write(&hv, r#"{"table": "hv", "nu": 100.0, "nv": 10.0}"#).unwrap();
+    let out = dir.path().join("report");
+    let o = run(&[
+        env.to_str().unwrap(),
+        "--coeffs",
+        hv.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert!(e.contains("hv.json: not an SH-exp coefficient file"), "{e}");
+}

@@ -4,7 +4,7 @@ use clap::Parser;
 use ibl_shexp::fit::{run, Params};
 use std::path::PathBuf;
 
-/// Fits the spherical-harmonic-exponential glossy probe of paper 002 (Silvennoinen et al. 2025):
+/// Fits the spherical-harmonic-exponential glossy probe of Silvennoinen et al. 2025 (Silvennoinen et al. 2025):
 /// per colour channel, P (order --p-order, at the reflection vector) and Q (order --q-order
 /// without DC, at the half-reflection vector) by least squares on log E0 (eq. 13), then, by
 /// default, refined on the relative linear error (--objective log skips that). --alphas are GGX
@@ -28,6 +28,7 @@ fn main() {
     let cli = ibl_cli::parse::<Cli>("shexp-fit");
     ibl_cli::run("shexp-fit", cli.common.clone(), |ctx| {
         cli.params.validate()?;
+        ibl_cli::check_output(&cli.output, ibl_cli::OutputKind::File)?;
         let env = ctx.load_environment(&cli.input, cli.params.sanitize)?;
         let baked = run(&cli.params, &env, &cli.output, ctx.progress())?;
         let outputs = ibl_cli::write_outputs(&baked.files)?;
@@ -66,4 +67,13 @@ fn main() {
         });
         Ok::<_, ibl_shexp::Error>((outputs, details))
     })
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn help_has_no_rustdoc_links_or_file_citations() {
+        let problems = ibl_cli::help_problems(<super::Cli as clap::CommandFactory>::command());
+        assert!(problems.is_empty(), "{problems:#?}");
+    }
 }

@@ -4,7 +4,7 @@ use clap::Parser;
 use ibl_material::{tpr_map, MaterialError};
 use std::path::PathBuf;
 
-/// Tangent-plane rotation map (thesis 004 §3.5): RGBA with RG = the rotated tangent
+/// Tangent-plane rotation map (Marcolongo 2020 §3.5): RGBA with RG = the rotated tangent
 /// (x, y)·0.5 + 0.5 in tangent space (b = n × t) and BA = perceptual roughness along t and b
 /// (α = r²; --store-alpha stores α). Directions come from a preset, an angle/direction map
 /// or expressions in u, v (texel centres (i+0.5)/W, (j+0.5)/H, row 0 first); zero-length or
@@ -31,6 +31,7 @@ fn main() {
         cli.common.clone(),
         |ctx| -> Result<_, MaterialError> {
             cli.params.validate_output(&cli.output)?;
+            ibl_cli::check_output(&cli.output, ibl_cli::OutputKind::File)?;
             cli.params.compile()?;
             let inputs = tpr_map::load_inputs(&cli.params)?;
             let baked = tpr_map::run(&cli.params, &inputs, &cli.output, ctx.progress())?;
@@ -44,4 +45,13 @@ fn main() {
             Ok((outputs, serde_json::json!({ "stats": baked.stats })))
         },
     )
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn help_has_no_rustdoc_links_or_file_citations() {
+        let problems = ibl_cli::help_problems(<super::Cli as clap::CommandFactory>::command());
+        assert!(problems.is_empty(), "{problems:#?}");
+    }
 }

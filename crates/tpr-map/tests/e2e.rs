@@ -397,3 +397,31 @@ fn non_finite_maps_are_refused_unless_sanitized_and_inputs_are_not_overwritten()
     assert!(e.contains("is the input"), "{e}");
     assert_eq!(std::fs::read(&rough).unwrap(), before);
 }
+
+#[test]
+fn truncated_jpeg_angle_maps_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut grey = image::GrayImage::new(64, 64);
+    for (i, p) in grey.pixels_mut().enumerate() {
+        p.0 = [(i * 37 % 251) as u8];
+    }
+    let mut bytes = Vec::new();
+    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut bytes, 95)
+        .encode_image(&grey)
+        .unwrap();
+    let out = dir.path().join("t.png");
+    for cut in [bytes.len() / 3, bytes.len() * 2 / 3, bytes.len() - 2] {
+        let t = dir.path().join("a.jpg");
+        std::fs::write(&t, &bytes[..cut]).unwrap();
+        let o = run(&[
+            "--angle-map",
+            t.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "cut {cut}: {e}");
+        assert!(e.contains("a.jpg: truncated JPEG"), "{e}");
+        assert!(!out.exists());
+    }
+}

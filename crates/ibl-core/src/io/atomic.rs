@@ -96,6 +96,100 @@ pub fn write_many_atomic(files: &[(PathBuf, Vec<u8>)]) -> Result<()> {
     Ok(())
 }
 
+/// What `-o` names: a folder the bake writes its files into, or one output file.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum OutputKind {
+    Folder,
+    File,
+}
+
+/// Checks, before any input is read, that a bake will be able to write where its output goes:
+/// a bake of minutes must not end in "File exists" or "Permission denied". Refuses an
+/// existing file where a folder is needed (and the reverse), a file in the way of a folder
+/// to be created, and a folder that cannot be written; each message says what to do.
+pub fn check_output(path: &std::path::Path, kind: OutputKind) -> Result<()> {
+    let shown = path.display();
+    match (kind, std::fs::metadata(path)) {
+        (OutputKind::Folder, Ok(m)) if !m.is_dir() => {
+            return Err(Error::invalid(
+                path,
+                format!(
+                    "the output must be a folder, but {shown} is an existing file: choose another \
+                     name or remove the file"
+                ),
+            ))
+        }
+        (OutputKind::File, Ok(m)) if m.is_dir() => {
+            return Err(Error::invalid(
+                path,
+                format!(
+                "the output must be a file, but {shown} is an existing folder: give a file name \
+                     such as {}",
+                path.join("out.exr").display()
+            ),
+            ))
+        }
+        _ => {}
+    }
+    // The folder the files will be created in: `path` itself or its parent. Its nearest
+    // existing ancestor must be a folder (a file in the way cannot become one) and writable.
+    let dir = match kind {
+        OutputKind::Folder => path.to_path_buf(),
+        OutputKind::File => match path.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => std::path::PathBuf::from("."),
+        },
+    };
+    let mut existing = dir.as_path();
+    while std::fs::symlink_metadata(existing).is_err() {
+        match existing.parent() {
+            Some(p) if !p.as_os_str().is_empty() => existing = p,
+            _ => {
+                existing = std::path::Path::new(".");
+                break;
+            }
+        }
+    }
+    if !existing.is_dir() {
+        return Err(Error::io(
+            path,
+            std::io::Error::new(
+                std::io::ErrorKind::NotADirectory,
+                format!(
+                    "cannot create the output folder {}: {} is a file in the way (move it or \
+                     choose another output)",
+                    dir.display(),
+                    existing.display()
+                ),
+            ),
+        ));
+    }
+    // Writability as the writes will see it (permissions, read-only mounts, ACLs): create
+    // and remove a probe file.
+    let probe = existing.join(format!(".ibl-write-probe-{}", std::process::id()));
+    match std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&probe)
+    {
+        Ok(_) => {
+            let _ = std::fs::remove_file(&probe);
+            Ok(())
+        }
+        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => Ok(()),
+        Err(e) => Err(Error::io(
+            path,
+            std::io::Error::new(
+                e.kind(),
+                format!(
+                    "cannot write into {} ({e}): choose a writable output",
+                    existing.display()
+                ),
+            ),
+        )),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -28,10 +28,12 @@ pub fn linear_to_srgb(c: f32) -> f32 {
     }
 }
 
-/// Refuses a PNG palette (PLTE chunk) that is not whole RGB triples: `png` 0.18.1 panics on
-/// one (image-rs/image-png#694; found by fuzzing, `fuzz/regressions/png/`). `io::guard` would
-/// catch the panic, but not before the panic message reached stderr.
-fn check_png_palette(path: &Path, bytes: &[u8]) -> Result<()> {
+/// Walks a PNG's chunks: refuses a palette (PLTE chunk) that is not whole RGB triples, as
+/// `png` 0.18.1 panics on one (image-rs/image-png#694; found by fuzzing,
+/// `fuzz/regressions/png/`; `io::guard` would catch the panic, but not before its message
+/// reached stderr), and a file that ends before its IEND chunk: the decoder returns the image
+/// once the pixel data is complete, so a file cut after its last IDAT would pass as whole.
+fn check_png_structure(path: &Path, bytes: &[u8]) -> Result<()> {
     if !bytes.starts_with(b"\x89PNG\r\n\x1a\n") {
         return Ok(());
     }
@@ -44,13 +46,107 @@ fn check_png_palette(path: &Path, bytes: &[u8]) -> Result<()> {
                 format!("PNG palette of {len} bytes is not whole RGB entries"),
             ));
         }
-        at = at.saturating_add(12).saturating_add(len);
+        let end = at.saturating_add(12).saturating_add(len);
+        if end > bytes.len() {
+            break;
+        }
+        if &head[4..8] == b"IEND" {
+            return Ok(());
+        }
+        at = end;
     }
-    Ok(())
+    Err(Error::invalid(
+        path,
+        "truncated PNG: the file ends before its IEND chunk (an incomplete download or copy?)",
+    ))
+}
+
+/// Finds where a JPEG's segments end, walking markers from SOI through every scan to EOI:
+/// `None` when the data stops first. Entropy-coded data cannot contain a marker (0xFF is
+/// stuffed as FF 00), so the walk needs no decoding; an EXIF thumbnail's own EOI lies inside
+/// its APP1 segment and is skipped with it.
+fn jpeg_end(bytes: &[u8]) -> Option<usize> {
+    let mut at = 2usize; // after SOI
+    loop {
+        // Markers may be preceded by fill bytes 0xFF.
+        while *bytes.get(at)? == 0xFF && *bytes.get(at + 1)? == 0xFF {
+            at += 1;
+        }
+        if *bytes.get(at)? != 0xFF {
+            return None;
+        }
+        let m = *bytes.get(at + 1)?;
+        match m {
+            0xD9 => return Some(at + 2),
+            0x01 | 0xD0..=0xD7 => at += 2,
+            _ => {
+                let len = u16::from_be_bytes([*bytes.get(at + 2)?, *bytes.get(at + 3)?]) as usize;
+                at = at + 2 + len;
+                if m == 0xDA {
+                    // Entropy-coded data up to the next marker that is not a stuffed 0xFF or
+                    // a restart marker.
+                    loop {
+                        if *bytes.get(at)? == 0xFF {
+                            let n = *bytes.get(at + 1)?;
+                            if n != 0x00 && !(0xD0..=0xD7).contains(&n) {
+                                break;
+                            }
+                            at += 2;
+                        } else {
+                            at += 1;
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Decodes a JPEG in zune-jpeg's strict mode: the `image` crate runs it leniently, which
+/// fills what a truncated or corrupt file lacks with grey and returns success. Returns
+/// 8-bit grey or RGB samples and the channel count.
+fn decode_jpeg(path: &Path, bytes: &[u8]) -> Result<(usize, usize, usize, Vec<u8>)> {
+    use zune_core::colorspace::ColorSpace as Zcs;
+    if jpeg_end(bytes).is_none() {
+        return Err(Error::invalid(
+            path,
+            "truncated JPEG: the data ends before the end-of-image marker (an incomplete \
+             download or copy?)",
+        ));
+    }
+    let bad = |e: zune_jpeg::errors::DecodeErrors| {
+        Error::invalid(path, format!("not a readable JPEG image: {e:?}"))
+    };
+    let options = zune_core::options::DecoderOptions::default()
+        .set_strict_mode(true)
+        .set_max_width(usize::MAX)
+        .set_max_height(usize::MAX);
+    let mut d = zune_jpeg::JpegDecoder::new_with_options(
+        zune_core::bytestream::ZCursor::new(bytes),
+        options,
+    );
+    d.decode_headers().map_err(bad)?;
+    let (w, h) = d
+        .dimensions()
+        .ok_or_else(|| Error::invalid(path, "JPEG without dimensions"))?;
+    Image::check_size(path, w as u64, h as u64)?;
+    let grey = matches!(d.input_colorspace(), Some(Zcs::Luma | Zcs::LumaA));
+    let (out, channels) = if grey { (Zcs::Luma, 1) } else { (Zcs::RGB, 3) };
+    d.set_options(options.jpeg_set_out_colorspace(out));
+    let data = d.decode().map_err(bad)?;
+    if data.len() != w * h * channels {
+        return Err(Error::invalid(path, "JPEG decoded to the wrong size"));
+    }
+    Ok((w, h, channels, data))
 }
 
 pub fn decode(path: &Path, bytes: &[u8], color: ColorSpace) -> Result<Image> {
-    check_png_palette(path, bytes)?;
+    if bytes.starts_with(&[0xFF, 0xD8]) {
+        let (w, h, channels, data) = decode_jpeg(path, bytes)?;
+        let data = data.into_iter().map(|v| v as f32 / 255.0).collect();
+        return finish(Image::from_data(w, h, channels, data)?, color);
+    }
+    check_png_structure(path, bytes)?;
     let bad = |e: image::ImageError| Error::invalid(path, format!("not a readable image: {e}"));
     let reader = image::ImageReader::new(Cursor::new(bytes))
         .with_guessed_format()
@@ -101,7 +197,15 @@ pub fn decode(path: &Path, bytes: &[u8], color: ColorSpace) -> Result<Image> {
             .map(|v| v as f32 / 65535.0)
             .collect(),
     };
-    let mut img = Image::from_data(w as usize, h as usize, channels, data)?;
+    finish(
+        Image::from_data(w as usize, h as usize, channels, data)?,
+        color,
+    )
+}
+
+/// Decodes sRGB-encoded colour channels to linear (alpha stays as stored).
+fn finish(mut img: Image, color: ColorSpace) -> Result<Image> {
+    let channels = img.channels;
     if color == ColorSpace::Srgb {
         for px in img.data.chunks_exact_mut(channels) {
             let colour = if channels == 4 { 3 } else { channels };

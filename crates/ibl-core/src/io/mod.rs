@@ -15,7 +15,7 @@ pub mod packed;
 mod rgbe;
 pub mod texture;
 
-pub use atomic::{write_atomic, write_many_atomic};
+pub use atomic::{check_output, write_atomic, write_many_atomic, OutputKind};
 
 use crate::error::{Error, Result};
 use crate::image::Image;
@@ -97,8 +97,8 @@ pub fn read_image(path: &Path, color: ColorSpace) -> Result<Image> {
     decode_image(path, &bytes, color)
 }
 
-/// Decodes image bytes; `path` names the file in errors and selects the format by extension
-/// (falling back to the magic number).
+/// Decodes image bytes; the format is the one the bytes' signature (magic number) names,
+/// the extension only when the signature is unknown; `path` names the file in errors.
 pub fn decode_image(path: &Path, bytes: &[u8], color: ColorSpace) -> Result<Image> {
     if bytes.is_empty() {
         return Err(Error::invalid(path, "empty file"));
@@ -115,9 +115,11 @@ pub fn decode_image(path: &Path, bytes: &[u8], color: ColorSpace) -> Result<Imag
     } else {
         ""
     };
-    let kind = match ext.as_str() {
-        "exr" | "hdr" | "png" | "jpg" | "jpeg" | "pic" => ext.as_str(),
-        _ => by_magic,
+    // The content decides, whatever the name says: EXR data named `.png` reads as it does
+    // named `.txt`. The extension only names a format whose signature is unknown.
+    let kind = match (by_magic, ext.as_str()) {
+        ("", "exr" | "hdr" | "png" | "jpg" | "jpeg" | "pic") => ext.as_str(),
+        (magic, _) => magic,
     };
     match kind {
         "exr" => guard(path, "EXR", || exr_io::decode(path, bytes)),
@@ -294,6 +296,97 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(err.contains("limit"), "{err}");
+    }
+
+    /// One small image in every format the readers take, JPEG in grey and colour, baseline
+    /// and progressive-free (the `image` encoder writes baseline).
+    fn every_format() -> Vec<(&'static str, Vec<u8>)> {
+        let mut img = Image::new(64, 48, 3);
+        for (k, v) in img.data.iter_mut().enumerate() {
+            *v = ((k * 7919) % 1000) as f32 / 1000.0;
+        }
+        let p8 = WriteOptions {
+            png_bits: 8,
+            ..Default::default()
+        };
+        let enc = |n: &str, o: &WriteOptions| encode_image(Path::new(n), &img, o).unwrap();
+        let jpeg = |grey: bool| {
+            let mut out = Vec::new();
+            let (data, color): (Vec<u8>, _) = if grey {
+                let g = img.data.iter().step_by(3).map(|v| (v * 255.0) as u8);
+                (g.collect(), image::ExtendedColorType::L8)
+            } else {
+                let c = img.data.iter().map(|v| (v * 255.0) as u8);
+                (c.collect(), image::ExtendedColorType::Rgb8)
+            };
+            image::codecs::jpeg::JpegEncoder::new_with_quality(&mut out, 90)
+                .encode(&data, 64, 48, color)
+                .unwrap();
+            out
+        };
+        let half = WriteOptions {
+            float: FloatDepth::F16,
+            ..Default::default()
+        };
+        vec![
+            ("a.exr", enc("a.exr", &WriteOptions::default())),
+            ("h.exr", enc("h.exr", &half)),
+            ("a.hdr", enc("a.hdr", &WriteOptions::default())),
+            ("a.png", enc("a.png", &p8)),
+            ("b.png", enc("b.png", &WriteOptions::default())),
+            ("a.jpg", jpeg(false)),
+            ("g.jpg", jpeg(true)),
+        ]
+    }
+
+    #[test]
+    fn truncated_files_are_refused_in_every_format() {
+        for (name, bytes) in every_format() {
+            let path = Path::new(name);
+            let whole = decode_image(path, &bytes, ColorSpace::Linear).unwrap();
+            assert_eq!((whole.width, whole.height), (64, 48), "{name}");
+            let n = bytes.len();
+            let mut cuts: Vec<usize> = [0.05, 0.3, 0.5, 0.7, 0.9, 0.99]
+                .iter()
+                .map(|f| (n as f64 * f) as usize)
+                .collect();
+            cuts.extend([n - 1, n - 2, n - 3, n - 12]);
+            for cut in cuts {
+                let err = decode_image(path, &bytes[..cut], ColorSpace::Linear)
+                    .map(|_| ())
+                    .expect_err(&format!("{name} cut at {cut} of {n} was accepted"));
+                assert!(err.to_string().starts_with(name), "{err}");
+            }
+        }
+    }
+
+    #[test]
+    fn the_content_decides_the_format_not_the_name() {
+        for (name, bytes) in every_format() {
+            let whole = decode_image(Path::new(name), &bytes, ColorSpace::Linear).unwrap();
+            for other in ["x.png", "x.exr", "x.txt", "x.jpg", "x.hdr", "x"] {
+                let back = decode_image(Path::new(other), &bytes, ColorSpace::Linear)
+                    .unwrap_or_else(|e| panic!("{name} named {other}: {e}"));
+                assert_eq!(back, whole, "{name} named {other}");
+            }
+        }
+    }
+
+    #[test]
+    fn jpeg_corrupt_scan_data_is_refused() {
+        let (_, bytes) = every_format().remove(5);
+        let jpeg = |b: &[u8]| decode_image(Path::new("c.jpg"), b, ColorSpace::Linear);
+        // A reserved marker in the middle of the scan, the file still ending in EOI: the
+        // lenient decoder skips it and fills the rest.
+        let mut b = bytes.clone();
+        let at = b.len() / 2;
+        b[at] = 0xFF;
+        b[at + 1] = 0x05;
+        assert!(jpeg(&b).is_err());
+        // Trailing bytes after EOI are common (camera padding) and harmless.
+        let mut b = bytes.clone();
+        b.extend_from_slice(&[0u8; 16]);
+        assert!(jpeg(&b).is_ok());
     }
 
     #[test]

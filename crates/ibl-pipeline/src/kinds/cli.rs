@@ -412,7 +412,10 @@ list_collector!(
 
 /// Parses `args` with clap into `P` (the other half of the round trip).
 pub fn from_args<P: clap::Args + clap::FromArgMatches>(args: &[String]) -> Result<P, String> {
-    let cmd = P::augment_args(clap::Command::new("params").no_binary_name(true));
+    // A flag the CLI requires (hv-lut --nu) is left out of the defaults' arguments: RON
+    // validation, not clap, refuses a pipeline without it.
+    let cmd = P::augment_args(clap::Command::new("params").no_binary_name(true))
+        .mut_args(|a| a.required(false));
     let m = cmd.try_get_matches_from(args).map_err(|e| e.to_string())?;
     P::from_arg_matches(&m).map_err(|e| e.to_string())
 }

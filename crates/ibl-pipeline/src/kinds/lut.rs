@@ -40,7 +40,7 @@ pub static DFG: Adapter<dfg::Params> = Adapter {
 
 pub static FRESNEL_TAIL: Adapter<tail::Params> = Adapter {
     name: "fresnel-tail",
-    summary: "Fresnel-tail table of the SH-exponential probes (paper 002 eq. 15)",
+    summary: "Fresnel-tail table of the SH-exponential probes (Silvennoinen et al. 2025 eq. 15)",
     command: &["brdf-lut", "fresnel-tail"],
     package: "brdf-lut",
     reads: Arity::NONE,

@@ -4,7 +4,7 @@
 use super::{input_error, standard_argv, Adapter, Arity, BakeError, Baked, ParamsObj};
 use ibl_core::error::ErrorClass;
 use ibl_core::progress::Progress;
-use ibl_material::{batch::glob_match, normal, quat_map as qm, tpr_map as tpr};
+use ibl_material::{batch, normal, quat_map as qm, tpr_map as tpr};
 use std::path::{Path, PathBuf};
 
 fn invalid(path: &Path, why: impl std::fmt::Display) -> BakeError {
@@ -14,47 +14,51 @@ fn invalid(path: &Path, why: impl std::fmt::Display) -> BakeError {
     }
 }
 
-/// Material folders under `root` (itself included): (folder relative to `root`, its normal map),
-/// sorted; hidden entries skipped. A folder with several files matching `pattern` is an error.
+/// Normal maps under `root` (itself included), walked by `ibl_core::walk` (symlinked folders
+/// followed, loops refused): (folder relative to `root`, normal map, output file name), sorted.
+/// Several files matching `pattern` in one folder are an error unless the output name has
+/// {stem} (one output per file).
 fn material_folders(
     root: &Path,
     pattern: &str,
     output_name: &str,
-) -> Result<Vec<(PathBuf, PathBuf)>, BakeError> {
+) -> Result<Vec<(PathBuf, PathBuf, String)>, BakeError> {
     let mut found = Vec::new();
-    let mut stack = vec![root.to_path_buf()];
-    while let Some(dir) = stack.pop() {
-        let mut entries: Vec<_> = std::fs::read_dir(&dir)
-            .map_err(|e| invalid(&dir, e))?
-            .flatten()
-            .filter(|e| !e.file_name().to_string_lossy().starts_with('.'))
-            .collect();
-        entries.sort_by_key(|e| e.file_name());
-        let mut normals = Vec::new();
-        for e in entries {
-            let path = e.path();
-            let name = e.file_name().to_string_lossy().into_owned();
-            if path.is_dir() {
-                stack.push(path);
-            } else if glob_match(pattern, &name) && name != output_name {
-                normals.push(path);
+    let mut problem = None;
+    let per_file = output_name.contains(batch::STEM);
+    ibl_core::walk::folders(root, &mut |dir, listing| {
+        let files = match listing {
+            Ok(l) => &l.files,
+            Err(e) => {
+                problem.get_or_insert_with(|| invalid(dir, e));
+                return;
             }
+        };
+        let normals = batch::inputs_in(files, pattern, output_name);
+        if normals.len() > 1 && !per_file {
+            problem.get_or_insert_with(|| {
+                invalid(
+                    dir,
+                    format!(
+                        "{} files match '{pattern}' (give each its own output with \
+                         output_name: \"{{stem}}_quat.png\")",
+                        normals.len()
+                    ),
+                )
+            });
+            return;
         }
-        match normals.as_slice() {
-            [] => {}
-            [n] => found.push((
-                dir.strip_prefix(root)
-                    .unwrap_or(Path::new(""))
-                    .to_path_buf(),
-                n.clone(),
-            )),
-            many => {
-                return Err(invalid(
-                    &dir,
-                    format!("{} files match '{pattern}'", many.len()),
-                ))
-            }
+        let rel = dir
+            .strip_prefix(root)
+            .unwrap_or(Path::new(""))
+            .to_path_buf();
+        for (n, out) in normals {
+            found.push((rel.clone(), n.clone(), out));
         }
+    })
+    .map_err(|e| invalid(root, e))?;
+    if let Some(p) = problem {
+        return Err(p);
     }
     found.sort();
     Ok(found)
@@ -93,10 +97,11 @@ fn quat_jobs(
             jobs.extend(
                 found
                     .into_iter()
-                    .map(|(rel, normal)| (normal, base.join(rel).join(&p.output_name))),
+                    .map(|(rel, normal, out)| (normal, base.join(rel).join(out))),
             );
         } else {
-            jobs.push((input.clone(), base.join(&p.output_name)));
+            let out = batch::output_name(&p.output_name, input);
+            jobs.push((input.clone(), base.join(out)));
         }
     }
     let mut outs: Vec<&PathBuf> = jobs.iter().map(|j| &j.1).collect();

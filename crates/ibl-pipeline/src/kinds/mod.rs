@@ -99,12 +99,60 @@ impl<P: BakeParams> ParamsObj for P {
         self
     }
     fn canonical(&self) -> serde_json::Value {
-        // serde_json's map is a BTreeMap (no `preserve_order`), so keys come out sorted.
-        serde_json::to_value(self).expect("Params serialise to JSON")
+        // serde_json's map is a BTreeMap (no `preserve_order`), so keys come out sorted;
+        // f32 values as the user wrote them (0.2, not 0.20000000298023224).
+        let mut v = serde_json::to_value(self).expect("Params serialise to JSON");
+        ibl_core::io::data::shortest_f32(&mut v);
+        v
     }
     fn cli_args(&self) -> Result<Vec<String>, String> {
         cli::to_args(self)
     }
+}
+
+impl<P: BakeParams> Adapter<P> {
+    fn in_ron_terms(&self, e: BakeError) -> BakeError {
+        BakeError {
+            message: ron_terms(&e.message, &self.param_names()),
+            ..e
+        }
+    }
+}
+
+/// Rewrites a bake's message for a pipeline, whose user writes RON keys, not CLI flags:
+/// "pass --y-down" becomes "set y_down: true", "drop --y-down" "set y_down: false", and any
+/// other "--max-roughness" of the kind's parameters "max_roughness". The libraries word
+/// their messages for the CLIs they share with the pipeline.
+pub fn ron_terms(message: &str, names: &[String]) -> String {
+    let mut out = message.to_string();
+    // Longest first, so that --size does not rewrite the front of --size-bias.
+    let mut names: Vec<&String> = names.iter().collect();
+    names.sort_by_key(|n| std::cmp::Reverse(n.len()));
+    for name in names {
+        let flag = format!("--{}", name.replace('_', "-"));
+        if !out.contains(&flag) {
+            continue;
+        }
+        for (verb, value) in [("pass ", "true"), ("use ", "true"), ("drop ", "false")] {
+            out = out.replace(&format!("{verb}{flag}"), &format!("set {name}: {value}"));
+        }
+        // Whole flags only: the next character must not continue the flag's name.
+        let mut rewritten = String::with_capacity(out.len());
+        let mut rest = out.as_str();
+        while let Some(at) = rest.find(&flag) {
+            let after = &rest[at + flag.len()..];
+            rewritten.push_str(&rest[..at]);
+            if after.starts_with(|c: char| c.is_ascii_alphanumeric() || c == '-') {
+                rewritten.push_str(&flag);
+            } else {
+                rewritten.push_str(name);
+            }
+            rest = after;
+        }
+        rewritten.push_str(rest);
+        out = rewritten;
+    }
+    out
 }
 
 /// The canonical text of parameters hashed into cache keys.
@@ -340,7 +388,7 @@ impl<P: BakeParams> Kind for Adapter<P> {
         Ok(Arc::new(p))
     }
     fn validate(&self, p: &AnyParams) -> Result<(), BakeError> {
-        (self.validate)(self.typed(p))
+        (self.validate)(self.typed(p)).map_err(|e| self.in_ron_terms(e))
     }
     fn out_arg(&self, p: &AnyParams, dir: &Path) -> PathBuf {
         (self.out)(self.typed(p), dir)
@@ -363,7 +411,13 @@ impl<P: BakeParams> Kind for Adapter<P> {
         dir: &Path,
         progress: &dyn Progress,
     ) -> Result<Baked, BakeError> {
-        (self.run)(self.typed(p), inputs, &self.out_arg(p, dir), progress)
+        let mut baked = (self.run)(self.typed(p), inputs, &self.out_arg(p, dir), progress)
+            .map_err(|e| self.in_ron_terms(e))?;
+        let names = self.param_names();
+        for w in &mut baked.warnings {
+            *w = ron_terms(w, &names);
+        }
+        Ok(baked)
     }
     fn argv(
         &self,
@@ -421,6 +475,27 @@ pub(crate) fn input_error(kind: &str, why: impl Into<String>) -> BakeError {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn pipeline_messages_name_ron_keys() {
+        let names: Vec<String> = ["y_down", "size", "size_bias", "sanitize", "max_roughness"]
+            .map(String::from)
+            .to_vec();
+        assert_eq!(
+            ron_terms("leans y-down (DirectX): pass --y-down", &names),
+            "leans y-down (DirectX): set y_down: true"
+        );
+        assert_eq!(ron_terms("drop --y-down", &names), "set y_down: false");
+        assert_eq!(
+            ron_terms(
+                "--size 9 and --size-bias 2; --max-roughness -1 (--sanitize)",
+                &names
+            ),
+            "size 9 and size_bias 2; max_roughness -1 (sanitize)"
+        );
+        // Flags of other tools stay as they are.
+        assert_eq!(ron_terms("--other", &names), "--other");
+    }
 
     #[test]
     fn every_kind_round_trips_its_parameters_through_its_cli() {

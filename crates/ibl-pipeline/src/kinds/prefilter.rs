@@ -18,7 +18,10 @@ pub static PREFILTER: Adapter<Params> = Adapter {
     run: |p, inputs, out, progress: &dyn Progress| {
         let env = load_environment(one_input("prefilter", inputs)?, p.sanitize)?;
         let baked = pf::run(p, &env, out, progress)?;
+        // Everything the CLI tells the user: the input's, the chain's own warnings (an
+        // upsampled source, a kernel wider than a level's support), and the report's note.
         let mut warnings = env.warnings();
+        warnings.extend(baked.chain.warnings.iter().cloned());
         warnings.extend(baked.chain.report.note.clone());
         warnings.extend(baked.chain.warnings.iter().cloned());
         Ok(Baked {

@@ -8,7 +8,7 @@ use ibl_shexp::fit::{self, Params};
 
 pub static SHEXP_FIT: Adapter<Params> = Adapter {
     name: "shexp-fit",
-    summary: "SH-exponential glossy probe fit (paper 002)",
+    summary: "SH-exponential glossy probe fit (Silvennoinen et al. 2025)",
     command: &["shexp-fit"],
     package: "shexp-fit",
     reads: Arity::one(ENVIRONMENT),
