@@ -698,8 +698,22 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
         source: &source,
         params: Quality::Default.tree_params(),
     };
-    let runtime_report =
-        runtime::evaluate(&mips, params.target, runtime::REPORT_DIRECTIONS, &reference);
+    // The engine samples what the format decodes to: a lossy chain is looked up decoded.
+    let enc = params.encoding()?;
+    let decoded = if enc.format.is_lossless() {
+        None
+    } else {
+        let (payload, _) =
+            ibl_core::io::texture::encode_chain(&mips, enc.format, enc.bc6h_quality);
+        Some(ibl_core::io::texture::decode_cube(Path::new("chain"), &payload)?)
+    };
+    let mut runtime_report = runtime::evaluate(
+        decoded.as_ref().unwrap_or(&mips),
+        params.target,
+        runtime::REPORT_DIRECTIONS,
+        &reference,
+    );
+    runtime_report.format = enc.format.name();
     let runtime_seconds = tr.elapsed().as_secs_f64();
     let report = Report {
         runtime: Some(runtime_report),

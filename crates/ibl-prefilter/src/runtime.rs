@@ -123,6 +123,9 @@ pub struct RuntimeReport {
     /// Directions per roughness (low-discrepancy, between texel centres).
     pub directions: usize,
     pub reference: &'static str,
+    /// The pixel format the looked-up chain was decoded from (the engine samples the decoded
+    /// texels; rgba32f is the float chain itself).
+    pub format: &'static str,
 }
 
 /// Evaluates `target`'s lookup of `mips` (as baked, in our frame: the targets' orientations
@@ -144,6 +147,7 @@ pub fn evaluate(
         roughness,
         directions,
         reference: reference.name(),
+        format: "rgba32f",
     }
 }
 
