@@ -14,8 +14,10 @@ build:
 demo: build
 	@if [ -x target/release/bake ] && [ -f pipelines/probe.ron ]; then \
 		target/release/bake run pipelines/probe.ron && \
+		target/release/contact-sheet --quiet out/probe -o out/probe/contact-sheet.png && \
 		echo "demo outputs are in $(OUT)/probe/: cube/ (faces), prefiltered/ (GGX chain + prefilter.json)," && \
-		echo "  irradiance/ (sh.json + E/pi cube), dfg/dfg.exr, shexp/shexp.json; run it again: all up to date"; \
+		echo "  irradiance/ (sh.json + E/pi cube), dfg/dfg.exr, shexp/shexp.json; run it again: all up to date" && \
+		echo "contact sheet of all of it: out/probe/contact-sheet.png"; \
 	else \
 		target/release/equirect-to-cube $(DEMO_INPUT) -o $(OUT)/cube --size 128 && \
 		target/release/irradiance $(DEMO_INPUT) -o $(OUT)/irradiance && \

@@ -1,0 +1,78 @@
+//! `contact-sheet`: parse, read the baked outputs, lay them out with `ibl_preview`, write
+//! the PNG atomically, report.
+
+use clap::Parser;
+use ibl_core::io::{self, WriteOptions};
+use ibl_core::Error;
+use std::path::PathBuf;
+
+/// A labelled PNG contact sheet of baked outputs: the environment cube as a horizontal cross,
+/// every prefiltered level (with its roughness), the irradiance cube and the DFG LUT, tone
+/// mapped with one exposure taken from the environment.
+#[derive(Parser)]
+#[command(version, about)]
+struct Cli {
+    /// Baked outputs: a pipeline's output folder (e.g. out/probe), a bake's folder, a
+    /// .ktx2/.ktx/.dds cube or a LUT image.
+    #[arg(required = true)]
+    inputs: Vec<PathBuf>,
+    /// The sheet (.png).
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Exposure in stops on top of the automatic one (log-average luminance → 0.18).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    exposure: f32,
+    /// Height in pixels of every tile.
+    #[arg(long, default_value_t = 192)]
+    height: usize,
+    #[command(flatten)]
+    common: ibl_cli::CommonArgs,
+}
+
+fn main() {
+    let cli = ibl_cli::parse::<Cli>("contact-sheet");
+    ibl_cli::run("contact-sheet", cli.common.clone(), |_ctx| {
+        if io::extension(&cli.output) != "png" {
+            return Err(Error::param(format!(
+                "--output {} must be a .png",
+                cli.output.display()
+            )));
+        }
+        if !cli.exposure.is_finite() || cli.exposure.abs() > 30.0 {
+            return Err(Error::param("--exposure must be within ±30 stops"));
+        }
+        if !(16..=2048).contains(&cli.height) {
+            return Err(Error::param("--height must be within 16..=2048"));
+        }
+        let mut assets = Vec::new();
+        for input in &cli.inputs {
+            assets.extend(ibl_preview::assets::discover(input)?);
+        }
+        let exposure = ibl_preview::sheet::exposure_for(&assets, cli.exposure);
+        let rows = ibl_preview::sheet::rows(&assets, exposure, cli.height);
+        let footer = format!(
+            "ACES tone map, sRGB; exposure {:+.1} EV: log-average luminance {:.3} -> 0.18; LUT as stored",
+            cli.exposure, exposure.mean_luminance
+        );
+        let sheet = ibl_preview::sheet::compose(&rows, &footer);
+        let opts = WriteOptions {
+            png_bits: 8,
+            ..WriteOptions::default()
+        };
+        let bytes = io::encode_image(&cli.output, &sheet, &opts)?;
+        io::write_atomic(&cli.output, &bytes)?;
+        Ok::<_, Error>((
+            vec![cli.output.display().to_string()],
+            serde_json::json!({
+                "width": sheet.width,
+                "height": sheet.height,
+                "rows": rows.iter().map(|r| serde_json::json!({
+                    "title": r.title,
+                    "tiles": r.tiles.iter().map(|t| &t.caption).collect::<Vec<_>>(),
+                })).collect::<Vec<_>>(),
+                "mean_luminance": exposure.mean_luminance,
+                "exposure_scale": exposure.scale,
+            }),
+        ))
+    })
+}

@@ -1,0 +1,192 @@
+//! End to end: `contact-sheet` on a small bake output tree written with ibl_core's writers
+//! (faces, a KTX2 chain with its prefilter.json, an irradiance folder, a DFG table), and on
+//! missing or garbled inputs.
+
+use ibl_core::io::{self, ColorSpace, FloatDepth, WriteOptions};
+use ibl_core::{CubeMips, Cubemap, Image};
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn run(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_contact-sheet"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn write_faces(dir: &Path, prefix: &str, cube: &Cubemap) {
+    for (k, face) in cube.faces.iter().enumerate() {
+        let name = format!("{prefix}{}.exr", ibl_core::Face::from_index(k).name());
+        io::write_image(&dir.join(name), face, &WriteOptions::default()).unwrap();
+    }
+}
+
+/// out/{cube, prefiltered, irradiance, dfg, shexp}: red environment, green 3-level chain (as
+/// KTX2), blue irradiance, a yellow 16² table, and a folder with no image.
+fn tree(root: &Path) {
+    for d in ["cube", "prefiltered", "irradiance", "dfg", "shexp"] {
+        std::fs::create_dir_all(root.join(d)).unwrap();
+    }
+    write_faces(
+        &root.join("cube"),
+        "",
+        &Cubemap::constant(8, [1.0, 0.0, 0.0]),
+    );
+    let mips = CubeMips {
+        levels: [8, 4, 2]
+            .map(|n| Cubemap::constant(n, [0.0, 1.0, 0.0]))
+            .to_vec(),
+    };
+    std::fs::write(
+        root.join("prefiltered/prefiltered.ktx2"),
+        io::ktx2::encode_cube(&mips, FloatDepth::F32),
+    )
+    .unwrap();
+    std::fs::write(
+        root.join("prefiltered/prefilter.json"),
+        r#"{"level":[{"roughness":0.0},{"roughness":0.5},{"roughness":1.0}]}"#,
+    )
+    .unwrap();
+    write_faces(
+        &root.join("irradiance"),
+        "",
+        &Cubemap::constant(4, [0.0, 0.0, 1.0]),
+    );
+    std::fs::write(root.join("irradiance/sh.json"), "{}").unwrap();
+    let lut = Image::from_data(16, 16, 2, [0.9, 0.9].repeat(256)).unwrap();
+    io::write_image(&root.join("dfg/dfg.exr"), &lut, &WriteOptions::default()).unwrap();
+    std::fs::write(root.join("shexp/shexp.json"), "{}").unwrap();
+}
+
+#[test]
+fn sheet_has_every_row_in_order_and_the_lut_as_stored() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("out");
+    tree(&root);
+    let sheet = root.join("sheet.png");
+    let out = run(&[
+        root.to_str().unwrap(),
+        "-o",
+        sheet.to_str().unwrap(),
+        "--height",
+        "48",
+        "--json",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let summary: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let img = io::read_image(&sheet, ColorSpace::Linear).unwrap();
+    assert_eq!(summary["details"]["width"], img.width);
+    assert_eq!(summary["details"]["height"], img.height);
+    let rows = summary["details"]["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 4, "{rows:?}");
+    assert_eq!(rows[1]["tiles"][2], "level 2, r = 1.00 (2²)");
+    // Four rows of 48-pixel tiles; the widest row is the chain's three 64×48 crosses.
+    assert!(
+        img.height > 4 * 48 && img.width > 3 * 64,
+        "{}×{}",
+        img.width,
+        img.height
+    );
+
+    // Each row's tiles: pixels of its colour, at least a whole cross's 6 faces of 16² each,
+    // and the rows top to bottom in the order environment, chain, irradiance, table.
+    let byte = |v: f32| (v * 255.0).round() as i32;
+    let rows_of = |pred: &dyn Fn([i32; 3]) -> bool| {
+        let mut ys = Vec::new();
+        for y in 0..img.height {
+            for x in 0..img.width {
+                let t = img.texel(x, y);
+                if pred([byte(t[0]), byte(t[1]), byte(t[2])]) {
+                    ys.push(y);
+                }
+            }
+        }
+        ys
+    };
+    let dominant = |c: usize| move |p: [i32; 3]| (0..3).all(|k| k == c || p[c] > p[k] + 80);
+    let red = rows_of(&dominant(0));
+    let green = rows_of(&dominant(1));
+    let blue = rows_of(&dominant(2));
+    let lut = rows_of(&|p| p == [230, 230, 0]);
+    assert!(
+        red.len() >= 6 * 16 * 16,
+        "environment row: {} px",
+        red.len()
+    );
+    assert!(
+        green.len() >= 3 * 6 * 16 * 16,
+        "chain row: {} px",
+        green.len()
+    );
+    assert!(
+        blue.len() >= 6 * 16 * 16,
+        "irradiance row: {} px",
+        blue.len()
+    );
+    // The table is shown as stored, 0.9 → 230, scaled from 16² to 48².
+    assert_eq!(lut.len(), 48 * 48);
+    let span = |v: &[usize]| (v[0], *v.last().unwrap());
+    let (r, g, b, l) = (span(&red), span(&green), span(&blue), span(&lut));
+    assert!(
+        r.1 < g.0 && g.1 < b.0 && b.1 < l.0,
+        "{r:?} {g:?} {b:?} {l:?}"
+    );
+    assert_eq!((l.1 - l.0 + 1), 48);
+}
+
+fn assert_one_line_error(out: &Output, code: i32, names: &str) {
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(code), "{err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    assert!(err.contains(names), "{err}");
+}
+
+#[test]
+fn missing_garbled_or_mismatched_inputs_fail_in_one_line_and_write_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let sheet = dir.path().join("sheet.png");
+    let s = sheet.to_str().unwrap();
+
+    let missing = dir.path().join("nowhere");
+    let out = run(&[missing.to_str().unwrap(), "-o", s]);
+    assert_one_line_error(&out, 4, "nowhere");
+
+    let garbled = dir.path().join("garbled");
+    std::fs::create_dir_all(&garbled).unwrap();
+    for f in ["px", "nx", "py", "ny", "pz", "nz"] {
+        std::fs::write(garbled.join(format!("{f}.exr")), b"not an exr at all").unwrap();
+    }
+    let out = run(&[garbled.to_str().unwrap(), "-o", s]);
+    assert_one_line_error(&out, 2, "garbled");
+
+    let empty = dir.path().join("empty");
+    std::fs::create_dir_all(&empty).unwrap();
+    let out = run(&[empty.to_str().unwrap(), "-o", s]);
+    assert_one_line_error(&out, 2, "empty");
+
+    // prefilter.json that disagrees with the chain beside it.
+    let root = dir.path().join("out");
+    tree(&root);
+    std::fs::write(
+        root.join("prefiltered/prefilter.json"),
+        r#"{"level":[{"roughness":0.0}]}"#,
+    )
+    .unwrap();
+    let out = run(&[root.to_str().unwrap(), "-o", s]);
+    assert_one_line_error(&out, 2, "prefilter.json");
+
+    let out = run(&[
+        empty.to_str().unwrap(),
+        "-o",
+        dir.path().join("s.jpg").to_str().unwrap(),
+    ]);
+    assert_one_line_error(&out, 2, ".png");
+
+    assert!(!sheet.exists());
+    let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
+    assert_eq!(left.len(), 3, "only the inputs remain: {left:?}");
+}
