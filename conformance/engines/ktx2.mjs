@@ -15,7 +15,7 @@ export function readCubeRgba32f(path) {
   return { n, faces: [0, 1, 2, 3, 4, 5].map((f) => all.subarray(f * face, (f + 1) * face)) };
 }
 
-// Direction of texel (i, j) of face f of an n-texel face (DESIGN.md table, faces px nx py ny pz nz).
+// Direction of texel (i, j) of face f of an n-texel face (docs/CONVENTIONS.md table, faces px nx py ny pz nz).
 export function texelDirection(f, i, j, n) {
   const sc = (2 * (i + 0.5)) / n - 1;
   const tc = (2 * (j + 0.5)) / n - 1;

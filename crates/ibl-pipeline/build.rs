@@ -9,6 +9,10 @@
 //! their path relative to the workspace, by path and content only (never mtimes or absolute
 //! paths), so the same sources give the same fingerprint in any checkout, and a change to any
 //! of them gives a new one (cached results are then rebuilt once).
+//!
+//! Stage keys use a narrower fingerprint per library crate (`library_fingerprints.rs` in
+//! `OUT_DIR`): only that crate and its workspace dependencies, without test code, so editing a
+//! test, the plotting crate or another bake's library re-bakes nothing it does not run.
 
 #[path = "build/fingerprint.rs"]
 mod fingerprint;
@@ -28,4 +32,17 @@ fn main() {
     println!("cargo:rerun-if-changed=build.rs");
     println!("cargo:rerun-if-changed=build/fingerprint.rs");
     println!("cargo:rustc-env=IBL_BUILD_FINGERPRINT={fp}");
+    // Per library crate, the fingerprint of the code its bakes run (`cache::tool_for`).
+    let libraries = fingerprint::library_fingerprints(&workspace)
+        .unwrap_or_else(|e| panic!("fingerprinting the workspace crates: {e}"));
+    let table: String = libraries
+        .iter()
+        .map(|(name, fp)| format!("    ({name:?}, {fp:?}),\n"))
+        .collect();
+    let out = PathBuf::from(std::env::var_os("OUT_DIR").expect("cargo sets it"));
+    std::fs::write(
+        out.join("library_fingerprints.rs"),
+        format!("&[\n{table}]\n"),
+    )
+    .unwrap_or_else(|e| panic!("writing the library fingerprints: {e}"));
 }

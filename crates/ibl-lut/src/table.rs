@@ -5,8 +5,7 @@
 use crate::error::{Error, Result};
 use ibl_core::io::{self, FloatDepth, WriteOptions};
 use ibl_core::progress::Progress;
-use ibl_core::Image;
-use rayon::prelude::*;
+use ibl_core::{traverse, Image};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 
@@ -22,7 +21,7 @@ pub fn texel_centre(i: usize, n: usize) -> f64 {
 }
 
 /// Builds a width × height table with `channels` channels by calling `kernel(row, out)` for
-/// each row in parallel; `out` is that row's interleaved data.
+/// each row in parallel over [`ibl_core::traverse`]; `out` is that row's interleaved data.
 pub fn map_rows<K>(
     width: usize,
     height: usize,
@@ -34,15 +33,15 @@ where
     K: Fn(usize, &mut [f32]) + Sync,
 {
     let mut img = Image::new(width, height, channels);
-    progress.start("rows", height as u64);
-    img.data
-        .par_chunks_mut(width * channels)
-        .enumerate()
-        .for_each(|(j, row)| {
-            kernel(j, row);
-            progress.inc(1);
-        });
-    progress.finish();
+    traverse::map_image_rows_with(
+        &mut img.data,
+        width * channels,
+        1,
+        "rows",
+        progress,
+        || (),
+        |_, j, row| kernel(j, row),
+    );
     img
 }
 

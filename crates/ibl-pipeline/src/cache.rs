@@ -1,7 +1,7 @@
 //! The content-addressed cache: stage keys, the manifest of what is built, and the object store.
 //!
 //! A stage's key is the blake3 hash of the tool (its version and the fingerprint of the sources
-//! it was built from, see [`tool`]), its kind, its canonical parameters and,
+//! its bake runs, see [`tool_for`]), its kind, its canonical parameters and,
 //! for each source it reads in order, the digest of that input's bytes and names (see
 //! [`input_digest`]) or the key of the upstream stage. Keys of upstream stages (not the bytes
 //! of their outputs) make every key known before anything runs; bakes are deterministic, so a
@@ -48,6 +48,24 @@ pub fn tool() -> String {
         ibl_core::TOOL_VERSION,
         env!("IBL_BUILD_FINGERPRINT")
     )
+}
+
+/// Per workspace library crate, the fingerprint of the code its bakes run (that crate and its
+/// workspace dependencies, without tests; `build.rs`).
+const LIBRARY_FINGERPRINTS: &[(&str, &str)] =
+    include!(concat!(env!("OUT_DIR"), "/library_fingerprints.rs"));
+
+/// The `tool` part of the keys of stages whose bake lives in the crate `library`: the package
+/// version and that library's fingerprint, so editing tests, the plotting crate or another
+/// bake's library leaves these keys alone. An unknown crate falls back to [`tool`].
+pub fn tool_for(library: &str) -> String {
+    match LIBRARY_FINGERPRINTS
+        .iter()
+        .find(|(name, _)| *name == library)
+    {
+        Some((_, fp)) => format!("{}+{}", ibl_core::TOOL_VERSION, fp),
+        None => tool(),
+    }
 }
 
 /// What a stage key is made of.
@@ -628,6 +646,99 @@ mod tests {
         assert_eq!(fingerprint::fingerprint(d1.path()).unwrap().0, fp);
         write(d1.path(), "Cargo.lock", "lock2");
         assert_ne!(fingerprint::fingerprint(d1.path()).unwrap().0, fp);
+    }
+
+    #[test]
+    fn a_library_fingerprint_follows_only_the_code_its_bakes_run() {
+        let root = tempfile::tempdir().unwrap();
+        let root = root.path();
+        let write = |rel: &str, text: &str| {
+            let p = root.join(rel);
+            std::fs::create_dir_all(p.parent().unwrap()).unwrap();
+            std::fs::write(p, text).unwrap();
+        };
+        let lib = |body: &str, test: &str| {
+            format!(
+                "//! A crate.\n\npub fn f() -> f32 {{\n    {body}\n}}\n\n#[cfg(test)]\n\
+                 fn helper() -> f32 {{ 2.0 }}\n\n#[cfg(test)]\nmod tests {{\n    \
+                 #[test]\n    fn t() {{\n        assert_eq!(helper(), {test}.0);\n    }}\n}}\n"
+            )
+        };
+        write("Cargo.toml", "[workspace]\nmembers = [\"crates/*\"]\n");
+        write("Cargo.lock", "lock");
+        let toml = |name: &str, deps: &str| {
+            format!("[package]\nname = \"{name}\"\n\n[dependencies]\n{deps}\n[dev-dependencies]\nibl-plot.workspace = true\n")
+        };
+        write(
+            "crates/core/Cargo.toml",
+            &toml("ibl-core", "glam = \"0.30\""),
+        );
+        write("crates/core/src/lib.rs", &lib("1.0", "3"));
+        write(
+            "crates/pre/Cargo.toml",
+            &toml("ibl-prefilter", "ibl-core.workspace = true"),
+        );
+        write("crates/pre/src/lib.rs", &lib("2.0", "3"));
+        write("crates/pre/tests/e2e.rs", "// end to end");
+        write(
+            "crates/lut/Cargo.toml",
+            &toml("ibl-lut", "ibl-core = { path = \"../core\" }"),
+        );
+        write("crates/lut/src/lib.rs", &lib("3.0", "3"));
+        write("crates/plot/Cargo.toml", &toml("ibl-plot", ""));
+        write("crates/plot/src/lib.rs", &lib("4.0", "3"));
+        let keys = || {
+            ["ibl-prefilter", "ibl-lut"].map(|l| {
+                fingerprint::library_fingerprint(root, l)
+                    .unwrap()
+                    .expect("a workspace crate")
+            })
+        };
+        let [pre, lut] = keys();
+        assert_ne!(pre, lut);
+        let all = fingerprint::library_fingerprints(root).unwrap();
+        assert_eq!(all.len(), 4);
+        assert!(
+            all.contains(&("ibl-lut".to_string(), lut.clone())),
+            "{all:?}"
+        );
+        assert_eq!(
+            fingerprint::library_fingerprint(root, "nope").unwrap(),
+            None
+        );
+        // Test-only code, tests/, the plotting crate (a dev-dependency only): no change.
+        write("crates/pre/src/lib.rs", &lib("2.0", "4"));
+        write("crates/core/src/lib.rs", &lib("1.0", "5"));
+        write("crates/pre/tests/e2e.rs", "// edited");
+        write("crates/plot/src/lib.rs", &lib("4.5", "3"));
+        assert_eq!(keys(), [pre.clone(), lut.clone()]);
+        let helper = lib("1.0", "5").replace("{ 2.0 }", "{ 2.5 }");
+        write("crates/core/src/lib.rs", &helper);
+        assert_eq!(keys(), [pre.clone(), lut.clone()]);
+        // A library's own code changes its key, not another library's.
+        write("crates/pre/src/lib.rs", &lib("2.5", "4"));
+        let [pre2, lut2] = keys();
+        assert_ne!(pre2, pre);
+        assert_eq!(lut2, lut);
+        // A shared dependency's code changes both.
+        write("crates/core/src/lib.rs", &lib("1.5", "5"));
+        let [pre3, lut3] = keys();
+        assert!(pre3 != pre2 && lut3 != lut2);
+    }
+
+    #[test]
+    fn every_kind_keys_on_its_own_library_fingerprint() {
+        for kind in crate::kinds::all() {
+            let t = tool_for(kind.library());
+            assert!(
+                LIBRARY_FINGERPRINTS
+                    .iter()
+                    .any(|(name, fp)| *name == kind.library() && t.ends_with(fp)),
+                "{}: no fingerprint for '{}'",
+                kind.name(),
+                kind.library()
+            );
+        }
     }
 
     #[test]

@@ -191,7 +191,7 @@ pub fn plan(graph: &Graph, force: bool) -> Result<Plan> {
             })
             .collect();
         let parts = KeyParts {
-            tool: crate::cache::tool(),
+            tool: crate::cache::tool_for(kind.library()),
             kind: kind.name().to_string(),
             params: canonical_text(params),
             reads,

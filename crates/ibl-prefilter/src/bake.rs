@@ -703,9 +703,11 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
     let decoded = if enc.format.is_lossless() {
         None
     } else {
-        let (payload, _) =
-            ibl_core::io::texture::encode_chain(&mips, enc.format, enc.bc6h_quality);
-        Some(ibl_core::io::texture::decode_cube(Path::new("chain"), &payload)?)
+        let (payload, _) = ibl_core::io::texture::encode_chain(&mips, enc.format, enc.bc6h_quality);
+        Some(ibl_core::io::texture::decode_cube(
+            Path::new("chain"),
+            &payload,
+        )?)
     };
     let mut runtime_report = runtime::evaluate(
         decoded.as_ref().unwrap_or(&mips),

@@ -1,4 +1,4 @@
-//! Cubes as horizontal crosses (DESIGN.md faces and orientation: nx pz px nz across the middle,
+//! Cubes as horizontal crosses (docs/CONVENTIONS.md faces and orientation: nx pz px nz across the middle,
 //! py above pz, ny below, each face as stored), and resampling to a common height.
 
 use ibl_core::{Cubemap, Face, Image};
@@ -88,7 +88,7 @@ mod tests {
         let n = 4;
         let img = horizontal_cross(&labelled_cube(n));
         assert_eq!((img.width, img.height, img.channels), (16, 12, 4));
-        // DESIGN.md's cross, written out cell by cell (row, column) → face index + 1 (0: empty).
+        // docs/CONVENTIONS.md's cross, written out cell by cell (row, column) → face index + 1 (0: empty).
         let expected = [[0, 3, 0, 0], [2, 5, 1, 6], [0, 4, 0, 0]];
         for (row, cells) in expected.iter().enumerate() {
             for (col, &k) in cells.iter().enumerate() {

@@ -3,34 +3,8 @@
 //!
 //! The table itself comes from `ibl-lut` ([`Dfg::standard`]: `ibl_lut::dfg::dfg_table`, whose
 //! B channel is also the R channel of its `fresnel-tail` table, and whose B/(A+B) is that
-//! table's G channel). [`dfg_integrals`] / [`Dfg::build`] are an independent VNDF estimator
-//! kept as the cross-check of the shared table (see tests).
-
-use crate::microfacet::{g1, g2, reflect, sample_vndf, schlick_tail};
-use glam::Vec3;
-use ibl_core::sampling::hammersley;
-
-/// (A, B) of the split-sum: A + B = ∫ f_DV (n·l) dl, B = ∫ f_DV (1 − v·h)⁵ (n·l) dl, for a
-/// view at cos θ = `n_dot_v` and GGX α = `alpha`, by `samples` VNDF samples (weight G2/G1(v)).
-pub fn dfg_integrals(n_dot_v: f32, alpha: f32, samples: u32) -> (f64, f64) {
-    let nv = n_dot_v.clamp(1e-4, 1.0);
-    let v = Vec3::new((1.0 - nv * nv).sqrt(), 0.0, nv);
-    let g1v = g1(nv, alpha);
-    let (mut a, mut b) = (0.0f64, 0.0f64);
-    for i in 0..samples {
-        let (u1, u2) = hammersley(i, samples);
-        let h = sample_vndf(v, u1, u2, alpha);
-        let l = reflect(v, h);
-        if l.z <= 0.0 {
-            continue;
-        }
-        let w = (g2(nv, l.z, alpha) / g1v) as f64;
-        let t = schlick_tail(v.dot(h)) as f64;
-        a += w * (1.0 - t);
-        b += w * t;
-    }
-    (a / samples as f64, b / samples as f64)
-}
+//! table's G channel); the tests check it against `ibl_lut::reference::DfgReference`, the
+//! Gauss–Legendre quadrature that shares nothing with the bake's estimator.
 
 /// How the SH-exp path turns E0 into the Fresnel tail E1.
 #[derive(
@@ -62,26 +36,6 @@ pub struct Dfg {
 }
 
 impl Dfg {
-    /// Builds a table (parallel over rows).
-    pub fn build(width: usize, height: usize, samples: u32) -> Self {
-        use rayon::prelude::*;
-        let data = (0..width * height)
-            .into_par_iter()
-            .map(|k| {
-                let (i, j) = (k % width, k / width);
-                let nv = (i as f32 + 0.5) / width as f32;
-                let r = (j as f32 + 0.5) / height as f32;
-                let (a, b) = dfg_integrals(nv, r * r, samples);
-                [a as f32, b as f32]
-            })
-            .collect();
-        Dfg {
-            width,
-            height,
-            data,
-        }
-    }
-
     /// The table every part of this crate shares: `ibl-lut`'s DFG bake at its defaults
     /// (128², 1024 samples per texel), built once per process, so the fit's E0/(A+B) target and
     /// the evaluator use the same values a renderer loads.
@@ -96,6 +50,18 @@ impl Dfg {
                 &ibl_core::progress::NoProgress,
             ))
         })
+    }
+
+    /// A small table baked by `ibl-lut` (size², `samples` per texel) for tests that need a
+    /// cheap one.
+    #[cfg(test)]
+    pub(crate) fn baked(size: usize, samples: u32) -> Self {
+        Dfg::from_image(&ibl_lut::dfg::dfg_table(
+            size,
+            samples,
+            false,
+            &ibl_core::progress::NoProgress,
+        ))
     }
 
     /// A table from an image in the docs/CONVENTIONS.md layout (R = A, G = B).
@@ -157,43 +123,15 @@ impl Dfg {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::microfacet::f_dv;
+    use ibl_lut::reference::DfgReference;
 
     #[test]
-    fn integrals_match_quadrature() {
-        for (nv, alpha) in [(0.9f32, 0.25f32), (0.3, 0.6), (0.05, 1.0)] {
-            let (a, b) = dfg_integrals(nv, alpha, 1 << 16);
-            let v = Vec3::new((1.0 - nv * nv).sqrt(), 0.0, nv);
-            let k = 600;
-            let (mut s, mut t) = (0.0f64, 0.0f64);
-            for i in 0..k {
-                let z = (i as f64 + 0.5) / k as f64;
-                let st = (1.0 - z * z).sqrt();
-                for j in 0..2 * k {
-                    let phi = std::f64::consts::PI * (j as f64 + 0.5) / k as f64;
-                    let l = Vec3::new((st * phi.cos()) as f32, (st * phi.sin()) as f32, z as f32);
-                    let f = (f_dv(v, l, alpha) * l.z) as f64;
-                    s += f;
-                    t += f * schlick_tail(v.dot((v + l).normalize())) as f64;
-                }
-            }
-            let w = 2.0 * std::f64::consts::PI / (2 * k * k) as f64;
-            eprintln!(
-                "n·v={nv} α={alpha}: A+B {:.5} vs {:.5}, B {b:.5} vs {:.5}",
-                a + b,
-                s * w,
-                t * w
-            );
-            assert!((a + b - s * w).abs() < 3e-3);
-            assert!((b - t * w).abs() < 2e-3);
-        }
-    }
-
-    #[test]
-    fn shared_table_agrees_with_the_independent_estimator() {
-        // ibl-lut's table (GGX-D sampling) against our VNDF estimator at the same texel centres.
+    fn shared_table_agrees_with_the_quadrature_reference() {
+        // The table as this crate loads it (R = A, G = B) against the independent product
+        // Gauss–Legendre rule at the same texel centres.
         let shared = Dfg::standard();
-        let mut worst = [0.0f32; 2];
+        let reference = DfgReference::new(256);
+        let mut worst = [0.0f64; 2];
         for (i, j) in [
             (0usize, 0usize),
             (3, 64),
@@ -203,15 +141,15 @@ mod tests {
             (127, 127),
             (0, 127),
         ] {
-            let nv = (i as f32 + 0.5) / shared.width as f32;
-            let r = (j as f32 + 0.5) / shared.height as f32;
-            let (a, b) = dfg_integrals(nv, r * r, 1 << 15);
+            let nv = (i as f64 + 0.5) / shared.width as f64;
+            let r = (j as f64 + 0.5) / shared.height as f64;
+            let [a, b] = reference.dfg(nv, r * r);
             let s = shared.data[j * shared.width + i];
-            worst[0] = worst[0].max((s[0] - a as f32).abs());
-            worst[1] = worst[1].max((s[1] - b as f32).abs());
+            worst[0] = worst[0].max((s[0] as f64 - a).abs());
+            worst[1] = worst[1].max((s[1] as f64 - b).abs());
         }
         eprintln!(
-            "ibl-lut DFG vs independent VNDF estimate: max |ΔA| {:.2e}, max |ΔB| {:.2e}",
+            "ibl-lut DFG vs Gauss–Legendre reference: max |ΔA| {:.2e}, max |ΔB| {:.2e}",
             worst[0], worst[1]
         );
         assert!(worst[0] < 5e-3 && worst[1] < 5e-3, "{worst:?}");
@@ -219,7 +157,7 @@ mod tests {
 
     #[test]
     fn lookup_hits_texel_centres_and_factor_limits() {
-        let dfg = Dfg::build(8, 8, 512);
+        let dfg = Dfg::baked(8, 512);
         let (a, b) = dfg.ab(2.5 / 8.0, 5.5 / 8.0);
         assert_eq!([a, b], dfg.data[5 * 8 + 2]);
         // Chrome: factor 1 whatever the tail; ratio mode gives at most 1.

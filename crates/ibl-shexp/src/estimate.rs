@@ -6,8 +6,9 @@
 //! only on the local view and α, so it is built once per (view, α) before the row loop; a row
 //! then only rotates the table into its normal's frame and reads the chain.
 
-use crate::microfacet::{g1, g2, pdf_vndf_reflected, reflect, sample_vndf};
 use glam::Vec3;
+use ibl_brdf::ggx::{g1, g2, pdf_vndf_reflected, sample_vndf};
+use ibl_brdf::reflect;
 use ibl_core::bordered::BorderedMips;
 use ibl_core::sampling::hammersley;
 
@@ -57,14 +58,25 @@ pub struct Estimator {
 }
 
 impl Estimator {
-    /// Builds all tables (in parallel over (α, view); the result is order-deterministic).
+    /// Builds all tables (in parallel over (α, view) with `ibl_core::traverse`, kept in order).
     pub fn new(views: &[Vec3], alphas: &[f32], samples: usize, lod_bias: f32) -> Self {
-        use rayon::prelude::*;
         let nv = views.len();
-        let tables = (0..alphas.len() * nv)
-            .into_par_iter()
-            .map(|i| sample_table(views[i % nv], alphas[i / nv], samples, lod_bias))
-            .collect();
+        let tables = ibl_core::traverse::ordered_row_reduce(
+            alphas.len() * nv,
+            |i| {
+                vec![sample_table(
+                    views[i % nv],
+                    alphas[i / nv],
+                    samples,
+                    lod_bias,
+                )]
+            },
+            Vec::with_capacity(alphas.len() * nv),
+            |mut all, one| {
+                all.extend(one);
+                all
+            },
+        );
         Estimator {
             views: views.to_vec(),
             alphas: alphas.to_vec(),
@@ -136,7 +148,7 @@ pub fn e0_at(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::microfacet::f_dv;
+    use ibl_brdf::ggx::f_dv;
     use ibl_core::{CubeMips, Cubemap};
 
     #[test]

@@ -18,8 +18,7 @@ use glam::Vec3;
 use ibl_core::envmap::Environment;
 use ibl_core::equirect::Filter;
 use ibl_core::progress::{NoProgress, Progress};
-use ibl_core::{Cubemap, Image, Rgb};
-use rayon::prelude::*;
+use ibl_core::{traverse, Cubemap, Image, Rgb};
 use std::fmt::Write;
 use std::time::Instant;
 
@@ -234,9 +233,9 @@ pub fn compute_truth(cube: &Cubemap, params: &Params, progress: &dyn Progress) -
     let mut views = Vec::new();
     for &vd in &params.views {
         let cam = camera(vd);
-        let rows: Vec<Vec<TruthPixel>> = (0..s)
-            .into_par_iter()
-            .map(|j| {
+        let pixels = traverse::ordered_row_reduce(
+            s,
+            |j| {
                 let mut out = Vec::new();
                 for i in 0..s {
                     let Some(n) = pixel_normal(i, j, s, cam) else {
@@ -257,9 +256,14 @@ pub fn compute_truth(cube: &Cubemap, params: &Params, progress: &dyn Progress) -
                 }
                 progress.inc(1);
                 out
-            })
-            .collect();
-        views.push((cam.2, rows.into_iter().flatten().collect()));
+            },
+            Vec::new(),
+            |mut all, row| {
+                all.extend(row);
+                all
+            },
+        );
+        views.push((cam.2, pixels));
     }
     progress.finish();
     Truth {

@@ -25,7 +25,7 @@ use ibl_core::bordered::BorderedMips;
 use ibl_core::envmap::{Environment, LoadedEnvironment};
 use ibl_core::equirect::Filter;
 use ibl_core::progress::{NoProgress, Progress};
-use ibl_core::{CubeMips, Cubemap};
+use ibl_core::{traverse, CubeMips, Cubemap};
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -377,9 +377,7 @@ pub fn estimate_rows(
         .collect();
     let na = params.alphas.len();
     let (p, q) = (params.p_order, params.q_order);
-    type NormalOut = (Vec<Features>, Vec<f32>, Vec<[f64; 3]>);
-    let per_normal: Vec<NormalOut>;
-    progress.start("E0 rows", params.normals as u64);
+    let per_normal: NormalRows;
     match params.estimator {
         EstimatorKind::Mc => {
             let t0 = Instant::now();
@@ -389,26 +387,9 @@ pub fn estimate_rows(
             let est = Estimator::new(&views, &params.alphas, params.samples, params.lod_bias);
             timings.tables = t0.elapsed().as_secs_f64();
             let t0 = Instant::now();
-            per_normal = (0..params.normals)
-                .into_par_iter()
-                .map(|i| {
-                    let (frame, world) = row_geometry(i, params.normals, &views);
-                    let mut feats = Vec::with_capacity(views.len());
-                    let mut nv = Vec::with_capacity(views.len());
-                    let mut e0 = Vec::with_capacity(views.len() * na);
-                    for (k, v) in world.iter().enumerate() {
-                        let mut f = Features::new(p, q);
-                        f.eval(frame.2, *v);
-                        feats.push(f);
-                        nv.push(frame.2.dot(*v));
-                        for a in 0..na {
-                            e0.push(est.e0(&sampler, frame, a, k));
-                        }
-                    }
-                    progress.inc(1);
-                    (feats, nv, e0)
-                })
-                .collect();
+            per_normal = map_normals(params, &views, progress, |frame, k, _, e0| {
+                e0.extend((0..na).map(|a| est.e0(&sampler, frame, a, k)));
+            });
             timings.estimate = t0.elapsed().as_secs_f64();
         }
         EstimatorKind::Exact => {
@@ -422,45 +403,65 @@ pub fn estimate_rows(
             let set = TexelSet::from_cube(&small);
             timings.prepare = t0.elapsed().as_secs_f64();
             let t0 = Instant::now();
-            per_normal = (0..params.normals)
-                .into_par_iter()
-                .map(|i| {
-                    let (frame, world) = row_geometry(i, params.normals, &views);
-                    let mut feats = Vec::with_capacity(views.len());
-                    let mut nv = Vec::with_capacity(views.len());
-                    let mut e0 = Vec::with_capacity(views.len() * na);
-                    let mut out = vec![([0.0; 3], [0.0; 3]); na];
-                    for v in &world {
-                        let mut f = Features::new(p, q);
-                        f.eval(frame.2, *v);
-                        feats.push(f);
-                        nv.push(frame.2.dot(*v));
-                        set.e0_e1(frame.2, *v, &params.alphas, &mut out);
-                        e0.extend(out.iter().map(|o| o.0));
-                    }
-                    progress.inc(1);
-                    (feats, nv, e0)
-                })
-                .collect();
+            per_normal = map_normals(params, &views, progress, |frame, _, v, e0| {
+                let mut out = vec![([0.0; 3], [0.0; 3]); na];
+                set.e0_e1(frame.2, v, &params.alphas, &mut out);
+                e0.extend(out.iter().map(|o| o.0));
+            });
             timings.estimate = t0.elapsed().as_secs_f64();
         }
     }
-    progress.finish();
-    let mut rows = Rows {
+    let (features, n_dot_v, e0) = per_normal;
+    Rows {
         p_order: p,
         q_order: q,
         alphas: params.alphas.clone(),
-        features: vec![],
-        n_dot_v: vec![],
-        e0: vec![],
+        features,
+        n_dot_v,
+        e0,
         normals: params.normals,
         views: params.views,
-    };
-    for (f, nv, e) in per_normal {
-        rows.features.extend(f);
-        rows.n_dot_v.extend(nv);
-        rows.e0.extend(e);
     }
+}
+
+/// Features, n·v and E0 (α fastest) of consecutive (normal, view) pairs.
+type NormalRows = (Vec<Features>, Vec<f32>, Vec<[f64; 3]>);
+
+/// The rows of every normal, one normal per task over the shared ordered traversal
+/// (`ibl_core::traverse`), concatenated in normal order whatever the thread count.
+/// `e0_of(frame, k, v, e0)` appends the E0 of view k (world direction v) at every α.
+fn map_normals<E>(params: &Params, views: &[Vec3], progress: &dyn Progress, e0_of: E) -> NormalRows
+where
+    E: Fn((Vec3, Vec3, Vec3), usize, Vec3, &mut Vec<[f64; 3]>) + Sync,
+{
+    let na = params.alphas.len();
+    progress.start("E0 rows", params.normals as u64);
+    let rows = traverse::ordered_row_reduce(
+        params.normals,
+        |i| {
+            let (frame, world) = row_geometry(i, params.normals, views);
+            let mut feats = Vec::with_capacity(views.len());
+            let mut nv = Vec::with_capacity(views.len());
+            let mut e0 = Vec::with_capacity(views.len() * na);
+            for (k, v) in world.iter().enumerate() {
+                let mut f = Features::new(params.p_order, params.q_order);
+                f.eval(frame.2, *v);
+                feats.push(f);
+                nv.push(frame.2.dot(*v));
+                e0_of(frame, k, *v, &mut e0);
+            }
+            progress.inc(1);
+            (feats, nv, e0)
+        },
+        (vec![], vec![], vec![]),
+        |mut all, row| {
+            all.0.extend(row.0);
+            all.1.extend(row.1);
+            all.2.extend(row.2);
+            all
+        },
+    );
+    progress.finish();
     rows
 }
 
@@ -1031,8 +1032,9 @@ mod tests {
             co.residual
         );
         // Mean level at n = v (where A+B is largest) follows the albedo at both ends.
+        let reference = ibl_lut::reference::DfgReference::new(256);
         for alpha in [0.2f32, 1.0] {
-            let (a, b) = crate::dfg::dfg_integrals(1.0, alpha, 1 << 14);
+            let [a, b] = reference.dfg(1.0, alpha as f64);
             let e = co.e0(Vec3::Z, Vec3::Z, alpha)[0] as f64 / c as f64;
             let e11 = co.eq11().e0(Vec3::Z, Vec3::Z, alpha)[0] as f64 / c as f64;
             eprintln!(
@@ -1090,13 +1092,14 @@ mod tests {
         let mut timings = Timings::default();
         let rows = estimate_rows(&params, &cube, &mut timings, &NoProgress);
         let na = params.alphas.len();
+        let reference = ibl_lut::reference::DfgReference::new(256);
         let mut worst = 0.0f64;
         let mut mean_log = 0.0f64;
         for (r, e) in rows.e0.iter().enumerate() {
             let nv = rows.n_dot_v[r / na];
             let alpha = params.alphas[r % na];
             if r % 97 == 0 {
-                let (a, b) = crate::dfg::dfg_integrals(nv, alpha, 1 << 14);
+                let [a, b] = reference.dfg((nv as f64).clamp(1e-4, 1.0), alpha as f64);
                 worst = worst.max((e[0] / (c as f64 * (a + b)) - 1.0).abs());
             }
             mean_log += e[0].ln();

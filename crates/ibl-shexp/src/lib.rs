@@ -30,7 +30,6 @@ pub mod dfg;
 pub mod estimate;
 pub mod eval;
 pub mod fit;
-pub mod microfacet;
 pub mod refine;
 pub mod shader;
 pub mod solve;

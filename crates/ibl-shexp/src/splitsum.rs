@@ -7,8 +7,9 @@
 //! sampling) kept as the fallback and as a cross-check of the shared one.
 
 use crate::dfg::Dfg;
-use crate::microfacet::{d_ggx, reflect};
 use glam::Vec3;
+use ibl_brdf::ggx::d_ggx;
+use ibl_brdf::reflect;
 use ibl_core::bordered::BorderedMips;
 use ibl_core::cube::mip_sizes;
 use ibl_core::progress::NoProgress;
@@ -161,12 +162,12 @@ mod tests {
         }
         let a = SplitSum::new(
             &shared_chain(&cube, 32).unwrap(),
-            Dfg::build(8, 8, 64),
+            Dfg::baked(8, 64),
             "shared",
         );
         let b = SplitSum::new(
             &prefilter_chain(&cube, 32, 3, 1, 1024),
-            Dfg::build(8, 8, 64),
+            Dfg::baked(8, 64),
             "fallback",
         );
         assert_eq!(a.levels(), 3);
@@ -189,7 +190,7 @@ mod tests {
         // Split-sum is exact for L = const: L_pref = c and F0·A + B is the albedo.
         let c = 1.7f32;
         let chain = prefilter_chain(&Cubemap::constant(16, [c; 3]), 16, 5, 1, 64);
-        let ss = SplitSum::new(&chain, Dfg::build(16, 16, 256), "test");
+        let ss = SplitSum::new(&chain, Dfg::baked(16, 256), "test");
         let n = Vec3::new(0.2, 0.9, 0.1).normalize();
         let v = Vec3::new(0.0, 1.0, 0.0);
         for r in [0.5f32, 1.0] {

@@ -3,8 +3,8 @@
 //! the midpoint rule of the piecewise-constant environment, exact up to the variation of the
 //! BRDF inside one texel (measured by comparing two cube sizes, see `eval`).
 
-use crate::microfacet::schlick_tail;
 use glam::Vec3;
+use ibl_brdf::fresnel::schlick_weight as schlick_tail;
 use ibl_core::cube::{texel_direction, texel_solid_angle, Cubemap, Face};
 use std::f32::consts::PI;
 
@@ -129,7 +129,7 @@ impl TexelSet {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::microfacet::{f_dv, schlick_tail};
+    use ibl_brdf::ggx::f_dv;
 
     #[test]
     fn constant_cube_sums_to_the_albedo_integral() {

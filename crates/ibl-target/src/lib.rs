@@ -355,7 +355,7 @@ mod tests {
         ]
     }
 
-    /// Our mapping (DESIGN.md): u = 0.5 + atan2(z, x)/2π, v = acos(y)/π.
+    /// Our mapping (docs/CONVENTIONS.md): u = 0.5 + atan2(z, x)/2π, v = acos(y)/π.
     fn ours_uv(d: Vec3) -> (f32, f32) {
         let d = d.normalize();
         (

@@ -1,4 +1,4 @@
-//! Orientations: the pure transform of our cube (DESIGN.md frame) that makes an engine show
+//! Orientations: the pure transform of our cube (docs/CONVENTIONS.md frame) that makes an engine show
 //! the environment as intended. Every engine's turn or mirror is a signed permutation of the
 //! axes, so it maps texel centres onto texel centres: applying it is an exact face permutation
 //! with flips, no resampling.

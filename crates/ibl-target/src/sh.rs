@@ -1,5 +1,5 @@
 //! The diffuse SH forms engines take, made from our 3-band irradiance coefficients c_lm
-//! (DESIGN.md basis; E(n)/π = Σ c_lm Y_lm(n)): Filament's and Unity's pre-scaled polynomial
+//! (docs/CONVENTIONS.md basis; E(n)/π = Σ c_lm Y_lm(n)): Filament's and Unity's pre-scaled polynomial
 //! coefficients (cmgen's `sh.txt` and KTX1 `sh` metadata; Unity's SphericalHarmonicsL2 and
 //! its shader constants) and three.js's `LightProbe` JSON.
 
@@ -167,7 +167,7 @@ pub fn unity_shader_constants(sh: &[[f64; 9]; 3]) -> [[f64; 4]; 7] {
 
 /// Radiance coefficients L_lm in our basis and frame recovered from the irradiance ones
 /// (L_lm = c_lm·π/Â_l): what three.js's `LightProbe.sh` holds (mrdoob/three.js
-/// `src/math/SphericalHarmonics3.js`: `getBasisAt` is DESIGN.md's basis; `getIrradianceAt`
+/// `src/math/SphericalHarmonics3.js`: `getBasisAt` is docs/CONVENTIONS.md's basis; `getIrradianceAt`
 /// applies Â_l itself).
 pub fn three_radiance(irradiance: &[[f32; 3]]) -> [[f64; 3]; 9] {
     let mut out = [[0.0; 3]; 9];
@@ -315,7 +315,7 @@ mod tests {
                 }
             }
         }
-        // In our own frame the form is c_i·K_i: the constants of DESIGN.md.
+        // In our own frame the form is c_i·K_i: the constants of docs/CONVENTIONS.md.
         let p = prescaled_polynomial(&c, Orientation::IDENTITY);
         let k = [
             0.282095, 0.488603, 0.488603, 0.488603, 1.092548, 1.092548, 0.315392, 1.092548,

@@ -35,6 +35,7 @@ pub static EQUIRECT_TO_CUBE: Adapter<e2c::Params> = Adapter {
     summary: "environment to an area-filtered cubemap (faces or KTX2)",
     command: &["equirect-to-cube"],
     package: "equirect-to-cube",
+    library: "ibl-env",
     reads: Arity::one(ENVIRONMENT),
     out: super::in_dir,
     product: |p, out| {
@@ -73,6 +74,7 @@ pub static IRRADIANCE: Adapter<irr::Params> = Adapter {
     summary: "SH projection, E/π coefficients and the irradiance cube",
     command: &["irradiance"],
     package: "irradiance",
+    library: "ibl-env",
     reads: Arity::one(ENVIRONMENT),
     out: super::in_dir,
     product: |_, out| out.to_path_buf(),

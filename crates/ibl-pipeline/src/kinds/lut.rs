@@ -28,6 +28,7 @@ pub static DFG: Adapter<dfg::Params> = Adapter {
     summary: "split-sum DFG table (GGX, height-correlated Smith)",
     command: &["brdf-lut", "dfg"],
     package: "brdf-lut",
+    library: "ibl-lut",
     reads: Arity::NONE,
     out: |_, dir| dir.join("dfg.exr"),
     product: |_, out| out.to_path_buf(),
@@ -43,6 +44,7 @@ pub static FRESNEL_TAIL: Adapter<tail::Params> = Adapter {
     summary: "Fresnel-tail table of the SH-exponential probes (Silvennoinen et al. 2025 eq. 15)",
     command: &["brdf-lut", "fresnel-tail"],
     package: "brdf-lut",
+    library: "ibl-lut",
     reads: Arity::NONE,
     out: |_, dir| dir.join("fresnel-tail.exr"),
     product: |_, out| out.to_path_buf(),
@@ -58,6 +60,7 @@ pub static AS_SIZE_BIAS: Adapter<sb::Params> = Adapter {
     summary: "Ashikhmin-Shirley size/bias table for one (n_u, n_v)",
     command: &["brdf-lut", "as-size-bias"],
     package: "brdf-lut",
+    library: "ibl-lut",
     reads: Arity::NONE,
     out: |p, dir| table_out(dir, "as-size-bias.exr", p.thesis_names),
     // Invalid parameters never reach a run (the graph checks them); the folder is a fallback.
@@ -83,6 +86,7 @@ pub static HV_LUT: Adapter<hv::Params> = Adapter {
     summary: "Ashikhmin-Shirley half-vector LUT (and its sidecar) for one (n_u, n_v)",
     command: &["hv-lut"],
     package: "hv-lut",
+    library: "ibl-lut",
     reads: Arity::NONE,
     out: |p, dir| table_out(dir, "hv.exr", p.thesis_names),
     product: |p, out| {

@@ -135,6 +135,7 @@ pub static QUAT_MAP: Adapter<qm::Params> = Adapter {
     summary: "normal maps to quaternion maps (a file, or every material folder under a folder)",
     command: &["quat-map"],
     package: "quat-map",
+    library: "ibl-material",
     reads: Arity {
         min: 1,
         max: usize::MAX,
@@ -222,6 +223,7 @@ pub static TPR_MAP: Adapter<tpr::Params> = Adapter {
     summary: "tangent-plane rotation map (direction field + directional roughness)",
     command: &["tpr-map"],
     package: "tpr-map",
+    library: "ibl-material",
     reads: Arity {
         min: 0,
         max: 2,

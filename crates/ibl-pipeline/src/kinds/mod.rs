@@ -230,6 +230,9 @@ pub trait Kind: Send + Sync {
     fn command(&self) -> &'static [&'static str];
     /// The cargo package that builds that binary.
     fn package(&self) -> &'static str;
+    /// The library crate the bake lives in: its fingerprint is the tool part of the stage keys
+    /// (`cache::tool_for`).
+    fn library(&self) -> &'static str;
     fn reads(&self) -> Arity;
     /// The RON keys (= long flags with `_` for `-`) this kind's parameters accept.
     fn param_names(&self) -> Vec<String>;
@@ -289,6 +292,8 @@ pub struct Adapter<P> {
     pub summary: &'static str,
     pub command: &'static [&'static str],
     pub package: &'static str,
+    /// The library crate whose `run` the bake is (see [`Kind::library`]).
+    pub library: &'static str,
     pub reads: Arity,
     /// The `-o` argument given the stage's folder (the folder itself, or a file in it).
     pub out: fn(&P, &Path) -> PathBuf,
@@ -352,6 +357,9 @@ impl<P: BakeParams> Kind for Adapter<P> {
     }
     fn package(&self) -> &'static str {
         self.package
+    }
+    fn library(&self) -> &'static str {
+        self.library
     }
     fn reads(&self) -> Arity {
         self.reads

@@ -11,6 +11,7 @@ pub static PREFILTER: Adapter<Params> = Adapter {
     summary: "GGX prefiltered specular mip chain (split-sum radiance)",
     command: &["prefilter"],
     package: "prefilter",
+    library: "ibl-prefilter",
     reads: Arity::one(ENVIRONMENT),
     out: super::in_dir,
     product: |p, out| cube_product(out, p.encoding(), p.chain_name()),

@@ -11,6 +11,7 @@ pub static SHEXP_FIT: Adapter<Params> = Adapter {
     summary: "SH-exponential glossy probe fit (Silvennoinen et al. 2025)",
     command: &["shexp-fit"],
     package: "shexp-fit",
+    library: "ibl-shexp",
     reads: Arity::one(ENVIRONMENT),
     out: |_, dir| dir.join("shexp.json"),
     product: |_, out| out.to_path_buf(),
