@@ -29,7 +29,7 @@ def ktx_metadata(lib, st, key):
 
 
 def main():
-    tdir, bakes = Path(sys.argv[1]), Path(sys.argv[2])
+    tdir, bakes = Path(sys.argv[1]).resolve(), Path(sys.argv[2]).resolve()
     lib = c.load_libktx()
     levels = {t: json.loads((tdir / t / "prefilter.json").read_text())["levels"] for t in ("gltf", "bevy", "filament", "unity")}
 

@@ -40,7 +40,13 @@ fn main() -> ExitCode {
         };
         let levels: u32 = levels.parse().expect("levels");
         let ext = path.rsplit('.').next().unwrap_or("");
-        let bytes = std::fs::read(path).expect("file");
+        let bytes = match std::fs::read(path) {
+            Ok(b) => b,
+            Err(e) => {
+                check(false, format!("{path}: {e}"));
+                continue;
+            }
+        };
         let image = Image::from_buffer(
             &bytes,
             ImageType::Extension(ext),
@@ -60,7 +66,10 @@ fn main() -> ExitCode {
         let got = format!("{:?}", d.format);
         check(
             Some(got.as_str()) == wgpu_format(format),
-            format!("{path}: Bevy reads it as {got} (want {:?})", wgpu_format(format)),
+            format!(
+                "{path}: Bevy reads it as {got} (want {:?})",
+                wgpu_format(format)
+            ),
         );
         check(
             d.mip_level_count == levels,
@@ -93,7 +102,10 @@ fn main() -> ExitCode {
             })
             .sum();
         let len = image.data.as_ref().map_or(0, |b| b.len());
-        check(len == want, format!("{path}: {len} bytes of texels (want {want})"));
+        check(
+            len == want,
+            format!("{path}: {len} bytes of texels (want {want})"),
+        );
     }
     println!("bevy_image: {passed} passed, {failed} failed");
     if failed == 0 {
