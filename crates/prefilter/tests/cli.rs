@@ -604,34 +604,21 @@ fn target_three_has_no_chain_to_bake() {
 fn target_babylon_writes_an_env_of_the_full_chain_or_refuses() {
     let tmp = tempfile::tempdir().unwrap();
     let input = fixture("hdri/sunset_256.exr");
+    let babylon = |out: &Path, extra: &[&str]| {
+        let mut args = vec![input.to_str().unwrap(), "-o", out.to_str().unwrap()];
+        args.extend(["--size", "16", "--target", "babylon", "-q"]);
+        args.extend(extra);
+        run(&args)
+    };
     let out = tmp.path().join("b");
-    let o = run(&[
-        input.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--size",
-        "16",
-        "--target",
-        "babylon",
-        "-q",
-    ]);
+    let o = babylon(&out, &[]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let env = std::fs::read(out.join("environment.env")).unwrap();
     assert_eq!(&env[..8], &[0x86, 0x16, 0x87, 0x96, 0xf6, 0xd6, 0x96, 0x36]);
     assert_eq!(report(&out)["levels"], 5);
     // Babylon reads every level: a truncated chain is refused before any work.
     let bad = tmp.path().join("c");
-    let o = run(&[
-        input.to_str().unwrap(),
-        "-o",
-        bad.to_str().unwrap(),
-        "--size",
-        "16",
-        "--levels",
-        "3",
-        "--target",
-        "babylon",
-    ]);
+    let o = babylon(&bad, &["--levels", "3"]);
     assert_eq!(o.status.code(), Some(2));
     assert!(!bad.exists());
 }
