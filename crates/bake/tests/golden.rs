@@ -1,0 +1,154 @@
+//! Pins the bytes every bake writes: each example pipeline and `golden/fixtures.ron` (every
+//! fixture, engine target, container and pixel format) is run by the real `bake`, and every
+//! output file's BLAKE3 hash is compared with the manifest committed under `tests/golden/`.
+//!
+//! Why: refactors (one `Bake` definition per bake, the runner's module split) must leave every
+//! output byte-identical, and a change of behaviour must be deliberate. When a change is meant to
+//! alter outputs, regenerate the manifests with `GOLDEN_UPDATE=1 cargo test --release -p bake
+//! --test golden` and say why in the commit: the manifest's diff shows exactly which files moved.
+//! The CLIs are held to the same bytes by e2e's ninja test, which runs them and compares.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+fn copy_tree(from: &Path, to: &Path) {
+    if from.is_dir() {
+        for e in std::fs::read_dir(from).unwrap() {
+            let e = e.unwrap();
+            copy_tree(&e.path(), &to.join(e.file_name()));
+        }
+    } else {
+        std::fs::create_dir_all(to.parent().unwrap()).unwrap();
+        std::fs::copy(from, to).unwrap();
+    }
+}
+
+/// Relative path → BLAKE3 hex of every file under `dir`, the runner's own `.bake/` excluded.
+fn hashes(dir: &Path, rel: &Path, out: &mut BTreeMap<String, String>) {
+    let mut entries: Vec<_> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap())
+        .collect();
+    entries.sort_by_key(|e| e.file_name());
+    for e in entries {
+        let name = e.file_name();
+        if name == ".bake" {
+            continue;
+        }
+        let (path, rel) = (e.path(), rel.join(&name));
+        if path.is_dir() {
+            hashes(&path, &rel, out);
+        } else {
+            let bytes = std::fs::read(&path).unwrap();
+            let rel = rel.to_string_lossy().replace('\\', "/");
+            out.insert(rel, blake3::hash(&bytes).to_hex().to_string());
+        }
+    }
+}
+
+fn manifest_text(h: &BTreeMap<String, String>) -> String {
+    h.iter().map(|(p, x)| format!("{x}  {p}\n")).collect()
+}
+
+fn parse_manifest(text: &str) -> BTreeMap<String, String> {
+    text.lines()
+        .filter_map(|l| l.split_once("  "))
+        .map(|(x, p)| (p.to_string(), x.to_string()))
+        .collect()
+}
+
+/// Runs `pipelines/<name>.ron` in a copy of the workspace and checks (or, with
+/// `GOLDEN_UPDATE=1`, rewrites) `tests/golden/<name>.b3`.
+fn check(name: &str, output: &str) {
+    let work = tempfile::tempdir().unwrap();
+    copy_tree(&root().join("pipelines"), &work.path().join("pipelines"));
+    copy_tree(&root().join("fixtures"), &work.path().join("fixtures"));
+    copy_tree(
+        &Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/golden/fixtures.ron"),
+        &work.path().join("pipelines/golden-fixtures.ron"),
+    );
+    let out = Command::new(env!("CARGO_BIN_EXE_bake"))
+        .args(["run", &format!("pipelines/{name}.ron"), "--quiet"])
+        .current_dir(work.path())
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "bake run pipelines/{name}.ron failed:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let mut got = BTreeMap::new();
+    hashes(&work.path().join(output), Path::new(""), &mut got);
+    assert!(!got.is_empty(), "{name} wrote nothing");
+
+    let manifest = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("tests/golden/{name}.b3"));
+    if std::env::var_os("GOLDEN_UPDATE").is_some() {
+        std::fs::write(&manifest, manifest_text(&got)).unwrap();
+        return;
+    }
+    let want = parse_manifest(&std::fs::read_to_string(&manifest).unwrap_or_else(|e| {
+        panic!(
+            "{}: {e}; create it with GOLDEN_UPDATE=1 cargo test --release -p bake --test golden",
+            manifest.display()
+        )
+    }));
+    let mut problems = Vec::new();
+    for (path, hash) in &want {
+        match got.get(path) {
+            None => problems.push(format!("{path}: no longer written")),
+            Some(h) if h != hash => problems.push(format!("{path}: bytes changed")),
+            Some(_) => {}
+        }
+    }
+    for path in got.keys().filter(|p| !want.contains_key(*p)) {
+        problems.push(format!("{path}: newly written"));
+    }
+    assert!(
+        problems.is_empty(),
+        "{name}: {} of {} outputs differ from tests/golden/{name}.b3 (if meant, regenerate with \
+         GOLDEN_UPDATE=1 and say why in the commit):\n{}",
+        problems.len(),
+        want.len(),
+        problems.join("\n")
+    );
+}
+
+#[test]
+fn probe_pipeline_bytes_are_pinned() {
+    check("probe", "out/probe");
+}
+
+#[test]
+fn materials_pipeline_bytes_are_pinned() {
+    check("materials", "out/materials");
+}
+
+#[test]
+fn anisotropic_scene_bytes_are_pinned() {
+    check("anisotropic-scene", "out/anisotropic-scene");
+}
+
+#[test]
+fn every_fixture_target_and_format_bytes_are_pinned() {
+    check("golden-fixtures", "out/golden-fixtures");
+}
+
+#[test]
+fn a_manifest_round_trips_and_a_changed_byte_is_caught() {
+    let mut h = BTreeMap::new();
+    h.insert(
+        "a/b.exr".to_string(),
+        blake3::hash(b"x").to_hex().to_string(),
+    );
+    h.insert(
+        "c.json".to_string(),
+        blake3::hash(b"y").to_hex().to_string(),
+    );
+    assert_eq!(parse_manifest(&manifest_text(&h)), h);
+    assert_ne!(blake3::hash(b"x"), blake3::hash(b"x\0"));
+}
