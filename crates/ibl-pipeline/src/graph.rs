@@ -4,8 +4,9 @@
 
 use crate::error::{Diagnostic, Error, Result};
 use crate::kinds::{AnyParams, Kind};
+use crate::need::Need;
 use crate::paths;
-use crate::scene::{self, Need};
+use crate::scene;
 use crate::schema::{Input, Pipeline};
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
@@ -137,12 +138,39 @@ fn check_id(id: &str) -> std::result::Result<(), String> {
     Ok(())
 }
 
+/// The inputs a pipeline declares and its scene adds: name → (input, offset in the file).
+type InputDecls = BTreeMap<String, (Input, usize)>;
+
 /// Builds and checks the graph of a parsed pipeline. Every problem found is reported at once.
 pub fn build(pipeline: Pipeline) -> Result<Graph> {
-    let mut diags: Vec<Diagnostic> = Vec::new();
     let p = &pipeline;
+    let mut diags: Vec<Diagnostic> = Vec::new();
+    let (mut stages, raw_reads, input_decls) = collect_stages(p, &mut diags);
+    let by_id = check_ids(p, &stages, &input_decls, &mut diags);
+    check_stage_folders(p, &stages, &mut diags);
+    let unresolved = resolve_reads(p, &mut stages, &raw_reads, &input_decls, &by_id, &mut diags);
+    let order = dependency_order(p, &stages, &mut diags)?;
+    mark_needed(p, &mut stages, &order, &by_id, &mut diags);
+    check_needed_params(p, &stages, &mut diags);
+    let inputs = resolve_inputs(p, &stages, &input_decls, &mut diags);
+    check_arity(p, &stages, &unresolved, &inputs, &mut diags);
+    if !diags.is_empty() {
+        return Err(Error::Invalid(diags));
+    }
+    let stages = in_order(stages, &order);
+    Ok(Graph {
+        pipeline,
+        inputs,
+        stages,
+    })
+}
 
-    // 1. All stages: declared, then derived from the scene.
+/// Every stage, declared then derived from the scene, with the names each reads (resolved
+/// later), and every input, declared and scene-added.
+fn collect_stages(
+    p: &Pipeline,
+    diags: &mut Vec<Diagnostic>,
+) -> (Vec<Stage>, Vec<Vec<String>>, InputDecls) {
     let mut stages: Vec<Stage> = Vec::new();
     let mut raw_reads: Vec<Vec<String>> = Vec::new();
     for d in &p.stages {
@@ -160,39 +188,48 @@ pub fn build(pipeline: Pipeline) -> Result<Graph> {
         });
         raw_reads.push(d.reads.clone());
     }
-    let mut input_decls: BTreeMap<String, (Input, usize)> = p.inputs.clone();
-    if let Some(scene) = &p.scene {
-        let (derived, scene_inputs) = scene::derive(p, scene, &mut diags);
-        for (name, input, at) in scene_inputs {
-            if input_decls.contains_key(&name) {
-                diags.push(p.diag(
-                    at,
-                    format!("scene input '{name}' clashes with a declared input of the same name"),
-                ));
-            }
-            input_decls.insert(name, (input, at));
+    let mut input_decls: InputDecls = p.inputs.clone();
+    let Some(scene) = &p.scene else {
+        return (stages, raw_reads, input_decls);
+    };
+    let (derived, scene_inputs) = scene::derive(p, scene, diags);
+    for (name, input, at) in scene_inputs {
+        if input_decls.contains_key(&name) {
+            diags.push(p.diag(
+                at,
+                format!("scene input '{name}' clashes with a declared input of the same name"),
+            ));
         }
-        for d in derived {
-            let kind = crate::kinds::find(d.kind);
-            if kind.is_none() && matches!(d.need, Need::Needed(_)) {
-                diags.push(p.diag(d.offset, format!("the scene needs stage '{}' of kind '{}', which this build of bake does not have", d.id, d.kind)));
-            }
-            stages.push(Stage {
-                dir: paths::normalize(&p.output.join(&d.id)),
-                id: d.id,
-                kind_name: d.kind.to_string(),
-                kind,
-                params: d.params,
-                reads: vec![],
-                origin: Origin::Scene,
-                need: d.need,
-                offset: d.offset,
-            });
-            raw_reads.push(d.reads);
-        }
+        input_decls.insert(name, (input, at));
     }
+    for d in derived {
+        let kind = crate::kinds::find(d.kind);
+        if kind.is_none() && d.need.is_needed() {
+            diags.push(p.diag(d.offset, format!("the scene needs stage '{}' of kind '{}', which this build of bake does not have", d.id, d.kind)));
+        }
+        stages.push(Stage {
+            dir: paths::normalize(&p.output.join(&d.id)),
+            id: d.id,
+            kind_name: d.kind.to_string(),
+            kind,
+            params: d.params,
+            reads: vec![],
+            origin: Origin::Scene,
+            need: d.need,
+            offset: d.offset,
+        });
+        raw_reads.push(d.reads);
+    }
+    (stages, raw_reads, input_decls)
+}
 
-    // 2. Ids: valid, unique, distinct from input names, distinct output folders.
+/// Ids are valid, unique and distinct from input names; returns id → index.
+fn check_ids(
+    p: &Pipeline,
+    stages: &[Stage],
+    input_decls: &InputDecls,
+    diags: &mut Vec<Diagnostic>,
+) -> HashMap<String, usize> {
     let mut by_id: HashMap<String, usize> = HashMap::new();
     for (i, s) in stages.iter().enumerate() {
         if let Err(e) = check_id(&s.id) {
@@ -215,8 +252,13 @@ pub fn build(pipeline: Pipeline) -> Result<Graph> {
             ));
         }
     }
-    for s in &stages {
-        let output = paths::normalize(&p.output);
+    by_id
+}
+
+/// Each stage writes to its own folder inside the output, out of `.bake/`.
+fn check_stage_folders(p: &Pipeline, stages: &[Stage], diags: &mut Vec<Diagnostic>) {
+    let output = paths::normalize(&p.output);
+    for s in stages {
         if !paths::is_within(&s.dir, &output)
             || s.dir == output
             || paths::is_within(&s.dir, &output.join(".bake"))
@@ -233,7 +275,7 @@ pub fn build(pipeline: Pipeline) -> Result<Graph> {
         }
     }
     let mut dirs: HashMap<&Path, &str> = HashMap::new();
-    for s in &stages {
+    for s in stages {
         if let Some(other) = dirs.insert(&s.dir, &s.id).filter(|other| *other != s.id) {
             diags.push(p.diag(
                 s.offset,
@@ -245,17 +287,25 @@ pub fn build(pipeline: Pipeline) -> Result<Graph> {
             ));
         }
     }
+}
 
-    // 3. Reads resolve to inputs or stages.
-    let mut reads_of: Vec<Vec<(String, Source)>> = Vec::new();
+/// Resolves each stage's reads to inputs or stages; returns which stages had a read that
+/// names neither (their arity is not checked).
+fn resolve_reads(
+    p: &Pipeline,
+    stages: &mut [Stage],
+    raw_reads: &[Vec<String>],
+    input_decls: &InputDecls,
+    by_id: &HashMap<String, usize>,
+    diags: &mut Vec<Diagnostic>,
+) -> Vec<bool> {
     let mut unresolved = vec![false; stages.len()];
-    for (i, (s, reads)) in stages.iter().zip(&raw_reads).enumerate() {
-        let mut rs = Vec::new();
+    for (i, (s, reads)) in stages.iter_mut().zip(raw_reads).enumerate() {
         for r in reads {
             if input_decls.contains_key(r) {
-                rs.push((r.clone(), Source::Input(r.clone())));
+                s.reads.push((r.clone(), Source::Input(r.clone())));
             } else if let Some(&j) = by_id.get(r.as_str()) {
-                rs.push((r.clone(), Source::Stage(j)));
+                s.reads.push((r.clone(), Source::Stage(j)));
             } else {
                 let at = p.src[s.offset.min(p.src.len())..]
                     .find(&format!("\"{r}\""))
@@ -276,52 +326,62 @@ pub fn build(pipeline: Pipeline) -> Result<Graph> {
                 unresolved[i] = true;
             }
         }
-        reads_of.push(rs);
     }
-    for (s, rs) in stages.iter_mut().zip(reads_of) {
-        s.reads = rs;
-    }
+    unresolved
+}
 
-    // 4. Cycles (reported with the cycle's path), then dependency order.
-    let order = match topo_order(&stages) {
-        Ok(o) => o,
-        Err(cycle) => {
-            let names: Vec<&str> = cycle.iter().map(|&i| stages[i].id.as_str()).collect();
-            diags.push(p.diag(
-                stages[cycle[0]].offset,
-                format!("cycle: {} -> {}", names.join(" -> "), names[0]),
-            ));
-            return Err(Error::Invalid(diags));
-        }
-    };
+/// The stages in dependency order; a cycle is reported with its path and ends the checks.
+fn dependency_order(
+    p: &Pipeline,
+    stages: &[Stage],
+    diags: &mut Vec<Diagnostic>,
+) -> Result<Vec<usize>> {
+    topo_order(stages).map_err(|cycle| {
+        let names: Vec<&str> = cycle.iter().map(|&i| stages[i].id.as_str()).collect();
+        diags.push(p.diag(
+            stages[cycle[0]].offset,
+            format!("cycle: {} -> {}", names.join(" -> "), names[0]),
+        ));
+        Error::Invalid(std::mem::take(diags))
+    })
+}
 
-    // 5. What is needed: the closure of the targets over reads.
-    let targets: Vec<usize> = match &p.targets {
-        Some(ts) => ts
-            .iter()
-            .filter_map(|(t, at)| match by_id.get(t.as_str()) {
-                Some(&i) => Some(i),
-                None => {
-                    diags.push(p.diag(
-                        *at,
-                        format!(
-                                "output '{t}' is not a stage (stages: {})",
-                                stages
-                                    .iter()
-                                    .map(|s| s.id.as_str())
-                                    .collect::<Vec<_>>()
-                                    .join(", ")
-                            ),
-                    ));
-                    None
-                }
-            })
-            .collect(),
-        None => (0..stages.len()).filter(|&i| stages[i].needed()).collect(),
+/// The pipeline's targets: its `outputs`, or every stage needed of itself.
+fn targets(
+    p: &Pipeline,
+    stages: &[Stage],
+    by_id: &HashMap<String, usize>,
+    diags: &mut Vec<Diagnostic>,
+) -> Vec<usize> {
+    let Some(ts) = &p.targets else {
+        return (0..stages.len()).filter(|&i| stages[i].needed()).collect();
     };
-    // A target is needed for its own reason; a stage a needed stage reads is needed by it.
+    ts.iter()
+        .filter_map(|(t, at)| match by_id.get(t.as_str()) {
+            Some(&i) => Some(i),
+            None => {
+                let ids: Vec<&str> = stages.iter().map(|s| s.id.as_str()).collect();
+                diags.push(p.diag(
+                    *at,
+                    format!("output '{t}' is not a stage (stages: {})", ids.join(", ")),
+                ));
+                None
+            }
+        })
+        .collect()
+}
+
+/// What is needed: the closure of the targets over reads. A target is needed for its own
+/// reason; a stage a needed stage reads is needed by it.
+fn mark_needed(
+    p: &Pipeline,
+    stages: &mut [Stage],
+    order: &[usize],
+    by_id: &HashMap<String, usize>,
+    diags: &mut Vec<Diagnostic>,
+) {
     let mut is_target = vec![false; stages.len()];
-    for &t in &targets {
+    for t in targets(p, stages, by_id, diags) {
         is_target[t] = true;
     }
     let mut read_by: Vec<Option<usize>> = vec![None; stages.len()];
@@ -350,7 +410,16 @@ pub fn build(pipeline: Pipeline) -> Result<Graph> {
                 Need::NotNeeded("not needed by the pipeline's outputs".into())
             }
         };
-        if s.needed() && s.kind.is_none() {
+    }
+}
+
+/// Needed stages have a kind in this build and valid parameters. Parameters are checked once
+/// it is known what is needed: the scene's parameters of a stage the scene does not need are
+/// not checked unless the outputs or a stage need it. (Declared stages were checked as they
+/// were parsed; checking them again is harmless.)
+fn check_needed_params(p: &Pipeline, stages: &[Stage], diags: &mut Vec<Diagnostic>) {
+    for s in stages.iter().filter(|s| s.needed()) {
+        if s.kind.is_none() {
             diags.push(p.diag(
                 s.offset,
                 format!(
@@ -359,65 +428,72 @@ pub fn build(pipeline: Pipeline) -> Result<Graph> {
                 ),
             ));
         }
-        // Parameters are checked once it is known what is needed: the scene's parameters of a
-        // stage the scene does not need are not checked unless the outputs or a stage need it.
-        // (Declared stages were checked as they were parsed; checking them again is harmless.)
-        if let (true, Some((kind, params))) = (s.needed(), s.runnable()) {
-            if let Err(e) = kind.validate(params) {
-                let msg = match s.origin {
-                    Origin::Scene => format!(
-                        "scene: parameters of '{}' (stage '{}'): {}",
-                        s.kind_name, s.id, e.message
-                    ),
-                    Origin::Declared => {
-                        format!("stage '{}' ({}): {}", s.id, s.kind_name, e.message)
-                    }
-                };
-                diags.push(p.diag(s.offset, msg));
-            }
+        let Some((kind, params)) = s.runnable() else {
+            continue;
+        };
+        if let Err(e) = kind.validate(params) {
+            let msg = match s.origin {
+                Origin::Scene => format!(
+                    "scene: parameters of '{}' (stage '{}'): {}",
+                    s.kind_name, s.id, e.message
+                ),
+                Origin::Declared => {
+                    format!("stage '{}' ({}): {}", s.id, s.kind_name, e.message)
+                }
+            };
+            diags.push(p.diag(s.offset, msg));
         }
     }
+}
 
-    // 6. Inputs of needed stages exist; arity of every needed stage.
-    let mut inputs = BTreeMap::new();
+/// Finds every input's files on disk; an input a needed stage reads must exist.
+fn resolve_inputs(
+    p: &Pipeline,
+    stages: &[Stage],
+    input_decls: &InputDecls,
+    diags: &mut Vec<Diagnostic>,
+) -> BTreeMap<String, ResolvedInput> {
     let used: std::collections::BTreeSet<&str> = stages
         .iter()
         .filter(|s| s.needed())
         .flat_map(|s| {
-            s.reads.iter().filter_map(|(_, src)| {
-                if let Source::Input(n) = src {
-                    Some(n.as_str())
-                } else {
-                    None
-                }
+            s.reads.iter().filter_map(|(_, src)| match src {
+                Source::Input(n) => Some(n.as_str()),
+                Source::Stage(_) => None,
             })
         })
         .collect();
-    for (name, (input, at)) in &input_decls {
-        let resolved = resolve_input(p, input);
-        match resolved {
-            Ok(r) => {
-                inputs.insert(name.clone(), r);
-            }
+    let mut inputs = BTreeMap::new();
+    for (name, (input, at)) in input_decls {
+        let resolved = match resolve_input(p, input) {
+            Ok(r) => r,
             Err(why) if used.contains(name.as_str()) => {
-                diags.push(p.diag(*at, format!("input '{name}': {why}")))
+                diags.push(p.diag(*at, format!("input '{name}': {why}")));
+                continue;
             }
-            Err(_) => {
-                inputs.insert(
-                    name.clone(),
-                    ResolvedInput {
-                        input: input.clone(),
-                        path: p.resolve(input.pattern()),
-                        files: vec![],
-                        args: vec![],
-                    },
-                );
-            }
-        }
+            Err(_) => ResolvedInput {
+                input: input.clone(),
+                path: p.resolve(input.pattern()),
+                files: vec![],
+                args: vec![],
+            },
+        };
+        inputs.insert(name.clone(), resolved);
     }
+    inputs
+}
+
+/// Every needed stage whose reads all resolved reads as many sources as its kind takes.
+fn check_arity(
+    p: &Pipeline,
+    stages: &[Stage],
+    unresolved: &[bool],
+    inputs: &BTreeMap<String, ResolvedInput>,
+    diags: &mut Vec<Diagnostic>,
+) {
     for (s, _) in stages
         .iter()
-        .zip(&unresolved)
+        .zip(unresolved)
         .filter(|(s, unresolved)| s.needed() && !**unresolved)
     {
         let Some(kind) = s.kind else { continue };
@@ -442,11 +518,10 @@ pub fn build(pipeline: Pipeline) -> Result<Graph> {
             ));
         }
     }
-    if !diags.is_empty() {
-        return Err(Error::Invalid(diags));
-    }
+}
 
-    // Reorder stages topologically, remapping indices.
+/// `stages` reordered as `order` says, their reads remapped to the new indices.
+fn in_order(stages: Vec<Stage>, order: &[usize]) -> Vec<Stage> {
     let mut new_index = vec![0; stages.len()];
     for (new, &old) in order.iter().enumerate() {
         new_index[old] = new;
@@ -463,11 +538,7 @@ pub fn build(pipeline: Pipeline) -> Result<Graph> {
             }
         }
     }
-    Ok(Graph {
-        pipeline,
-        inputs,
-        stages,
-    })
+    stages
 }
 
 /// Kahn's algorithm, ties broken by declaration order; on a cycle, the stages of one cycle.
@@ -717,5 +788,40 @@ mod tests {
         for good in ["cube", "lobby/cube", "hv-lut/100x10", "a.b_c"] {
             assert!(check_id(good).is_ok(), "{good}");
         }
+    }
+
+    #[test]
+    #[cfg(all(feature = "material", feature = "lut"))]
+    fn scene_parameters_are_checked_only_where_used() {
+        let check = |src: &str| match build(
+            schema::parse(Path::new("s.ron"), src.into()).unwrap_or_else(|e| panic!("{e}")),
+        ) {
+            Ok(_) => vec![],
+            Err(Error::Invalid(d)) => d,
+            Err(e) => panic!("{e}"),
+        };
+        // 12-bit TPR maps are invalid, but no material uses a TPR map.
+        let d = check(
+            r#"(scene: (materials: [(id: "a", folder: "f", model: Ggx)], params: {"tpr-map": (size: 8, bits: 12)}))"#,
+        );
+        assert!(d.is_empty(), "{d:?}");
+        let d = check(
+            r#"(scene: (materials: [(id: "a", folder: "f", model: Ggx, tpr_map: true)], params: {"tpr-map": (size: 8, bits: 12)}))"#,
+        );
+        assert_eq!(d.len(), 1, "{d:?}");
+        assert!(
+            d[0].message.contains("tpr-map") && d[0].message.contains("bits"),
+            "{}",
+            d[0]
+        );
+        // A stage the scene does not need, needed by the outputs: checked too.
+        let d =
+            check(r#"(outputs: ["as-size-bias"], scene: (params: {"as-size-bias": (nu: -5)}))"#);
+        assert_eq!(d.len(), 1, "{d:?}");
+        assert!(
+            d[0].message.contains("as-size-bias") && d[0].message.contains("nu"),
+            "{}",
+            d[0]
+        );
     }
 }

@@ -15,6 +15,7 @@ pub mod error;
 pub mod exec;
 pub mod graph;
 pub mod kinds;
+pub mod need;
 pub mod ninja;
 pub mod paths;
 pub mod plan;

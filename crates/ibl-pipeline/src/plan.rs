@@ -5,7 +5,7 @@ use crate::cache::{input_digest, CacheDir, Hasher, KeyParts, Manifest, StageReco
 use crate::error::{Diagnostic, Error, Result};
 use crate::graph::{Graph, Source};
 use crate::kinds::canonical_text;
-use crate::scene::Need;
+use crate::need::Need;
 use std::collections::BTreeMap;
 use std::path::Path;
 

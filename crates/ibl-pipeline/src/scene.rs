@@ -14,14 +14,8 @@
 
 use crate::error::Diagnostic;
 use crate::kinds::{self, AnyParams};
+use crate::need::Need;
 use crate::schema::{Input, Model, Pipeline, Scene, Serving};
-
-/// Whether a stage is baked, and why.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub enum Need {
-    Needed(String),
-    NotNeeded(String),
-}
 
 /// A stage the scene implies.
 #[derive(Clone, Debug)]
@@ -496,40 +490,6 @@ mod tests {
         assert!(
             b.contains("\"preset\":\"radial") && b.contains("\"bits\":8"),
             "{b}"
-        );
-    }
-
-    #[test]
-    fn scene_parameters_are_checked_only_where_used() {
-        let check = |src: &str| match crate::graph::build(
-            schema::parse(Path::new("s.ron"), src.into()).unwrap_or_else(|e| panic!("{e}")),
-        ) {
-            Ok(_) => vec![],
-            Err(crate::Error::Invalid(d)) => d,
-            Err(e) => panic!("{e}"),
-        };
-        // 12-bit TPR maps are invalid, but no material uses a TPR map.
-        let d = check(
-            r#"(scene: (materials: [(id: "a", folder: "f", model: Ggx)], params: {"tpr-map": (size: 8, bits: 12)}))"#,
-        );
-        assert!(d.is_empty(), "{d:?}");
-        let d = check(
-            r#"(scene: (materials: [(id: "a", folder: "f", model: Ggx, tpr_map: true)], params: {"tpr-map": (size: 8, bits: 12)}))"#,
-        );
-        assert_eq!(d.len(), 1, "{d:?}");
-        assert!(
-            d[0].message.contains("tpr-map") && d[0].message.contains("bits"),
-            "{}",
-            d[0]
-        );
-        // A stage the scene does not need, needed by the outputs: checked too.
-        let d =
-            check(r#"(outputs: ["as-size-bias"], scene: (params: {"as-size-bias": (nu: -5)}))"#);
-        assert_eq!(d.len(), 1, "{d:?}");
-        assert!(
-            d[0].message.contains("as-size-bias") && d[0].message.contains("nu"),
-            "{}",
-            d[0]
         );
     }
 }
