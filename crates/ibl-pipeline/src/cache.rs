@@ -229,6 +229,36 @@ pub struct Manifest {
     pub files: BTreeMap<String, FileStamp>,
 }
 
+impl Manifest {
+    /// Records `record` for stage `id`: keeps the previous key in its history (for the object
+    /// store) and removes the previous outputs (in `output`) that the new ones do not replace.
+    pub fn apply(&mut self, output: &Path, id: &str, mut record: StageRecord) {
+        // Only the outputs of a sound record are removed: they lie in the output folder.
+        if let Some(old) = self.stages.remove(id).filter(StageRecord::is_sound) {
+            let new_files: std::collections::HashSet<PathBuf> = record
+                .outputs
+                .iter()
+                .map(|o| output.join(&record.dir).join(&o.rel))
+                .collect();
+            for o in &old.outputs {
+                let p = output.join(&old.dir).join(&o.rel);
+                if !new_files.contains(&p) {
+                    let _ = std::fs::remove_file(&p);
+                    crate::paths::remove_empty_parents(&p, output);
+                }
+            }
+            let mut history = vec![];
+            if old.key != record.key {
+                history.push(old.key);
+            }
+            history.extend(old.history.into_iter().filter(|k| *k != record.key));
+            history.truncate(KEEP_KEYS - 1);
+            record.history = history;
+        }
+        self.stages.insert(id.to_string(), record);
+    }
+}
+
 /// Paths under `OUTPUT/.bake/`.
 #[derive(Clone, Debug)]
 pub struct CacheDir {
@@ -542,6 +572,34 @@ pub fn temp_beside(target: &Path) -> PathBuf {
 /// Writes a runner file (manifest, entry, journal) by temp + rename, creating its folder.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     ibl_core::io::write_atomic(path, bytes).map_err(Error::from)
+}
+
+/// A record of stage folder `dir` with `files` (rel, bytes), for tests.
+#[cfg(test)]
+pub(crate) fn test_record(dir: &str, files: &[(&str, &[u8])]) -> StageRecord {
+    StageRecord {
+        key: hash_bytes(dir.as_bytes()),
+        parts: KeyParts {
+            tool: "t".into(),
+            kind: "k".into(),
+            params: "{}".into(),
+            reads: vec![],
+        },
+        dir: dir.into(),
+        outputs: files
+            .iter()
+            .map(|(rel, b)| OutputRecord {
+                rel: rel.to_string(),
+                stamp: FileStamp {
+                    size: b.len() as u64,
+                    mtime_ns: 0,
+                    hash: hash_bytes(b),
+                },
+            })
+            .collect(),
+        seconds: 0.0,
+        history: vec![],
+    }
 }
 
 #[cfg(test)]
@@ -921,5 +979,33 @@ mod tests {
         std::fs::write(cache.manifest_path(), serde_json::to_vec(&m).unwrap()).unwrap();
         let loaded = cache.load_manifest().unwrap();
         assert_eq!(loaded.stages.keys().collect::<Vec<_>>(), ["ok"]);
+    }
+
+    #[test]
+    fn a_new_record_removes_the_outputs_the_old_one_had_and_keeps_history() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path();
+        std::fs::create_dir_all(out.join("s")).unwrap();
+        for f in ["m0.exr", "m1.exr", "m2.exr"] {
+            std::fs::write(out.join("s").join(f), f).unwrap();
+        }
+        let mut m = Manifest::default();
+        m.apply(
+            out,
+            "s",
+            test_record(
+                "s",
+                &[
+                    ("m0.exr", b"m0.exr"),
+                    ("m1.exr", b"m1.exr"),
+                    ("m2.exr", b"m2.exr"),
+                ],
+            ),
+        );
+        let mut shorter = test_record("s", &[("m0.exr", b"m0.exr"), ("m1.exr", b"m1.exr")]);
+        shorter.key = "other".into();
+        m.apply(out, "s", shorter);
+        assert!(out.join("s/m1.exr").exists() && !out.join("s/m2.exr").exists());
+        assert_eq!(m.stages["s"].history, vec![hash_bytes(b"s")]);
     }
 }

@@ -71,6 +71,20 @@ pub fn slug(id: &str) -> String {
         .collect()
 }
 
+/// Removes the empty folders from `file`'s folder up to (not including) `stop`.
+pub fn remove_empty_parents(file: &Path, stop: &Path) {
+    let mut d = file.parent();
+    while let Some(dir) = d {
+        if !is_within(dir, stop)
+            || normalize(dir) == normalize(stop)
+            || std::fs::remove_dir(dir).is_err()
+        {
+            break;
+        }
+        d = dir.parent();
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -359,8 +359,10 @@ pub fn commit(graph: &Graph, results: &[PathBuf], restore: &[String]) -> Result<
     let plan = crate::plan::plan(graph, false)?;
     let manifest = Mutex::new(plan.manifest);
     {
-        let _g = exec::commit_lock();
-        session.cache.save_manifest(&exec::lock(&manifest))?;
+        let _g = session.commit_lock();
+        session
+            .cache
+            .save_manifest(&exec::commit::manifest_guard(&manifest))?;
     }
     let result_of = |i: usize, status: Status, reason: String| StageResult {
         id: graph.stages[i].id.clone(),
@@ -381,17 +383,17 @@ pub fn commit(graph: &Graph, results: &[PathBuf], restore: &[String]) -> Result<
     };
     let mut done = Vec::new();
     let commit_one = |i: usize,
-                      staged: std::result::Result<Vec<exec::Staged>, String>,
+                      staged: std::result::Result<Vec<exec::commit::Staged>, String>,
                       status: Status,
                       seconds: f64,
                       warnings: Vec<String>| {
         let planned = &plan.stages[i];
-        let staging = exec::staging_dir(&session, i, &graph.stages[i].id);
+        let staging = session.staging_dir(i, &graph.stages[i].id);
         let mut r = result_of(i, status, planned.decision.reason().to_string());
         r.warnings = warnings;
         r.seconds = seconds;
         let committed = staged.and_then(|staged| {
-            exec::commit(
+            exec::commit::commit(
                 &session,
                 graph,
                 i,
@@ -418,9 +420,9 @@ pub fn commit(graph: &Graph, results: &[PathBuf], restore: &[String]) -> Result<
         let planned = &plan.stages[i];
         match &planned.decision {
             Decision::Restore(_) => {
-                let staging = exec::staging_dir(&session, i, &graph.stages[i].id);
+                let staging = session.staging_dir(i, &graph.stages[i].id);
                 let key = planned.key.as_deref().expect("work has a key");
-                let staged = exec::stage_cached(&session, key, &staging).and_then(|s| {
+                let staged = exec::commit::stage_cached(&session, key, &staging).and_then(|s| {
                     s.ok_or_else(|| "its outputs are no longer in the cache: run it".to_string())
                 });
                 done.push(commit_one(i, staged, Status::Restored, 0.0, vec![]));
@@ -455,10 +457,10 @@ pub fn commit(graph: &Graph, results: &[PathBuf], restore: &[String]) -> Result<
             done.push(result_of(i, Status::UpToDate, "up to date".into()));
             continue;
         }
-        let staging = exec::staging_dir(&session, i, &s.id);
+        let staging = session.staging_dir(i, &s.id);
         let staged = {
-            let _g = exec::commit_lock();
-            exec::stage_files(
+            let _g = session.commit_lock();
+            exec::commit::stage_files(
                 &staging,
                 &s.dir,
                 files
@@ -476,8 +478,8 @@ pub fn commit(graph: &Graph, results: &[PathBuf], restore: &[String]) -> Result<
         ));
     }
     {
-        let _g = exec::commit_lock();
-        let m = exec::lock(&manifest);
+        let _g = session.commit_lock();
+        let m = exec::commit::manifest_guard(&manifest);
         session.cache.save_manifest(&m)?;
         let _ = session.cache.collect_garbage(&m);
     }
