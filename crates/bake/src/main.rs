@@ -402,11 +402,31 @@ fn print_plan(graph: &Graph, plan: &Plan) {
         ]);
     }
     table(&rows);
+    print_items(graph, plan);
     if !plan.orphans.is_empty() {
         println!(
             "\nno longer in the pipeline (outputs kept until `bake clean`): {}",
             plan.orphans.join(", ")
         );
+    }
+}
+
+/// The items of stages baked item by item that have work: which run and why.
+fn print_items(graph: &Graph, plan: &Plan) {
+    for (s, p) in graph.stages.iter().zip(&plan.stages) {
+        if p.items.is_empty() {
+            continue;
+        }
+        println!("\n{} item by item:", s.id);
+        let mut rows = vec![vec!["  ITEM".into(), "ACTION".into(), "WHY".into()]];
+        for it in &p.items {
+            rows.push(vec![
+                format!("  {}", it.name),
+                it.decision.word().into(),
+                it.decision.reason().into(),
+            ]);
+        }
+        table(&rows);
     }
 }
 
@@ -435,6 +455,7 @@ fn plan_json(
                 "key": p.key,
                 "params": s.params.as_ref().map(|p| p.canonical()),
                 "outputs": outputs,
+                "items": p.items.iter().map(|it| serde_json::json!({"name": it.name, "action": it.decision.word(), "reason": it.decision.reason(), "key": it.key})).collect::<Vec<_>>(),
                 "entry": entries[i],
             })
         })
@@ -628,6 +649,13 @@ impl Observer for Term {
         if self.lines && work {
             let detail = if r.status == Status::Failed || r.status == Status::Blocked {
                 r.reason.clone()
+            } else if !r.items.is_empty() {
+                let baked = r.items.iter().filter(|i| i.status == Status::Ran).count();
+                format!(
+                    "{baked} of {} items baked, {:.2} s",
+                    r.items.len(),
+                    r.seconds
+                )
             } else {
                 format!("{:.2} s", r.seconds)
             };

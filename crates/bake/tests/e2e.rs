@@ -985,6 +985,120 @@ fn a_folder_converts_per_item_and_one_changed_map_rewrites_one_output() {
     }
 }
 
+/// Item name → status (`run --json`) or action (`plan --json`) of the items of stage `id`.
+fn items_of(out: &Output, id: &str, field: &str) -> BTreeMap<String, String> {
+    let v: Value = serde_json::from_slice(&out.stdout)
+        .unwrap_or_else(|e| panic!("{e}: {}", String::from_utf8_lossy(&out.stdout)));
+    let stage = v["stages"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|s| s["id"] == id)
+        .unwrap_or_else(|| panic!("no stage {id}"));
+    stage["items"]
+        .as_array()
+        .map(|items| {
+            items
+                .iter()
+                .map(|i| {
+                    let name = i["name"].as_str().unwrap().to_string();
+                    (name, i[field].as_str().unwrap().to_string())
+                })
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+#[test]
+fn a_folder_of_materials_bakes_item_by_item_and_plan_says_which_items_run() {
+    let w = Work::new();
+    w.copy("pipelines/materials.ron");
+    w.copy("pipelines/materials");
+    let mats = w.path("pipelines/materials");
+    let q = |m: &str| w.path(&format!("out/materials/quaternions/{m}/quaternion.png"));
+    let run = |field: &str| -> BTreeMap<String, String> {
+        let out = w.bake(&["run", "pipelines/materials.ron", "--json"]);
+        assert!(out.status.success(), "{}", stderr(&out));
+        items_of(&out, "quaternions", field)
+    };
+    let plan = || w.bake(&["plan", "pipelines/materials.ron", "--json"]);
+    let count = |items: &BTreeMap<String, String>, what: &str| {
+        items.values().filter(|s| *s == what).count()
+    };
+    let first = run("status");
+    assert_eq!(count(&first, "ran"), 3, "{first:?}");
+    let stamp = |m: &str| (std::fs::read(q(m)).unwrap(), mtime(&q(m)));
+    let before: BTreeMap<&str, _> = ["brushed-steel", "frying-pan", "painted-metal"]
+        .into_iter()
+        .map(|m| (m, stamp(m)))
+        .collect();
+    std::thread::sleep(Duration::from_millis(50));
+
+    // One normal map changes: the plan names that item, the run bakes it alone.
+    std::fs::copy(
+        mats.join("frying-pan/normal.png"),
+        mats.join("brushed-steel/normal.png"),
+    )
+    .unwrap();
+    let planned = items_of(&plan(), "quaternions", "action");
+    assert_eq!(
+        planned["brushed-steel/quaternion.png"], "run",
+        "{planned:?}"
+    );
+    assert_eq!(planned["frying-pan/quaternion.png"], "up-to-date");
+    assert_eq!(planned["painted-metal/quaternion.png"], "up-to-date");
+    let text = stdout(&w.bake(&["plan", "pipelines/materials.ron"]));
+    assert!(
+        text.contains("1 of 3 items to bake (brushed-steel/quaternion.png)"),
+        "{text}"
+    );
+    assert!(text.contains("its input changed"), "{text}");
+    let second = run("status");
+    assert_eq!(count(&second, "ran"), 1, "{second:?}");
+    assert_eq!(count(&second, "up-to-date"), 2, "{second:?}");
+    assert_ne!(stamp("brushed-steel").0, before["brushed-steel"].0);
+    assert_eq!(
+        std::fs::read(q("brushed-steel")).unwrap(),
+        before["frying-pan"].0
+    );
+    for m in ["frying-pan", "painted-metal"] {
+        assert_eq!(stamp(m), before[m], "{m} was rewritten");
+    }
+    // Nothing changed: nothing runs.
+    let out = w.bake(&["run", "pipelines/materials.ron", "--json"]);
+    assert_eq!(statuses(&out)["quaternions"], "up-to-date");
+
+    // A new material is baked alone; a removed one's output goes; a reverted one comes back
+    // from the cache without baking.
+    copy_tree(&mats.join("painted-metal"), &mats.join("wok"));
+    std::fs::remove_dir_all(mats.join("painted-metal")).unwrap();
+    std::fs::copy(
+        root().join("pipelines/materials/brushed-steel/normal.png"),
+        mats.join("brushed-steel/normal.png"),
+    )
+    .unwrap();
+    let text = stdout(&w.bake(&["plan", "pipelines/materials.ron"]));
+    assert!(
+        text.contains("1 removed (painted-metal/quaternion.png)"),
+        "{text}"
+    );
+    let third = run("status");
+    assert_eq!(third["wok/quaternion.png"], "ran", "{third:?}");
+    assert_eq!(
+        third["brushed-steel/quaternion.png"], "restored",
+        "{third:?}"
+    );
+    assert_eq!(
+        third["frying-pan/quaternion.png"], "up-to-date",
+        "{third:?}"
+    );
+    assert_eq!(count(&third, "ran"), 1, "{third:?}");
+    assert!(!q("painted-metal").exists());
+    assert_eq!(std::fs::read(q("wok")).unwrap(), before["painted-metal"].0);
+    assert_eq!(stamp("brushed-steel").0, before["brushed-steel"].0);
+    assert_eq!(stamp("frying-pan"), before["frying-pan"]);
+}
+
 #[cfg(unix)]
 #[test]
 fn symlinked_material_folders_are_followed_and_loops_refused() {

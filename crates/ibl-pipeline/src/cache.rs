@@ -205,6 +205,51 @@ pub struct StageRecord {
     /// Earlier keys whose outputs the object store keeps (most recent first).
     #[serde(default)]
     pub history: Vec<String>,
+    /// For a stage baked item by item (see [`crate::kinds::Item`]): each item's key and
+    /// outputs, by item name.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub items: BTreeMap<String, ItemRecord>,
+}
+
+/// An item of a stage baked item by item.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ItemRecord {
+    /// Its own key: the stage's tool, kind and parameters, its name and its inputs' digest.
+    pub key: String,
+    /// The digest of the files it reads (to say which changed).
+    pub inputs: String,
+    /// Its outputs, relative to the stage's folder.
+    pub outputs: Vec<String>,
+    /// Earlier keys of this item whose outputs the object store keeps (most recent first).
+    #[serde(default)]
+    pub history: Vec<String>,
+}
+
+impl ItemRecord {
+    /// Its keys are digests and its outputs stay in the stage folder.
+    pub fn is_sound(&self) -> bool {
+        is_digest(&self.key)
+            && self.history.iter().all(|k| is_digest(k))
+            && self.outputs.iter().all(|o| is_inside_rel(o))
+    }
+}
+
+/// The key of an item of a stage whose key is made of `parts`: everything of the stage's key
+/// but its reads, the item's name and the digest of the files it reads.
+pub fn item_key(parts: &KeyParts, name: &str, inputs_digest: &str) -> String {
+    let mut h = blake3::Hasher::new();
+    for part in [
+        "ibl-bake/item/v1",
+        &parts.tool,
+        &parts.kind,
+        &parts.params,
+        name,
+        inputs_digest,
+    ] {
+        h.update(part.as_bytes());
+        h.update(&[0]);
+    }
+    h.finalize().to_hex().to_string()
 }
 
 impl StageRecord {
@@ -216,6 +261,7 @@ impl StageRecord {
             && is_inside_rel(&self.dir)
             && !Path::new(&self.dir).starts_with(".bake")
             && self.outputs.iter().all(OutputRecord::is_sound)
+            && self.items.values().all(ItemRecord::is_sound)
     }
 }
 
@@ -247,16 +293,27 @@ impl Manifest {
                     crate::paths::remove_empty_parents(&p, output);
                 }
             }
-            let mut history = vec![];
-            if old.key != record.key {
-                history.push(old.key);
+            record.history = recent_keys(old.key, old.history, &record.key);
+            for (name, item) in &mut record.items {
+                if let Some(was) = old.items.get(name) {
+                    item.history = recent_keys(was.key.clone(), was.history.clone(), &item.key);
+                }
             }
-            history.extend(old.history.into_iter().filter(|k| *k != record.key));
-            history.truncate(KEEP_KEYS - 1);
-            record.history = history;
         }
         self.stages.insert(id.to_string(), record);
     }
+}
+
+/// The keys the object store keeps besides `now`: the previous key `old`, then its
+/// `history`, at most [`KEEP_KEYS`]` - 1`, `now` left out.
+fn recent_keys(old: String, history: Vec<String>, now: &str) -> Vec<String> {
+    let mut keys = vec![];
+    if old != now {
+        keys.push(old);
+    }
+    keys.extend(history.into_iter().filter(|k| k != now));
+    keys.truncate(KEEP_KEYS - 1);
+    keys
 }
 
 /// Paths under `OUTPUT/.bake/`.
@@ -412,7 +469,13 @@ impl CacheDir {
         let kept: std::collections::HashSet<String> = m
             .stages
             .values()
-            .flat_map(|r| std::iter::once(r.key.clone()).chain(r.history.iter().cloned()))
+            .flat_map(|r| {
+                std::iter::once(r.key.clone())
+                    .chain(r.history.iter().cloned())
+                    .chain(r.items.values().flat_map(|i| {
+                        std::iter::once(i.key.clone()).chain(i.history.iter().cloned())
+                    }))
+            })
             .collect();
         let mut live = std::collections::HashSet::new();
         let cache = self.root.join("cache");
@@ -599,6 +662,7 @@ pub(crate) fn test_record(dir: &str, files: &[(&str, &[u8])]) -> StageRecord {
             .collect(),
         seconds: 0.0,
         history: vec![],
+        items: BTreeMap::new(),
     }
 }
 
@@ -956,6 +1020,7 @@ mod tests {
             }],
             seconds: 0.0,
             history: vec![],
+            items: BTreeMap::new(),
         };
         let k = hash_bytes(b"k");
         let mut m = Manifest {
@@ -1007,5 +1072,51 @@ mod tests {
         m.apply(out, "s", shorter);
         assert!(out.join("s/m1.exr").exists() && !out.join("s/m2.exr").exists());
         assert_eq!(m.stages["s"].history, vec![hash_bytes(b"s")]);
+    }
+
+    #[test]
+    fn item_keys_keep_their_history_and_their_objects_survive_garbage_collection() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path();
+        let cache = CacheDir::new(out);
+        std::fs::create_dir_all(out.join("s/a")).unwrap();
+        std::fs::write(out.join("s/a/q.png"), b"one").unwrap();
+        let item = |key: &str| ItemRecord {
+            key: key.into(),
+            inputs: hash_bytes(b"inputs"),
+            outputs: vec!["a/q.png".into()],
+            history: vec![],
+        };
+        let (k1, k2) = (hash_bytes(b"k1"), hash_bytes(b"k2"));
+        let mut rec = test_record("s", &[("a/q.png", b"one")]);
+        rec.items.insert("a/q.png".into(), item(&k1));
+        cache.put(&k1, &out.join("s"), &rec.outputs).unwrap();
+        let mut m = Manifest::default();
+        m.apply(out, "s", rec.clone());
+        // The item is rebuilt with another key: the first one stays in its history, and the
+        // object store keeps its outputs (a revert restores them without baking).
+        rec.items.insert("a/q.png".into(), item(&k2));
+        m.apply(out, "s", rec.clone());
+        assert_eq!(m.stages["s"].items["a/q.png"].history, vec![k1.clone()]);
+        cache.collect_garbage(&m).unwrap();
+        assert!(
+            cache.entry(&k1).is_some(),
+            "the earlier item key was collected"
+        );
+        // Dropped from the record altogether (the item was removed): collected.
+        rec.items.clear();
+        m.apply(out, "s", rec);
+        cache.collect_garbage(&m).unwrap();
+        assert!(cache.entry(&k1).is_none());
+        // A damaged item record makes its stage's record unsound.
+        let mut bad = test_record("s", &[]);
+        bad.items.insert(
+            "x".into(),
+            ItemRecord {
+                outputs: vec!["../x".into()],
+                ..item(&k2)
+            },
+        );
+        assert!(!bad.is_sound());
     }
 }

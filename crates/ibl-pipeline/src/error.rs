@@ -7,10 +7,13 @@ use std::path::{Path, PathBuf};
 /// One problem found in a pipeline before any stage ran, located in its file where possible.
 #[derive(Clone, Debug, PartialEq, Eq, serde::Serialize)]
 pub struct Diagnostic {
+    /// The pipeline file.
     pub file: PathBuf,
     /// 1-based line and column of the offending text, when it has a place in the file.
     pub line: Option<usize>,
+    /// 1-based column, when known.
     pub col: Option<usize>,
+    /// What is wrong.
     pub message: String,
     /// The offending source line with a caret under the column.
     pub snippet: Option<String>,
@@ -18,7 +21,7 @@ pub struct Diagnostic {
 
 impl Diagnostic {
     /// A problem with no place in the file (a missing input file, a cycle through several stages).
-    pub fn global(file: &Path, message: impl Into<String>) -> Self {
+    pub(crate) fn global(file: &Path, message: impl Into<String>) -> Self {
         Diagnostic {
             file: file.to_path_buf(),
             line: None,
@@ -63,7 +66,7 @@ impl fmt::Display for Diagnostic {
 }
 
 /// 1-based (line, column in characters) of byte `offset` in `src`.
-pub fn line_col(src: &str, offset: usize) -> (usize, usize) {
+pub(crate) fn line_col(src: &str, offset: usize) -> (usize, usize) {
     let offset = offset.min(src.len());
     let before = &src[..floor_char_boundary(src, offset)];
     let line = before.matches('\n').count() + 1;
@@ -72,7 +75,7 @@ pub fn line_col(src: &str, offset: usize) -> (usize, usize) {
 }
 
 /// Byte offset of 1-based (line, column in characters) in `src` (clamped to the text).
-pub fn offset_of(src: &str, line: usize, col: usize) -> usize {
+pub(crate) fn offset_of(src: &str, line: usize, col: usize) -> usize {
     let mut start = 0;
     for _ in 1..line.max(1) {
         match src[start..].find('\n') {
@@ -109,13 +112,20 @@ pub enum Error {
     /// The runner's own file-system work (cache, manifest, staging) failed.
     #[error("{}: {source}", .path.display())]
     Io {
+        /// The file or folder.
         path: PathBuf,
+        /// What the system said.
         #[source]
         source: std::io::Error,
     },
     /// Another `bake` holds the output folder.
     #[error("{}: {why}", .path.display())]
-    Busy { path: PathBuf, why: String },
+    Busy {
+        /// The output folder's lock file.
+        path: PathBuf,
+        /// Who holds it.
+        why: String,
+    },
 }
 
 fn render(d: &[Diagnostic]) -> String {
@@ -131,6 +141,7 @@ fn render(d: &[Diagnostic]) -> String {
 }
 
 impl Error {
+    /// A file-system error of the runner at `path`.
     pub fn io(path: impl AsRef<Path>, source: std::io::Error) -> Self {
         Error::Io {
             path: path.as_ref().to_path_buf(),
@@ -156,6 +167,7 @@ impl Classify for Error {
 /// "outer: cause: root cause" on one line (`ibl_core::error::chain`).
 pub use ibl_core::error::chain as error_chain;
 
+/// The runner's result type.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
 #[cfg(test)]

@@ -23,27 +23,37 @@ pub enum Source {
 /// Where a stage comes from.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum Origin {
+    /// Declared in the pipeline's `stages`.
     Declared,
+    /// Derived from the pipeline's `scene`.
     Scene,
 }
 
 /// A stage of the graph.
 #[derive(Clone)]
 pub struct Stage {
+    /// Its id (also its output folder's name under the output, by default).
     pub id: String,
+    /// Its kind's name, as written.
     pub kind_name: String,
     /// `None` only for stages the scene does not need, of kinds this build lacks.
     pub kind: Option<&'static dyn Kind>,
+    /// Its parameters (`None` only where `kind` is).
     pub params: Option<AnyParams>,
+    /// (name as written, source) of each read, in order.
     pub reads: Vec<(String, Source)>,
     /// The stage's output folder.
     pub dir: PathBuf,
+    /// Declared or derived from the scene.
     pub origin: Origin,
+    /// Whether it is baked, and why.
     pub need: Need,
+    /// Where it is declared in the pipeline file (for messages).
     pub offset: usize,
 }
 
 impl Stage {
+    /// Whether it is baked.
     pub fn needed(&self) -> bool {
         matches!(self.need, Need::Needed(_))
     }
@@ -52,7 +62,7 @@ impl Stage {
         Some((self.kind?, self.params.as_ref()?))
     }
     /// Indices of the stages this one reads.
-    pub fn deps(&self) -> impl Iterator<Item = usize> + '_ {
+    pub(crate) fn deps(&self) -> impl Iterator<Item = usize> + '_ {
         self.reads.iter().filter_map(|(_, s)| match s {
             Source::Stage(i) => Some(*i),
             Source::Input(_) => None,
@@ -63,6 +73,7 @@ impl Stage {
 /// An input with its files found on disk.
 #[derive(Clone, Debug)]
 pub struct ResolvedInput {
+    /// The input as declared.
     pub input: Input,
     /// The resolved path (or pattern for a glob).
     pub path: PathBuf,
@@ -74,14 +85,17 @@ pub struct ResolvedInput {
 
 /// A checked pipeline, stages in dependency order.
 pub struct Graph {
+    /// The parsed pipeline.
     pub pipeline: Pipeline,
+    /// Its inputs by name, with their files.
     pub inputs: BTreeMap<String, ResolvedInput>,
+    /// Its stages, in dependency order.
     pub stages: Vec<Stage>,
 }
 
 impl Graph {
     /// The stage with id `id`.
-    pub fn index(&self, id: &str) -> Option<usize> {
+    pub(crate) fn index(&self, id: &str) -> Option<usize> {
         self.stages.iter().position(|s| s.id == id)
     }
 
@@ -102,7 +116,7 @@ impl Graph {
     }
 
     /// All stages that read stage `i`, directly or not.
-    pub fn dependants(&self, i: usize) -> Vec<usize> {
+    pub(crate) fn dependants(&self, i: usize) -> Vec<usize> {
         let mut out = vec![false; self.stages.len()];
         let mut stack = vec![i];
         while let Some(k) = stack.pop() {
@@ -644,7 +658,7 @@ fn resolve_input(p: &Pipeline, input: &Input) -> std::result::Result<ResolvedInp
 
 /// Files under `dir`, recursively, sorted, skipping hidden entries: the workspace's one
 /// walker and symlink policy (`ibl_core::walk`), shared with `quat-map --batch`.
-pub fn walk(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
+pub(crate) fn walk(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
     ibl_core::walk::files(dir)
 }
 

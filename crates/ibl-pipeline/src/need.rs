@@ -1,5 +1,5 @@
-//! Whether a stage is baked, and why: decided by the scene ([`crate::scene`]) and by the
-//! pipeline's outputs ([`crate::graph`]), shown by `bake plan`.
+//! Whether a stage is baked, and why: decided by the scene derivation and by the pipeline's
+//! outputs (in the graph), shown by `bake plan`.
 
 /// Whether a stage is baked, and why.
 #[derive(Clone, Debug, PartialEq, Eq)]

@@ -19,7 +19,7 @@ fn esc_path(p: &Path) -> String {
 }
 
 /// Quotes one argument for `/bin/sh`.
-pub fn shell_quote(s: &str) -> String {
+pub(crate) fn shell_quote(s: &str) -> String {
     if !s.is_empty()
         && s.chars()
             .all(|c| c.is_ascii_alphanumeric() || "_./=,:+-@%".contains(c))

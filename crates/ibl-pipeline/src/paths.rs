@@ -4,7 +4,7 @@
 use std::path::{Component, Path, PathBuf};
 
 /// Removes `.` and resolves `..` lexically (`pipelines/../out` → `out`); keeps leading `..`.
-pub fn normalize(p: &Path) -> PathBuf {
+pub(crate) fn normalize(p: &Path) -> PathBuf {
     let mut out: Vec<Component> = Vec::new();
     for c in p.components() {
         match c {
@@ -31,7 +31,7 @@ pub fn absolute(p: &Path) -> PathBuf {
 }
 
 /// `p` relative to folder `base` (both made absolute first): `../x/y` when needed.
-pub fn relative_to(p: &Path, base: &Path) -> PathBuf {
+pub(crate) fn relative_to(p: &Path, base: &Path) -> PathBuf {
     let (p, base) = (absolute(p), absolute(base));
     let pc: Vec<_> = p.components().collect();
     let bc: Vec<_> = base.components().collect();
@@ -54,12 +54,12 @@ pub fn relative_to(p: &Path, base: &Path) -> PathBuf {
 }
 
 /// True when `p` is `dir` or inside it (lexically).
-pub fn is_within(p: &Path, dir: &Path) -> bool {
+pub(crate) fn is_within(p: &Path, dir: &Path) -> bool {
     normalize(p).starts_with(normalize(dir))
 }
 
 /// A file-name-safe form of a stage id (`lobby/cube` → `lobby_cube`).
-pub fn slug(id: &str) -> String {
+pub(crate) fn slug(id: &str) -> String {
     id.chars()
         .map(|c| {
             if c.is_ascii_alphanumeric() || c == '-' || c == '.' {
@@ -72,7 +72,7 @@ pub fn slug(id: &str) -> String {
 }
 
 /// Removes the empty folders from `file`'s folder up to (not including) `stop`.
-pub fn remove_empty_parents(file: &Path, stop: &Path) {
+pub(crate) fn remove_empty_parents(file: &Path, stop: &Path) {
     let mut d = file.parent();
     while let Some(dir) = d {
         if !is_within(dir, stop)

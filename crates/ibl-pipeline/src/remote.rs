@@ -22,29 +22,34 @@ use std::sync::Mutex;
 use std::time::Instant;
 
 /// Name of the report in a result folder.
-pub const REPORT: &str = "stage.json";
+pub(crate) const REPORT: &str = "stage.json";
 /// Name of the files' folder in a result folder.
-pub const FILES: &str = "files";
+pub(crate) const FILES: &str = "files";
 
 /// Everything needed to run one stage without the pipeline.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct StageEntry {
+    /// The stage's id.
     pub id: String,
+    /// Its kind.
     pub kind: String,
     /// The canonical parameters (every field, keys sorted), as hashed into the key.
     pub params: serde_json::Value,
+    /// The key it is planned with (its result is committed only under that key).
     pub key: String,
     /// The build of `bake` that planned it ([`cache::tool`]); only the same build may run it,
     /// or the outputs recorded under the key would be another build's.
     pub tool: String,
     /// The stage's folder relative to the output folder.
     pub dir: String,
+    /// What it reads, in order.
     pub reads: Vec<ReadEntry>,
 }
 
 /// One source a stage reads, as files to materialise in its numbered input folder.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ReadEntry {
+    /// The read's name in the pipeline.
     pub name: String,
     /// For a read of a stage: its id. Its files are that stage's outputs, under `prefix`.
     pub stage: Option<String>,
@@ -60,7 +65,9 @@ pub struct ReadEntry {
 /// A file to ship: its place in the input folder and its path where the plan was made.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ShippedFile {
+    /// Its path relative to the read's root.
     pub rel: String,
+    /// Its absolute path here.
     pub path: PathBuf,
 }
 
@@ -69,18 +76,24 @@ pub struct ShippedFile {
 pub struct OutputFile {
     /// Relative to the stage's folder.
     pub rel: String,
+    /// Its size in bytes.
     pub size: u64,
+    /// Its blake3 hash.
     pub hash: String,
 }
 
 /// What [`run_entry`] produced: `stage.json` of a result folder.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct StageOutput {
+    /// The stage's id.
     pub id: String,
+    /// The key it ran with.
     pub key: String,
     /// In the order the bake produced them (the order `bake run` records).
     pub outputs: Vec<OutputFile>,
+    /// Its bake's warnings.
     pub warnings: Vec<String>,
+    /// Wall-clock seconds of the bake.
     pub seconds: f64,
 }
 
@@ -351,6 +364,9 @@ fn read_result(dir: &Path) -> std::result::Result<(StageOutput, ResultFiles), St
     Ok((report, files))
 }
 
+/// Files staged for a commit, and outputs kept where they are.
+type StagedAndKept = (Vec<exec::commit::Staged>, Vec<crate::cache::OutputRecord>);
+
 /// Commits result folders (stages run elsewhere) and restores stages from the cache, as
 /// `bake run` would: each stage is re-planned here and committed only if its key is the one
 /// it ran with. Stages are committed one by one, so an interrupt keeps those done.
@@ -364,14 +380,8 @@ pub fn commit(graph: &Graph, results: &[PathBuf], restore: &[String]) -> Result<
             .cache
             .save_manifest(&exec::commit::manifest_guard(&manifest))?;
     }
-    let result_of = |i: usize, status: Status, reason: String| StageResult {
-        id: graph.stages[i].id.clone(),
-        kind: graph.stages[i].kind_name.clone(),
-        status,
-        reason,
-        seconds: 0.0,
-        outputs: vec![],
-        warnings: vec![],
+    let result_of = |i: usize, status: Status, reason: String| {
+        StageResult::new(&graph.stages[i], status, reason)
     };
     let find = |id: &str| {
         graph.index(id).ok_or_else(|| {
@@ -383,7 +393,7 @@ pub fn commit(graph: &Graph, results: &[PathBuf], restore: &[String]) -> Result<
     };
     let mut done = Vec::new();
     let commit_one = |i: usize,
-                      staged: std::result::Result<Vec<exec::commit::Staged>, String>,
+                      staged: std::result::Result<StagedAndKept, String>,
                       status: Status,
                       seconds: f64,
                       warnings: Vec<String>| {
@@ -392,16 +402,9 @@ pub fn commit(graph: &Graph, results: &[PathBuf], restore: &[String]) -> Result<
         let mut r = result_of(i, status, planned.decision.reason().to_string());
         r.warnings = warnings;
         r.seconds = seconds;
-        let committed = staged.and_then(|staged| {
+        let committed = staged.and_then(|(staged, kept)| {
             exec::commit::commit(
-                &session,
-                graph,
-                i,
-                planned.key.clone().expect("work has a key"),
-                planned.parts.clone().expect("work has key parts"),
-                staged,
-                seconds,
-                &manifest,
+                &session, graph, i, planned, staged, kept, seconds, &manifest,
             )
             .map_err(|e| e.to_string())
         });
@@ -421,10 +424,31 @@ pub fn commit(graph: &Graph, results: &[PathBuf], restore: &[String]) -> Result<
         match &planned.decision {
             Decision::Restore(_) => {
                 let staging = session.staging_dir(i, &graph.stages[i].id);
-                let key = planned.key.as_deref().expect("work has a key");
-                let staged = exec::commit::stage_cached(&session, key, &staging).and_then(|s| {
-                    s.ok_or_else(|| "its outputs are no longer in the cache: run it".to_string())
-                });
+                let staged = if planned.items.is_empty() {
+                    let key = planned.key.as_deref().expect("work has a key");
+                    exec::commit::stage_cached(&session, key, &staging).and_then(|s| {
+                        s.map(|s| (s, vec![])).ok_or_else(|| {
+                            "its outputs are no longer in the cache: run it".to_string()
+                        })
+                    })
+                } else {
+                    // Item by item: the items up to date stay, the others come back.
+                    let record = exec::commit::manifest_guard(&manifest)
+                        .stages
+                        .get(&graph.stages[i].id)
+                        .cloned();
+                    let mut r = result_of(i, Status::Restored, String::new());
+                    exec::stage_items(
+                        &session,
+                        graph,
+                        i,
+                        planned,
+                        record,
+                        &staging,
+                        &exec::Quiet,
+                        &mut r,
+                    )
+                };
                 done.push(commit_one(i, staged, Status::Restored, 0.0, vec![]));
             }
             Decision::UpToDate => done.push(result_of(i, Status::UpToDate, "up to date".into())),
@@ -468,6 +492,7 @@ pub fn commit(graph: &Graph, results: &[PathBuf], restore: &[String]) -> Result<
                     .map(|(rel, b)| (s.dir.join(rel), b))
                     .collect(),
             )
+            .map(|staged| (staged, vec![]))
         };
         done.push(commit_one(
             i,

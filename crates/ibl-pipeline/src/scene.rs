@@ -33,20 +33,6 @@ pub struct Derived {
 /// Inputs the scene adds (probe environments, material folders): (name, input, offset).
 pub type SceneInput = (String, Input, usize);
 
-/// The kinds the scene uses, with what the scene overrides in their parameters.
-pub const SCENE_KINDS: [&str; 10] = [
-    "equirect-to-cube",
-    "irradiance",
-    "prefilter",
-    "shexp-fit",
-    "dfg",
-    "fresnel-tail",
-    "hv-lut",
-    "as-size-bias",
-    "quat-map",
-    "tpr-map",
-];
-
 struct Builder<'a> {
     pipeline: &'a Pipeline,
     scene: &'a Scene,

@@ -38,7 +38,8 @@ pub enum Input {
 }
 
 impl Input {
-    pub fn pattern(&self) -> &str {
+    /// The path or pattern as written.
+    pub(crate) fn pattern(&self) -> &str {
         match self {
             Input::File(s) | Input::Folder(s) | Input::Glob(s) => s,
         }
@@ -59,6 +60,7 @@ pub enum Serving {
 #[derive(Clone, Debug, PartialEq, Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields, rename = "Probe")]
 pub struct Probe {
+    /// The probe's name (its stages are `<id>/...`).
     pub id: String,
     /// Environment file or folder (or the name of a declared input).
     pub env: String,
@@ -66,6 +68,7 @@ pub struct Probe {
     #[serde(default = "one")]
     pub max_roughness: f32,
     #[serde(default)]
+    /// How its glossy part is served (split-sum or SH-exp).
     pub served_by: Serving,
 }
 
@@ -79,41 +82,57 @@ pub enum Model {
     /// Isotropic GGX.
     Ggx,
     /// Anisotropic Ashikhmin-Shirley with exponents (n_u, n_v).
-    AshikhminShirley { n_u: f64, n_v: f64 },
+    AshikhminShirley {
+        /// Exponent along the tangent.
+        n_u: f64,
+        /// Exponent along the bitangent.
+        n_v: f64,
+    },
 }
 
 /// A material of the scene.
 #[derive(Clone, Debug)]
 pub struct Material {
+    /// The material's name (its stages are `<id>/...`).
     pub id: String,
     /// The material's folder (the thesis layout: `normal.*` inside), or a declared input's name.
     pub folder: String,
+    /// Its BRDF model.
     pub model: Model,
+    /// Whether it has a normal map (anisotropic ones then need a quaternion map).
     pub bump_mapped: bool,
+    /// Whether it uses a TPR map.
     pub tpr_map: bool,
     /// The material's own `tpr-map` parameters (its preset): the keys it gives (`tpr_keys`)
     /// override the scene's `tpr-map` parameters one by one, the others are the scene's.
     pub tpr_params: Option<AnyParams>,
     /// The keys `tpr_params` gives, in the order written.
     pub tpr_keys: Vec<String>,
+    /// Where it is declared in the file.
     pub offset: usize,
 }
 
-/// What the scene needs: the runner derives its stages from it (see [`crate::scene`]).
+/// What the scene needs: the runner derives its stages from it.
 #[derive(Clone, Debug)]
 pub struct Scene {
+    /// The probes, with where each is declared.
     pub probes: Vec<(Probe, usize)>,
+    /// The materials.
     pub materials: Vec<Material>,
     /// Parameters of the derived stages, per kind (over that kind's defaults).
     pub params: BTreeMap<String, AnyParams>,
+    /// Where the scene is declared.
     pub offset: usize,
 }
 
 /// A stage as declared.
 #[derive(Clone)]
 pub struct StageDecl {
+    /// Its id.
     pub id: String,
+    /// Its kind.
     pub kind: &'static dyn Kind,
+    /// Its parameters, parsed by its kind.
     pub params: AnyParams,
     /// Names of inputs or ids of stages, in the order the bake takes them.
     pub reads: Vec<String>,
@@ -144,9 +163,13 @@ pub struct Pipeline {
     pub base: PathBuf,
     /// Where outputs go (the cache lives in `output/.bake/`).
     pub output: PathBuf,
+    /// Declared inputs: name -> (input, where declared).
     pub inputs: BTreeMap<String, (Input, usize)>,
+    /// Declared stages.
     pub stages: Vec<StageDecl>,
+    /// The `outputs` list, if any, with where each is named.
     pub targets: Option<Vec<(String, usize)>>,
+    /// The scene, if any.
     pub scene: Option<Scene>,
 }
 
@@ -155,7 +178,8 @@ impl Pipeline {
     pub fn resolve(&self, p: &str) -> PathBuf {
         paths::normalize(&self.base.join(p))
     }
-    pub fn diag(&self, offset: usize, msg: impl Into<String>) -> Diagnostic {
+    /// A diagnostic at byte `offset` of the file.
+    pub(crate) fn diag(&self, offset: usize, msg: impl Into<String>) -> Diagnostic {
         Diagnostic::at(&self.file, &self.src, offset, msg)
     }
 }

@@ -5,11 +5,13 @@
 //! the reverse: `clean` removes what was committed.
 
 use super::session::{Journal, Session};
-use crate::cache::{self, KeyParts, Manifest, OutputRecord, StageRecord};
+use crate::cache::{self, ItemRecord, Manifest, OutputRecord, StageRecord};
 use crate::error::{Error, Result};
 use crate::graph::Graph;
 use crate::paths;
+use crate::plan::PlannedStage;
 use serde::Serialize;
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
@@ -96,21 +98,26 @@ pub(crate) fn stage_files(
     Ok(out)
 }
 
-/// Renames staged files into place and records the stage, under the commit lock and a journal.
+/// Renames staged files into place and records the stage as `planned` (its key, and its
+/// items' keys), under the commit lock and a journal. `kept` are outputs of items that were up
+/// to date: they stay as they are.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn commit(
     session: &Session,
     graph: &Graph,
     i: usize,
-    key: String,
-    parts: KeyParts,
+    planned: &PlannedStage,
     staged: Vec<Staged>,
+    kept: Vec<OutputRecord>,
     seconds: f64,
     manifest: &Mutex<Manifest>,
 ) -> Result<Vec<PathBuf>> {
     let s = &graph.stages[i];
     let output = &graph.pipeline.output;
-    let staged = keep_unchanged(&s.dir, staged);
+    let key = planned.key.clone().expect("work has a key");
+    let parts = planned.parts.clone().expect("work has key parts");
+    let mut staged = keep_unchanged(&s.dir, staged);
+    staged.extend(kept.into_iter().map(|o| (None, o.rel, o.stamp)));
     let rel_dir = s
         .dir
         .strip_prefix(output)
@@ -130,6 +137,11 @@ pub(crate) fn commit(
             .collect(),
         seconds,
         history: vec![],
+        items: BTreeMap::new(),
+    };
+    let record = StageRecord {
+        items: item_records(planned, &record.outputs),
+        ..record
     };
     let renames: Vec<(PathBuf, PathBuf)> = staged
         .iter()
@@ -157,6 +169,15 @@ pub(crate) fn commit(
     }
     // The object store is a convenience: failing to link into it must not fail the stage.
     let _ = session.cache.put(&key, &s.dir, &record.outputs);
+    for item in record.items.values() {
+        let files: Vec<OutputRecord> = record
+            .outputs
+            .iter()
+            .filter(|o| item.outputs.contains(&o.rel))
+            .cloned()
+            .collect();
+        let _ = session.cache.put(&item.key, &s.dir, &files);
+    }
     {
         let mut m = manifest_guard(manifest);
         m.apply(output, &s.id, record);
@@ -164,6 +185,28 @@ pub(crate) fn commit(
     }
     let _ = std::fs::remove_file(&journal_path);
     Ok(staged.iter().map(|(_, rel, _)| s.dir.join(rel)).collect())
+}
+
+/// The records of the items of `planned` whose outputs are all among `outputs`.
+fn item_records(planned: &PlannedStage, outputs: &[OutputRecord]) -> BTreeMap<String, ItemRecord> {
+    planned
+        .items
+        .iter()
+        .filter(|it| {
+            it.outputs
+                .iter()
+                .all(|o| outputs.iter().any(|r| r.rel == *o))
+        })
+        .map(|it| {
+            let record = ItemRecord {
+                key: it.key.clone(),
+                inputs: it.inputs.clone(),
+                outputs: it.outputs.clone(),
+                history: vec![],
+            };
+            (it.name.clone(), record)
+        })
+        .collect()
 }
 
 /// Leaves in place every output whose file already holds the new bytes: a stage that re-runs

@@ -15,14 +15,15 @@ pub use commit::{clean, clean_output, CleanReport};
 pub use session::Session;
 
 use crate::cache::Manifest;
+use crate::cache::{OutputRecord, StageRecord};
 use crate::error::Result;
-use crate::graph::Graph;
+use crate::graph::{Graph, Stage};
 use crate::kinds::{BakeError, Baked};
-use crate::plan::{Decision, Plan};
+use crate::plan::{Decision, Plan, PlannedStage};
 use commit::{manifest_guard, Staged};
 use ibl_core::progress::Progress;
 use serde::Serialize;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::{mpsc, Mutex};
 use std::time::Instant;
 
@@ -33,16 +34,22 @@ const DELAY_ENV: &str = "IBL_BAKE_TEST_DELAY_MS";
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Status {
+    /// The bake ran and its outputs were committed.
     Ran,
+    /// Its outputs came back from the cache, without baking.
     Restored,
+    /// Built with this key, outputs in place: nothing to do.
     UpToDate,
+    /// Not needed.
     Skipped,
+    /// The stage failed (its reason says why); nothing of it was written.
     Failed,
     /// Not run because a stage it reads failed.
     Blocked,
 }
 
 impl Status {
+    /// The status in words, as the terminal shows it.
     pub fn word(&self) -> &'static str {
         match self {
             Status::Ran => "ran",
@@ -58,31 +65,73 @@ impl Status {
 /// The result of one stage.
 #[derive(Clone, Debug, Serialize)]
 pub struct StageResult {
+    /// The stage's id.
     pub id: String,
+    /// Its kind.
     pub kind: String,
+    /// How it ended.
     pub status: Status,
     /// Why it ran or was skipped; the error for a failed stage.
     pub reason: String,
+    /// Wall-clock seconds it took.
     pub seconds: f64,
+    /// The files it wrote (or that were in place).
     pub outputs: Vec<PathBuf>,
+    /// Its bake's warnings, worded for pipelines.
     pub warnings: Vec<String>,
+    /// For a stage baked item by item: what happened to each item.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub items: Vec<ItemResult>,
+}
+
+impl StageResult {
+    /// The result of stage `s` with no outputs, warnings or time (yet).
+    pub fn new(s: &Stage, status: Status, reason: impl Into<String>) -> StageResult {
+        StageResult {
+            id: s.id.clone(),
+            kind: s.kind_name.clone(),
+            status,
+            reason: reason.into(),
+            seconds: 0.0,
+            outputs: vec![],
+            warnings: vec![],
+            items: vec![],
+        }
+    }
+}
+
+/// What happened to one item of a stage baked item by item.
+#[derive(Clone, Debug, Serialize)]
+pub struct ItemResult {
+    /// The item's name (its outputs, relative to the stage's folder).
+    pub name: String,
+    /// Ran, restored or up to date.
+    pub status: Status,
+    /// Why.
+    pub reason: String,
 }
 
 /// The results of a run, in stage order.
 #[derive(Clone, Debug, Serialize)]
 pub struct RunReport {
+    /// The pipeline file.
     pub pipeline: PathBuf,
+    /// Its output folder.
     pub output: PathBuf,
+    /// Every stage's result, in stage order.
     pub stages: Vec<StageResult>,
+    /// Wall-clock seconds of the whole run.
     pub seconds: f64,
 }
 
 impl RunReport {
+    /// Whether a stage failed or was blocked.
     pub fn failed(&self) -> bool {
         self.stages
             .iter()
             .any(|s| matches!(s.status, Status::Failed | Status::Blocked))
     }
+    /// How many stages ended with `status`.
     pub fn count(&self, status: Status) -> usize {
         self.stages.iter().filter(|s| s.status == status).count()
     }
@@ -90,11 +139,13 @@ impl RunReport {
 
 /// Receives the executor's events (the binary shows them on a terminal).
 pub trait Observer: Sync {
+    /// A stage starts (its bake, or its restore from the cache).
     fn started(&self, _id: &str, _decision: &Decision) {}
     /// A progress sink for a running stage's bake.
     fn progress(&self, _id: &str) -> Box<dyn Progress + '_> {
         Box::new(ibl_core::progress::NoProgress)
     }
+    /// A stage ended (in any way, including skipped and blocked).
     fn finished(&self, _result: &StageResult) {}
 }
 
@@ -148,13 +199,8 @@ pub fn run(
             _ => (Status::Skipped, vec![]),
         };
         let r = StageResult {
-            id: s.id.clone(),
-            kind: s.kind_name.clone(),
-            status,
-            reason: p.decision.reason().to_string(),
-            seconds: 0.0,
             outputs,
-            warnings: vec![],
+            ..StageResult::new(s, status, p.decision.reason())
         };
         obs.finished(&r);
         results[i] = Some(r);
@@ -206,15 +252,8 @@ pub fn run(
                     if pending[j] {
                         pending[j] = false;
                         let s = &graph.stages[j];
-                        let r = StageResult {
-                            id: s.id.clone(),
-                            kind: s.kind_name.clone(),
-                            status: Status::Blocked,
-                            reason: format!("not run: '{id}' failed"),
-                            seconds: 0.0,
-                            outputs: vec![],
-                            warnings: vec![],
-                        };
+                        let r =
+                            StageResult::new(s, Status::Blocked, format!("not run: '{id}' failed"));
                         obs.finished(&r);
                         results[j] = Some(r);
                     }
@@ -253,15 +292,7 @@ pub(crate) fn panic_message(panic: &(dyn std::any::Any + Send)) -> String {
 fn panicked(session: &Session, graph: &Graph, i: usize, msg: String) -> StageResult {
     let s = &graph.stages[i];
     let _ = std::fs::remove_dir_all(session.staging_dir(i, &s.id));
-    StageResult {
-        id: s.id.clone(),
-        kind: s.kind_name.clone(),
-        status: Status::Failed,
-        reason: format!("the runner panicked: {msg}"),
-        seconds: 0.0,
-        outputs: vec![],
-        warnings: vec![],
-    }
+    StageResult::new(s, Status::Failed, format!("the runner panicked: {msg}"))
 }
 
 /// Runs (or restores) one stage and commits its outputs.
@@ -269,7 +300,7 @@ fn run_stage(
     session: &Session,
     graph: &Graph,
     i: usize,
-    planned: &crate::plan::PlannedStage,
+    planned: &PlannedStage,
     manifest: &Mutex<Manifest>,
     delay_ms: u64,
     obs: &dyn Observer,
@@ -277,47 +308,26 @@ fn run_stage(
     let s = &graph.stages[i];
     let t0 = Instant::now();
     obs.started(&s.id, &planned.decision);
-    let key = planned.key.clone().expect("work has a key");
-    let parts = planned.parts.clone().expect("work has key parts");
     let staging = session.staging_dir(i, &s.id);
-    let mut result = StageResult {
-        id: s.id.clone(),
-        kind: s.kind_name.clone(),
-        status: Status::Ran,
-        reason: planned.decision.reason().to_string(),
-        seconds: 0.0,
-        outputs: vec![],
-        warnings: vec![],
+    let mut result = StageResult::new(s, Status::Ran, planned.decision.reason());
+
+    let outcome = if planned.items.is_empty() {
+        stage_whole(session, graph, i, planned, &staging, obs, &mut result)
+            .map(|staged| (staged, vec![]))
+    } else {
+        let record = manifest_guard(manifest).stages.get(&s.id).cloned();
+        stage_items(
+            session,
+            graph,
+            i,
+            planned,
+            record,
+            &staging,
+            obs,
+            &mut result,
+        )
     };
-
-    let outcome: std::result::Result<Vec<Staged>, String> = (|| {
-        if let Decision::Restore(_) = planned.decision {
-            if let Some(staged) = commit::stage_cached(session, &key, &staging)? {
-                result.status = Status::Restored;
-                return Ok(staged);
-            }
-            result.reason = format!("{} (cache damaged: baking)", result.reason);
-        }
-        let (kind, params) = s.runnable().expect("work is runnable");
-        let inputs = graph.input_args(i);
-        let progress = obs.progress(&s.id);
-        let baked = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            kind.run(params, &inputs, &s.dir, progress.as_ref())
-        }));
-        drop(progress);
-        let Baked { files, warnings } = match baked {
-            Ok(Ok(b)) => b,
-            Ok(Err(BakeError { message, .. })) => return Err(message),
-            Err(panic) => {
-                return Err(format!("the bake panicked: {}", panic_message(&*panic)));
-            }
-        };
-        result.warnings = warnings;
-        let _g = session.gate();
-        commit::stage_files(&staging, &s.dir, files)
-    })();
-
-    let staged = match outcome {
+    let (staged, kept) = match outcome {
         Ok(staged) => staged,
         Err(message) => {
             let _ = std::fs::remove_dir_all(&staging);
@@ -331,7 +341,7 @@ fn run_stage(
         std::thread::sleep(std::time::Duration::from_millis(delay_ms));
     }
     let seconds = t0.elapsed().as_secs_f64();
-    match commit::commit(session, graph, i, key, parts, staged, seconds, manifest) {
+    match commit::commit(session, graph, i, planned, staged, kept, seconds, manifest) {
         Ok(outputs) => result.outputs = outputs,
         Err(e) => {
             result.status = Status::Failed;
@@ -341,6 +351,118 @@ fn run_stage(
     let _ = std::fs::remove_dir_all(&staging);
     result.seconds = t0.elapsed().as_secs_f64();
     result
+}
+
+/// Stages the outputs of a stage baked as one piece: restored from the cache, or baked.
+fn stage_whole(
+    session: &Session,
+    graph: &Graph,
+    i: usize,
+    planned: &PlannedStage,
+    staging: &Path,
+    obs: &dyn Observer,
+    result: &mut StageResult,
+) -> std::result::Result<Vec<Staged>, String> {
+    let s = &graph.stages[i];
+    if let Decision::Restore(_) = planned.decision {
+        let key = planned.key.as_deref().expect("work has a key");
+        if let Some(staged) = commit::stage_cached(session, key, staging)? {
+            result.status = Status::Restored;
+            return Ok(staged);
+        }
+        result.reason = format!("{} (cache damaged: baking)", result.reason);
+    }
+    let baked = bake(graph, i, &graph.input_args(i), &s.dir, obs)?;
+    result.warnings = baked.warnings;
+    let _g = session.gate();
+    commit::stage_files(staging, &s.dir, baked.files)
+}
+
+/// Stages the outputs of a stage baked item by item: items up to date are kept where they
+/// are (returned as records), the others restored from the cache or baked, each into its own
+/// staging folder.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn stage_items(
+    session: &Session,
+    graph: &Graph,
+    i: usize,
+    planned: &PlannedStage,
+    record: Option<StageRecord>,
+    staging: &Path,
+    obs: &dyn Observer,
+    result: &mut StageResult,
+) -> std::result::Result<(Vec<Staged>, Vec<OutputRecord>), String> {
+    let s = &graph.stages[i];
+    let (mut staged, mut kept) = (vec![], vec![]);
+    let (mut ran, mut restored) = (false, false);
+    for (n, it) in planned.items.iter().enumerate() {
+        let item_staging = staging.join(format!("item-{n}"));
+        let mut reason = it.decision.reason().to_string();
+        if it.decision == Decision::UpToDate {
+            let outputs = record.as_ref().map(|r| r.outputs.as_slice()).unwrap_or(&[]);
+            kept.extend(
+                outputs
+                    .iter()
+                    .filter(|o| it.outputs.contains(&o.rel))
+                    .cloned(),
+            );
+            result.items.push(ItemResult {
+                name: it.name.clone(),
+                status: Status::UpToDate,
+                reason,
+            });
+            continue;
+        }
+        if let Decision::Restore(_) = it.decision {
+            if let Some(files) = commit::stage_cached(session, &it.key, &item_staging)? {
+                staged.extend(files);
+                restored = true;
+                result.items.push(ItemResult {
+                    name: it.name.clone(),
+                    status: Status::Restored,
+                    reason,
+                });
+                continue;
+            }
+            reason = format!("{reason} (cache damaged: baking)");
+        }
+        let baked = bake(graph, i, &it.item.inputs, &it.item.dir, obs)
+            .map_err(|e| format!("{}: {e}", it.name))?;
+        result.warnings.extend(baked.warnings);
+        let _g = session.gate();
+        staged.extend(commit::stage_files(&item_staging, &s.dir, baked.files)?);
+        ran = true;
+        result.items.push(ItemResult {
+            name: it.name.clone(),
+            status: Status::Ran,
+            reason,
+        });
+    }
+    if restored && !ran {
+        result.status = Status::Restored;
+    }
+    Ok((staged, kept))
+}
+
+/// Runs stage `i`'s bake on `inputs` into `dir`; a panic in the bake is its failure.
+fn bake(
+    graph: &Graph,
+    i: usize,
+    inputs: &[PathBuf],
+    dir: &Path,
+    obs: &dyn Observer,
+) -> std::result::Result<Baked, String> {
+    let s = &graph.stages[i];
+    let (kind, params) = s.runnable().expect("work is runnable");
+    let progress = obs.progress(&s.id);
+    let baked = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        kind.run(params, inputs, dir, progress.as_ref())
+    }));
+    match baked {
+        Ok(Ok(b)) => Ok(b),
+        Ok(Err(BakeError { message, .. })) => Err(message),
+        Err(panic) => Err(format!("the bake panicked: {}", panic_message(&*panic))),
+    }
 }
 
 #[cfg(test)]

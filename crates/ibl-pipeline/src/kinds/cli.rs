@@ -110,6 +110,7 @@ fn enum_value(arg: &clap::Arg, v: &str) -> String {
 }
 
 #[derive(Debug)]
+/// A parameter value that has no command-line form.
 pub struct SerError(String);
 impl Display for SerError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {

@@ -64,6 +64,7 @@ pub static EQUIRECT_TO_CUBE: Adapter<e2c::Params> = Adapter {
     },
     validate: |p| Ok(p.validate()?),
     argv: None,
+    items: None,
     example: || {
         super::example("(size: 16, rotate: -12.5, layout: ktx2, half: true, zstd: 19, filter: bilinear, to_equirect: true, sanitize: true)")
     },
@@ -97,6 +98,7 @@ pub static IRRADIANCE: Adapter<irr::Params> = Adapter {
     },
     validate: |p| Ok(p.validate()?),
     argv: None,
+    items: None,
     example: || {
         super::example("(bands: 5, size: 8, exact: true, exact_source_width: 64, window: true, sh_file: \"coeffs.ron\", rotate: 90, layout: dds, format: bc6h, bc6h_quality: fast, sanitize: true)")
     },

@@ -37,6 +37,7 @@ pub static DFG: Adapter<dfg::Params> = Adapter {
     validate: |p| Ok(p.validate()?),
     example: || super::example("(size: 16, samples: 64, multiscatter: true, half: true)"),
     argv: None,
+    items: None,
 };
 
 pub static FRESNEL_TAIL: Adapter<tail::Params> = Adapter {
@@ -53,6 +54,7 @@ pub static FRESNEL_TAIL: Adapter<tail::Params> = Adapter {
     validate: |p| Ok(p.validate()?),
     example: || super::example("(size: 16, samples: 64, half: true)"),
     argv: None,
+    items: None,
 };
 
 pub static AS_SIZE_BIAS: Adapter<sb::Params> = Adapter {
@@ -79,6 +81,7 @@ pub static AS_SIZE_BIAS: Adapter<sb::Params> = Adapter {
         super::example("(nu: 100, nv: 10.5, size: 16, samples: 64, sampler: r#hv-lut, hv_size: 32, thesis_names: true, half: true)")
     },
     argv: None,
+    items: None,
 };
 
 pub static HV_LUT: Adapter<hv::Params> = Adapter {
@@ -108,4 +111,5 @@ pub static HV_LUT: Adapter<hv::Params> = Adapter {
         super::example("(nu: 20000, nv: 70, size: 16, bits: 8, thesis_names: true, half: true)")
     },
     argv: None,
+    items: None,
 };

@@ -179,6 +179,17 @@ pub static QUAT_MAP: Adapter<qm::Params> = Adapter {
             .map(|(i, o)| standard_argv(&["quat-map"], &[rel(&i)], &rel(&o), flags.clone()))
             .collect())
     }),
+    // One item per conversion (normal map -> quaternion map), so one changed normal map
+    // re-bakes one output.
+    items: Some(|p, inputs, dir| {
+        Ok(quat_jobs(p, inputs, dir)?
+            .into_iter()
+            .map(|(normal, out)| super::Item {
+                inputs: vec![normal],
+                dir: out.parent().unwrap_or(dir).to_path_buf(),
+            })
+            .collect())
+    }),
 };
 
 /// The TPR map's file: EXR when half floats are asked for, PNG otherwise.
@@ -269,4 +280,5 @@ pub static TPR_MAP: Adapter<tpr::Params> = Adapter {
             q.cli_args()?,
         )])
     }),
+    items: None,
 };

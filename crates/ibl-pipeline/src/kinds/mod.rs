@@ -87,6 +87,7 @@ pub type AnyParams = Arc<dyn ParamsObj>;
 
 /// What the runner needs of parameters without knowing their type.
 pub trait ParamsObj: Any + Send + Sync + fmt::Debug {
+    /// The parameters as `Any`, for the kind that knows their type.
     fn as_any(&self) -> &dyn Any;
     /// Canonical form for cache keys: JSON with object keys sorted, every field present.
     fn canonical(&self) -> serde_json::Value;
@@ -163,18 +164,22 @@ pub fn canonical_text(p: &AnyParams) -> String {
 /// How many sources a kind reads, and what they are.
 #[derive(Clone, Copy, Debug)]
 pub struct Arity {
+    /// The fewest sources.
     pub min: usize,
+    /// The most sources (`usize::MAX`: no limit).
     pub max: usize,
     /// What each source is, for messages ("an environment: equirect, cube folder or KTX2").
     pub what: &'static str,
 }
 
 impl Arity {
+    /// Reads nothing.
     pub const NONE: Arity = Arity {
         min: 0,
         max: 0,
         what: "nothing",
     };
+    /// Exactly one source, of the kind `what` says.
     pub const fn one(what: &'static str) -> Arity {
         Arity {
             min: 1,
@@ -182,6 +187,7 @@ impl Arity {
             what,
         }
     }
+    /// "reads exactly 1 (an environment ...)", for messages.
     pub fn describe(&self) -> String {
         match (self.min, self.max) {
             (0, 0) => "reads nothing".to_string(),
@@ -195,7 +201,9 @@ impl Arity {
 /// A bake's failure as the runner keeps it: its one-line message and exit-code class.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct BakeError {
+    /// One line, naming the file and the problem.
     pub message: String,
+    /// Its exit-code class.
     pub class: ErrorClass,
 }
 
@@ -217,7 +225,9 @@ impl fmt::Display for BakeError {
 /// What a bake produced: encoded files (not yet written) and warnings for the log.
 #[derive(Default)]
 pub struct Baked {
+    /// (path, bytes) of every file, under the stage's folder.
     pub files: Vec<(PathBuf, Vec<u8>)>,
+    /// Warnings for the log.
     pub warnings: Vec<String>,
 }
 
@@ -225,6 +235,7 @@ pub struct Baked {
 pub trait Kind: Send + Sync {
     /// The name used in pipelines (`kind: "prefilter"`).
     fn name(&self) -> &'static str;
+    /// One line for `bake kinds`.
     fn summary(&self) -> &'static str;
     /// The CLI that runs the same bake: binary name, then subcommand if any.
     fn command(&self) -> &'static [&'static str];
@@ -233,11 +244,13 @@ pub trait Kind: Send + Sync {
     /// The library crate the bake lives in: its fingerprint is the tool part of the stage keys
     /// (`cache::tool_for`).
     fn library(&self) -> &'static str;
+    /// How many sources it reads, and what they are.
     fn reads(&self) -> Arity;
     /// The RON keys (= long flags with `_` for `-`) this kind's parameters accept.
     fn param_names(&self) -> Vec<String>;
     /// Parses the RON text of `params: (...)` (missing keys take their defaults).
     fn parse(&self, ron: &str) -> Result<AnyParams, ron::error::SpannedError>;
+    /// Its parameters at their defaults (clap's).
     fn default_params(&self) -> AnyParams;
     /// Non-default parameters exercising every kind of field (tests round-trip them).
     fn example_params(&self) -> AnyParams;
@@ -276,6 +289,14 @@ pub trait Kind: Send + Sync {
     ) -> Result<Vec<Vec<String>>, String>;
     /// Checks that `p` survives `Params → CLI args → clap → Params` unchanged.
     fn cli_round_trip(&self, p: &AnyParams) -> Result<Vec<String>, String>;
+    /// The stage's work split into independent items, each baked by `run(p, &item.inputs,
+    /// &item.dir)`; `None` when the kind bakes its inputs as one piece.
+    fn items(
+        &self,
+        p: &AnyParams,
+        inputs: &[PathBuf],
+        dir: &Path,
+    ) -> Option<Result<Vec<Item>, BakeError>>;
 }
 
 /// Lists the files a run writes, given the resolved inputs and the `-o` path.
@@ -286,29 +307,53 @@ pub type RunFn<P> = fn(&P, &[PathBuf], &Path, &dyn Progress) -> Result<Baked, Ba
 pub type ArgvFn<P> =
     fn(&P, &[PathBuf], &Path, &dyn Fn(&Path) -> PathBuf) -> Result<Vec<Vec<String>>, String>;
 
+/// Splits a stage's work into items, given the resolved inputs and the stage folder.
+pub type ItemsFn<P> = fn(&P, &[PathBuf], &Path) -> Result<Vec<Item>, BakeError>;
+
+/// One independent piece of a stage's work (one material of a folder of materials): the
+/// runner gives it its own cache key, so one changed file re-bakes one item. Running the
+/// kind on `inputs` into `dir` bakes exactly this item's outputs.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Item {
+    /// The files it reads (its key hashes them), given to the bake as its inputs.
+    pub inputs: Vec<PathBuf>,
+    /// The folder its run writes into, inside the stage's folder.
+    pub dir: PathBuf,
+}
+
 /// The adapter behind every kind: plain functions over the bake's own `Params` type.
 pub struct Adapter<P> {
+    /// The kind's name in pipelines.
     pub name: &'static str,
+    /// One line for `bake kinds`.
     pub summary: &'static str,
+    /// The CLI running the same bake: binary, then subcommand if any.
     pub command: &'static [&'static str],
+    /// The cargo package building that binary.
     pub package: &'static str,
     /// The library crate whose `run` the bake is (see [`Kind::library`]).
     pub library: &'static str,
+    /// How many sources it reads.
     pub reads: Arity,
     /// The `-o` argument given the stage's folder (the folder itself, or a file in it).
     pub out: fn(&P, &Path) -> PathBuf,
+    /// What a downstream stage reads, given the `-o` path.
     pub product: fn(&P, &Path) -> PathBuf,
     /// Outputs of a run given the resolved inputs and the `-o` path.
     pub outputs: OutputsFn<P>,
     /// The in-process bake given the resolved inputs and the `-o` path.
     pub run: RunFn<P>,
+    /// The bake's validation of its parameters.
     pub validate: fn(&P) -> Result<(), BakeError>,
+    /// Non-default example parameters (for tests).
     pub example: fn() -> P,
     /// The CLI commands (argv, binary first) doing the same work, given the inputs, the stage
     /// folder, and how to write a path for the command line (relative to the ninja file);
     /// `None`: one command,
     /// `BIN [SUB] INPUTS... -o OUT FLAGS... --quiet`.
     pub argv: Option<ArgvFn<P>>,
+    /// The stage's work as independent items (see [`Kind::items`]); `None`: one piece.
+    pub items: Option<ItemsFn<P>>,
 }
 
 /// `-o DIR`: the CLI writes into the stage's folder.
@@ -446,6 +491,15 @@ impl<P: BakeParams> Kind for Adapter<P> {
                 )])
             }
         }
+    }
+    fn items(
+        &self,
+        p: &AnyParams,
+        inputs: &[PathBuf],
+        dir: &Path,
+    ) -> Option<Result<Vec<Item>, BakeError>> {
+        let items = self.items?;
+        Some(items(self.typed(p), inputs, &self.out_arg(p, dir)))
     }
     fn cli_round_trip(&self, p: &AnyParams) -> Result<Vec<String>, String> {
         let p = self.typed(p);

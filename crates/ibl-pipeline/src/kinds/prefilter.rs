@@ -32,6 +32,7 @@ pub static PREFILTER: Adapter<Params> = Adapter {
     },
     validate: |p| Ok(p.validate()?),
     argv: None,
+    items: None,
     example: || {
         super::example("(size: 16, levels: 3, quality: high, method: fis, samples: 32, max_roughness: 0.25, layout: ktx1, format: b10g11r11, reference: true, rotate: 45.5, sanitize: true)")
     },

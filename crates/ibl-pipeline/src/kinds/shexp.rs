@@ -36,4 +36,5 @@ pub static SHEXP_FIT: Adapter<Params> = Adapter {
         super::example("(p_order: 3, q_order: 1, views: 8, normals: 8, alphas: [0.25, 1.0], alpha_knots: [0.25, 1.0], samples: 64, size: 16, floor: 0.01, weight_power: 2, cosine_weight: true, lod_bias: 0.5, estimator: exact, exact_size: 8, emit_shader: true, sanitize: true)")
     },
     argv: None,
+    items: None,
 };
