@@ -411,7 +411,7 @@ fn print_plan(graph: &Graph, plan: &Plan) {
     }
 }
 
-/// The items of stages baked item by item that have work: which run and why.
+/// The items of stages baked item by item that have work: which run or are restored, and why.
 fn print_items(graph: &Graph, plan: &Plan) {
     for (s, p) in graph.stages.iter().zip(&plan.stages) {
         if p.items.is_empty() {
@@ -419,7 +419,7 @@ fn print_items(graph: &Graph, plan: &Plan) {
         }
         println!("\n{} item by item:", s.id);
         let mut rows = vec![vec!["  ITEM".into(), "ACTION".into(), "WHY".into()]];
-        for it in &p.items {
+        for it in p.items.iter().filter(|it| it.decision.is_work()) {
             rows.push(vec![
                 format!("  {}", it.name),
                 it.decision.word().into(),
@@ -427,6 +427,10 @@ fn print_items(graph: &Graph, plan: &Plan) {
             ]);
         }
         table(&rows);
+        let idle = p.items.iter().filter(|it| !it.decision.is_work()).count();
+        if idle > 0 {
+            println!("  and {idle} up to date");
+        }
     }
 }
 
