@@ -59,7 +59,7 @@ impl AshikhminShirley {
     }
 
     /// (n·h)^{e(h)} for a unit h, from its tangential part: exp(e ln(1 − sin²θ)/2).
-    pub fn pdf_ratio(&self, h: DVec3) -> f64 {
+    pub(crate) fn pdf_ratio(&self, h: DVec3) -> f64 {
         if h.z <= 0.0 {
             return 0.0;
         }
@@ -122,7 +122,7 @@ impl AshikhminShirley {
     }
 
     /// Inverse of [`AshikhminShirley::sample`]: (ξ1, ξ2) of a unit h with h.z > 0.
-    pub fn invert(&self, h: DVec3) -> (f64, f64) {
+    pub(crate) fn invert(&self, h: DVec3) -> (f64, f64) {
         let mut phi = h.y.atan2(h.x);
         if phi < 0.0 {
             phi += TAU;
@@ -169,7 +169,7 @@ impl AshikhminShirley {
     /// cos θ = cos θ₀ s^{1/e} onto the measure cos^{e−1}θ sin θ dθ (resolving the boundary
     /// layer of large exponents) and the azimuth follows the AS azimuthal warp (resolving
     /// strong anisotropy). 4 × 48 azimuths × 24 polar nodes.
-    pub fn lambda_numeric(&self, v: DVec3) -> f64 {
+    pub(crate) fn lambda_numeric(&self, v: DVec3) -> f64 {
         if v.z <= 0.0 {
             return f64::INFINITY;
         }

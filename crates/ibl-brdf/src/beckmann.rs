@@ -38,7 +38,7 @@ impl Beckmann {
 
 /// Smith Λ of the Beckmann profile as a function of a = 1/(α_v tan θ_v) (Walter et al. 2007
 /// eq. 27 in Λ form): (erf(a) − 1)/2 + exp(−a²)/(2a√π).
-pub fn lambda_beckmann(a: f64) -> f64 {
+pub(crate) fn lambda_beckmann(a: f64) -> f64 {
     if a <= 0.0 {
         return f64::INFINITY;
     }

@@ -57,7 +57,7 @@ impl Gtr {
 
     /// Dimov's average visibility S_γ(μ), μ = |cot θ_v| (Atanasov et al. 2022 eqs. 35–39) for
     /// γ ∈ {0,…,4}, G1 = χ⁺ S_γ (eq. 34).
-    pub fn s_integer(gamma: u32, mu: f64, alpha: f64) -> f64 {
+    pub(crate) fn s_integer(gamma: u32, mu: f64, alpha: f64) -> f64 {
         if mu.is_infinite() {
             return 1.0;
         }

@@ -25,7 +25,7 @@ impl TangentTransform {
     }
 
     /// Mᵀ m = (a m_x + b m_y, c m_x + d m_y, m_z) (Atanasov et al. 2022, after eq. 13).
-    pub fn transpose_mul(&self, m: DVec3) -> DVec3 {
+    pub(crate) fn transpose_mul(&self, m: DVec3) -> DVec3 {
         DVec3::new(
             self.a * m.x + self.b * m.y,
             self.c * m.x + self.d * m.y,
@@ -34,7 +34,7 @@ impl TangentTransform {
     }
 
     /// M⁻¹ v.
-    pub fn inverse_mul(&self, v: DVec3) -> DVec3 {
+    pub(crate) fn inverse_mul(&self, v: DVec3) -> DVec3 {
         let k = 1.0 / self.det();
         DVec3::new(
             k * (self.d * v.x - self.c * v.y),
@@ -44,7 +44,7 @@ impl TangentTransform {
     }
 
     /// (M⁻¹)ᵀ u, the transform of normals (Atanasov et al. 2022 eq. 10).
-    pub fn inverse_transpose_mul(&self, u: DVec3) -> DVec3 {
+    pub(crate) fn inverse_transpose_mul(&self, u: DVec3) -> DVec3 {
         let k = 1.0 / self.det();
         DVec3::new(
             k * (self.d * u.x - self.b * u.y),

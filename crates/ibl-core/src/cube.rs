@@ -77,7 +77,7 @@ impl Face {
 
 /// Face coordinate of the centre of texel `i` on an `n`-texel edge: 2(i+0.5)/n − 1.
 #[inline]
-pub fn texel_coord(i: usize, n: usize) -> f32 {
+pub(crate) fn texel_coord(i: usize, n: usize) -> f32 {
     (2.0 * (i as f32 + 0.5)) / n as f32 - 1.0
 }
 
@@ -251,13 +251,6 @@ impl Cubemap {
             out[k] = top + (bot - top) * fy;
         }
         out
-    }
-
-    /// Nearest texel in direction `d`.
-    pub fn sample_nearest(&self, d: Vec3) -> Rgb {
-        let (face, sc, tc) = Face::from_direction(d);
-        let (i, j) = face_texel_index(sc, tc, self.size);
-        self.texel(face, i, j)
     }
 
     /// Solid-angle-weighted 2×2 box reduction to a cube of half the size (odd sizes: the

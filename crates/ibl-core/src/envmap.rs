@@ -125,7 +125,7 @@ pub(crate) fn find_with_stem(dir: &Path, stem: &str) -> Option<PathBuf> {
 
 /// Reads one HDR image and applies the input policy (NaN/Inf refused unless `sanitize`,
 /// negatives clamped).
-pub fn read_hdr_image(path: &Path, sanitize: bool) -> Result<(Image, TexelReport)> {
+pub(crate) fn read_hdr_image(path: &Path, sanitize: bool) -> Result<(Image, TexelReport)> {
     let mut img = io::read_image(path, ColorSpace::Srgb)?;
     let report = check_texels(&mut img, path, sanitize)?;
     Ok((img, report))

@@ -5,6 +5,8 @@
 //! the parallel texel traversal every bake shares ([`traverse`]) and file I/O with atomic
 //! writes ([`io`]).
 
+#![warn(missing_docs)]
+
 pub mod approx;
 pub mod area;
 pub mod bordered;

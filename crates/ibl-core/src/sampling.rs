@@ -2,7 +2,7 @@
 
 /// Van der Corput radical inverse in base 2 of `i`, in [0, 1).
 #[inline]
-pub fn radical_inverse_base2(i: u32) -> f32 {
+pub(crate) fn radical_inverse_base2(i: u32) -> f32 {
     (i.reverse_bits() >> 8) as f32 * (1.0 / 16777216.0)
 }
 

@@ -52,7 +52,7 @@ impl Default for Params {
 
 /// Largest face accepted: 6·n² texels must fit the image limit (`ibl_core::image::MAX_TEXELS`,
 /// 2^28) so that a KTX2 cube of that size can be read back (⌊√(2^28/6)⌋ = 6688).
-pub const MAX_FACE_SIZE: usize = 6688;
+pub(crate) const MAX_FACE_SIZE: usize = 6688;
 
 impl Params {
     pub fn validate(&self) -> Result<()> {
@@ -106,7 +106,7 @@ fn source_face_texels(env: &Environment) -> f64 {
 
 /// A warning when face size `n` upsamples the source: the bake then costs n² per face and adds
 /// no detail (`prefilter` warns the same way).
-pub fn upsampling_warning(input: &LoadedEnvironment, n: usize) -> Option<String> {
+pub(crate) fn upsampling_warning(input: &LoadedEnvironment, n: usize) -> Option<String> {
     let have = source_face_texels(&input.env);
     (n as f64 > have * 1.001).then(|| {
         let what = match &input.env {

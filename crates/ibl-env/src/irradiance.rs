@@ -17,7 +17,7 @@ use ibl_target::{DiffuseForm, Target};
 use std::path::{Path, PathBuf};
 
 /// Largest band count accepted (l ≤ 15).
-pub const MAX_BANDS: usize = 16;
+pub(crate) const MAX_BANDS: usize = 16;
 
 ibl_core::cube_output_params! {
 /// Parameters of the bake: CLI flags and RON keys alike.
@@ -103,7 +103,7 @@ impl Params {
     }
 
     /// The engine's own SH file, if the target takes one.
-    pub fn target_sh_file(&self) -> Option<&'static str> {
+    pub(crate) fn target_sh_file(&self) -> Option<&'static str> {
         self.target.spec().files.sh
     }
 
@@ -145,7 +145,7 @@ impl Params {
 
 /// The engine's SH file for `target` from the 3-band irradiance coefficients (E/π, our basis
 /// and frame), or `None` when the engine takes the irradiance cube only.
-pub fn target_sh_bytes(target: Target, irradiance: &[[f32; 3]]) -> Option<Vec<u8>> {
+pub(crate) fn target_sh_bytes(target: Target, irradiance: &[[f32; 3]]) -> Option<Vec<u8>> {
     use ibl_target::sh;
     let spec = target.spec();
     let json = |v: serde_json::Value| {
@@ -200,7 +200,7 @@ pub struct ShCoefficients {
 
 /// Lanczos σ factor of band l for `bands` bands: sinc(l/bands), sinc(x) = sin(πx)/(πx)
 /// (Sloan 2008, "Stupid Spherical Harmonics Tricks", §"windowing").
-pub fn lanczos_window(l: usize, bands: usize) -> f64 {
+pub(crate) fn lanczos_window(l: usize, bands: usize) -> f64 {
     if l == 0 {
         return 1.0;
     }
@@ -210,7 +210,7 @@ pub fn lanczos_window(l: usize, bands: usize) -> f64 {
 
 /// ∫ L Y_lm dω over an equirect image's own pixels, each at its centre direction (turned by
 /// `rotate_deg`) with the exact row solid angle. Ordered row sums: thread-count independent.
-pub fn project_equirect(img: &Image, bands: usize, rotate_deg: f32) -> Vec<[f64; 3]> {
+pub(crate) fn project_equirect(img: &Image, bands: usize, rotate_deg: f32) -> Vec<[f64; 3]> {
     let n = num_coeffs(bands);
     let (w, h) = (img.width, img.height);
     let row = |j: usize| {

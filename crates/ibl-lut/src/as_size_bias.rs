@@ -135,9 +135,10 @@ pub fn view_of(s: f64, t: f64) -> DVec3 {
     DVec3::new(cp * st, sp * st, nv)
 }
 
+#[cfg(test)]
 /// The table coordinates (s, t) of a view vector (the thesis's forward mapping, valid for any
 /// azimuth thanks to the rectangular symmetry).
-pub fn coords_of(v: DVec3) -> (f64, f64) {
+pub(crate) fn coords_of(v: DVec3) -> (f64, f64) {
     let s = if v.x == 0.0 && v.y == 0.0 {
         0.0
     } else {
@@ -202,7 +203,7 @@ pub fn size_bias(set: &SampleSet, v: DVec3) -> [f64; 2] {
 }
 
 /// The sample set the parameters ask for.
-pub fn sample_set(a: &AshikhminShirley, params: &Params) -> SampleSet {
+pub(crate) fn sample_set(a: &AshikhminShirley, params: &Params) -> SampleSet {
     match params.sampler {
         Sampler::Direct => SampleSet::direct(a, params.samples),
         Sampler::HvLut => SampleSet::through_lut(

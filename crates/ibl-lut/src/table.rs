@@ -22,7 +22,7 @@ pub fn texel_centre(i: usize, n: usize) -> f64 {
 
 /// Builds a width × height table with `channels` channels by calling `kernel(row, out)` for
 /// each row in parallel over [`ibl_core::traverse`]; `out` is that row's interleaved data.
-pub fn map_rows<K>(
+pub(crate) fn map_rows<K>(
     width: usize,
     height: usize,
     channels: usize,
@@ -68,7 +68,7 @@ impl Format {
 
     /// The format of an output that must be an image (`.exr` or `.png`); `what` says why,
     /// e.g. "the half-vector LUT is an image".
-    pub fn image_of(path: &Path, what: &str) -> Result<Format> {
+    pub(crate) fn image_of(path: &Path, what: &str) -> Result<Format> {
         match Format::of(path) {
             Ok(f @ (Format::Exr | Format::Png)) => Ok(f),
             _ => Err(unsupported(path, &format!("{what}: write .exr or .png"))),
@@ -92,7 +92,7 @@ fn unsupported(path: &Path, hint: &str) -> Error {
 
 /// The float dump written for `.json` / `.ron`: self-describing, row 0 first.
 #[derive(Serialize)]
-pub struct TableDump<'a> {
+pub(crate) struct TableDump<'a> {
     pub table: &'a str,
     pub tool_version: &'a str,
     pub width: usize,
@@ -193,7 +193,7 @@ pub fn check_size(name: &str, n: usize) -> Result<()> {
 }
 
 /// Checks a sample count against 1..=MAX_SAMPLES.
-pub fn check_samples(n: u32) -> Result<()> {
+pub(crate) fn check_samples(n: u32) -> Result<()> {
     if n == 0 || n > MAX_SAMPLES {
         return Err(Error::param(format!(
             "--samples {n} is out of range 1..={MAX_SAMPLES}"

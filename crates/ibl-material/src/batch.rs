@@ -82,7 +82,7 @@ pub fn inputs_in<'a>(
 }
 
 /// Case-insensitive match of a file name against a pattern with `*` and `?`.
-pub fn glob_match(pattern: &str, name: &str) -> bool {
+pub(crate) fn glob_match(pattern: &str, name: &str) -> bool {
     let p: Vec<char> = pattern.to_lowercase().chars().collect();
     let n: Vec<char> = name.to_lowercase().chars().collect();
     let (mut pi, mut ni) = (0, 0);

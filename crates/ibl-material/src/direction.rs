@@ -70,12 +70,12 @@ impl Preset {
 
 /// Position relative to (cx, cy) in image space: +x right, +y up, in units of the larger side.
 #[inline]
-pub fn image_offset(u: f64, v: f64, cx: f64, cy: f64, scale: [f64; 2]) -> [f64; 2] {
+pub(crate) fn image_offset(u: f64, v: f64, cx: f64, cy: f64, scale: [f64; 2]) -> [f64; 2] {
     [(u - cx) * scale[0], -(v - cy) * scale[1]]
 }
 
 /// (W, H) / max(W, H).
-pub fn aspect_scale(width: usize, height: usize) -> [f64; 2] {
+pub(crate) fn aspect_scale(width: usize, height: usize) -> [f64; 2] {
     let m = width.max(height) as f64;
     [width as f64 / m, height as f64 / m]
 }
@@ -164,7 +164,7 @@ impl<'de> serde::Deserialize<'de> for Preset {
 
 /// Angle in [0, π) stored as a value in [0, 1] (Cocco et al. 2024 Fig. 22) → unit tangent.
 #[inline]
-pub fn tangent_from_angle_value(value: f64) -> [f64; 2] {
+pub(crate) fn tangent_from_angle_value(value: f64) -> [f64; 2] {
     let (s, c) = (value * PI).sin_cos();
     [c, s]
 }
@@ -173,7 +173,7 @@ pub fn tangent_from_angle_value(value: f64) -> [f64; 2] {
 /// interpolation at texel centres of the doubled-angle vectors (x² − y², 2xy): t and −t are
 /// the same anisotropy axis, so averaging them must not cancel. Zero input texels carry no
 /// weight; an output with no consistent direction comes out as (0, 0).
-pub fn resample_line_field(
+pub(crate) fn resample_line_field(
     src: &[[f64; 2]],
     sw: usize,
     sh: usize,

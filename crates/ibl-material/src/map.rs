@@ -17,7 +17,7 @@ pub struct LoadedMap {
 }
 
 /// PNG colour type from the IHDR chunk (0 grey, 2 RGB, 3 palette, 4 grey+alpha, 6 RGBA).
-pub fn png_color_type(bytes: &[u8]) -> Option<u8> {
+pub(crate) fn png_color_type(bytes: &[u8]) -> Option<u8> {
     (bytes.len() > 25 && bytes.starts_with(&[0x89, b'P', b'N', b'G']) && &bytes[12..16] == b"IHDR")
         .then(|| bytes[25])
 }

@@ -5,7 +5,7 @@ use crate::quaternion::Vec3;
 use ibl_core::traverse::ordered_row_reduce;
 use ibl_core::{Error, Image};
 
-pub use crate::map::{load, png_color_type};
+pub use crate::map::load;
 
 /// A normal map as read from disk ([`load`]): the material bakes' one map type.
 pub type NormalImage = crate::map::LoadedMap;
@@ -99,7 +99,7 @@ impl Decoder {
     /// Decodes one texel without normalising it (the conversion's fast path: the quaternion
     /// formula takes the length instead).
     #[inline(always)]
-    pub fn decode_raw(&self, texel: &[f32]) -> RawTexel {
+    pub(crate) fn decode_raw(&self, texel: &[f32]) -> RawTexel {
         let d = &self.decoding;
         let (scale, offset) = if d.signed { (1.0, 0.0) } else { (2.0, -1.0) };
         let y_sign = if d.y_down { -1.0 } else { 1.0 };
@@ -135,7 +135,7 @@ impl Decoder {
 
 /// A decoded texel before normalisation.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum RawTexel {
+pub(crate) enum RawTexel {
     /// The decoded vector and its length (≥ `min_length`).
     Vector {
         v: Vec3,
@@ -168,7 +168,7 @@ impl ConventionCheck {
     /// The other convention is more integrable. Real maps (painted, photo-derived, lossy)
     /// are far from exact gradient fields: they reach |agreement| ≈ 0.3–0.8 where an exact
     /// height field gives 1, hence the modest threshold (the warning shows the number).
-    pub fn suggests_flip(&self) -> bool {
+    pub(crate) fn suggests_flip(&self) -> bool {
         self.samples >= 256 && self.agreement < -0.25
     }
 }

@@ -107,7 +107,7 @@ impl Params {
     }
 
     /// Everything that changes the output's bytes (not `check`): the batch's skip key.
-    pub fn output_key(&self) -> serde_json::Value {
+    pub(crate) fn output_key(&self) -> serde_json::Value {
         serde_json::json!({
             "y_down": self.y_down, "two_channel": self.two_channel, "signed": self.signed,
             "min_length": self.min_length, "bits": self.bits, "half": self.half, "sanitize": self.sanitize,

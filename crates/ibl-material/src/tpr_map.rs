@@ -20,7 +20,7 @@ use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
 /// Largest side accepted.
-pub const MAX_SIDE: usize = 16384;
+pub(crate) const MAX_SIDE: usize = 16384;
 
 /// Output size `W` or `WxH`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -152,7 +152,7 @@ impl<'de> serde::Deserialize<'de> for Roughness {
 }
 
 /// The thesis's α_x = 0.1, α_y = 1.0 (§3.5) as perceptual roughness.
-pub const DEFAULT_ROUGHNESS: [f64; 2] = [0.316_227_766_016_837_94, 1.0];
+pub(crate) const DEFAULT_ROUGHNESS: [f64; 2] = [0.316_227_766_016_837_94, 1.0];
 
 /// How `--angle-map` values are read.
 #[derive(

@@ -1,6 +1,8 @@
 //! Time-against-error charts for the benchmark reports: log-log line charts as self-contained
 //! SVG text, with the default of each knob marked and optional target lines.
 
+#![warn(missing_docs)]
+
 use std::fmt::Write as _;
 
 /// One curve: points (x, y) in the order they are joined, and which one is the default.

@@ -56,7 +56,7 @@ impl Quality {
     }
 
     /// Opening angle, leaf size and horizon split of the hierarchical sum.
-    pub fn tree_params(self) -> TreeParams {
+    pub(crate) fn tree_params(self) -> TreeParams {
         match self {
             Quality::Draft => TreeParams {
                 theta: 1.0,
@@ -77,7 +77,7 @@ impl Quality {
     }
 
     /// Hammersley points per texel of filtered importance sampling (`--method fis`).
-    pub fn fis_samples(self) -> u32 {
+    pub(crate) fn fis_samples(self) -> u32 {
         match self {
             Quality::Draft => 64,
             Quality::Default => 256,
@@ -122,7 +122,7 @@ impl Method {
 /// Mip bias added to the solid-angle lod of every FIS sample. Lagarde & de Rousiers use 1;
 /// against the brute-force reference 0 measured best at most levels and sample counts
 /// (studio, sunset, interior fixtures at 32², 32–1024 samples, biases 0, 0.5, 1).
-pub const LOD_BIAS: f32 = 0.0;
+pub(crate) const LOD_BIAS: f32 = 0.0;
 
 ibl_core::cube_output_params! {
 /// Parameters of the bake: CLI flags and RON keys alike.
@@ -181,7 +181,7 @@ pub const MAX_SAMPLES: u32 = 1 << 16;
 /// The source is at most this many times the output size (see [`source_face_size`]): finer
 /// would change the levels by far less than their error while the tree's memory grows 4× per
 /// step (about 200 MB for a 512² source).
-pub const MAX_SOURCE_FACTOR: usize = 2;
+pub(crate) const MAX_SOURCE_FACTOR: usize = 2;
 
 /// Levels a chain from `size` can hold (halving down to 1×1).
 pub fn max_levels(size: usize) -> usize {
@@ -272,7 +272,7 @@ impl Params {
     }
 
     /// Levels actually baked: all N, or those with r ≤ --max-roughness.
-    pub fn baked_levels(&self) -> usize {
+    pub(crate) fn baked_levels(&self) -> usize {
         let n = self.chain_levels();
         match self.max_roughness {
             Some(r) if n > 1 => (0..n)
@@ -284,7 +284,7 @@ impl Params {
     }
 
     /// Hammersley points per texel with --method fis.
-    pub fn fis_samples(&self) -> u32 {
+    pub(crate) fn fis_samples(&self) -> u32 {
         self.samples.unwrap_or_else(|| self.quality.fis_samples())
     }
 }
@@ -459,10 +459,10 @@ pub struct Baked {
 }
 
 /// Name of the Babylon.js `.env` written with `--target babylon`.
-pub const BABYLON_ENV_NAME: &str = "environment.env";
+pub(crate) const BABYLON_ENV_NAME: &str = "environment.env";
 
 /// Name of the sidecar report.
-pub const REPORT_NAME: &str = "prefilter.json";
+pub(crate) const REPORT_NAME: &str = "prefilter.json";
 
 /// Bakes the chain and encodes the outputs for `out_dir` (nothing is written).
 pub fn run(
@@ -736,16 +736,16 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
 
 /// A texel's edge must be at most this fraction of the lobe's width α (radians) to be stored
 /// as its centre value; coarser texels store their footprint's mean.
-pub const FOOTPRINT_LOBE_FRACTION: f32 = 0.25;
+pub(crate) const FOOTPRINT_LOBE_FRACTION: f32 = 0.25;
 /// Finest face the footprint means are computed at (bounds their cost: a few thousand texels).
-pub const FOOTPRINT_MAX_SIZE: usize = 64;
+pub(crate) const FOOTPRINT_MAX_SIZE: usize = 64;
 
 /// Sub-texels per edge k (a power of two) whose mean an n×n texel of roughness r stores: the
 /// smallest with a sub-texel edge (π/2)/(n·k) ≤ [`FOOTPRINT_LOBE_FRACTION`]·α, at most
 /// [`FOOTPRINT_MAX_SIZE`]/n; 1 (the centre value) where texels are already small next to the
 /// lobe. Mean over the footprint = ∫ over the texel of the convolved radiance / Ω, so the
 /// level keeps the environment's power whatever its size.
-pub fn footprint_factor(n: usize, roughness: f32) -> usize {
+pub(crate) fn footprint_factor(n: usize, roughness: f32) -> usize {
     let alpha = (roughness * roughness).max(1e-6);
     let edge = std::f32::consts::FRAC_PI_2 / n as f32;
     let mut k = 1;
@@ -779,7 +779,11 @@ const ESTIMATE_BUDGET: usize = 10_000_000;
 
 /// Estimated error of a level: its probe texels against the exact kernel summed by brute force
 /// over every source texel.
-pub fn estimate_error(level: &Cubemap, texels: &SourceTexels, roughness: f32) -> EstimatedError {
+pub(crate) fn estimate_error(
+    level: &Cubemap,
+    texels: &SourceTexels,
+    roughness: f32,
+) -> EstimatedError {
     use rayon::prelude::*;
     let per_face = (ESTIMATE_BUDGET / (6 * texels.len().max(1))).max(1);
     let g = ((per_face as f64).sqrt() as usize).clamp(1, 4);

@@ -14,19 +14,19 @@ use ibl_target::{LodMapping, Target};
 use serde::Serialize;
 
 /// Roughness values of the report: k/32, k = 0 … 32.
-pub const ROUGHNESS_STEPS: usize = 33;
+pub(crate) const ROUGHNESS_STEPS: usize = 33;
 /// Directions of the report (a modest count: the sidecar must not dominate the bake).
 pub const REPORT_DIRECTIONS: usize = 128;
 
 /// `steps` roughness values evenly spaced over [0, 1].
-pub fn roughness_grid(steps: usize) -> Vec<f32> {
+pub(crate) fn roughness_grid(steps: usize) -> Vec<f32> {
     let d = steps.saturating_sub(1).max(1) as f32;
     (0..steps).map(|k| k as f32 / d).collect()
 }
 
 /// `n` low-discrepancy unit directions (a spherical Fibonacci lattice, turned by an
 /// irrational angle so no point falls on a texel centre or a face edge of any level).
-pub fn probe_directions(n: usize) -> Vec<Vec3> {
+pub(crate) fn probe_directions(n: usize) -> Vec<Vec3> {
     let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
     let (s, c) = (0.7390851332f64.sin(), 0.7390851332f64.cos());
     (0..n)

@@ -8,7 +8,7 @@ use crate::tonemap::{display, exposure_scale, log_average_luminance};
 use ibl_core::{Cubemap, Image};
 
 /// Labels are the 5×7 font upscaled ×2.
-pub const LABEL_SCALE: usize = 2;
+pub(crate) const LABEL_SCALE: usize = 2;
 const MARGIN: usize = 16;
 const GAP: usize = 20;
 const BACKGROUND: [f32; 3] = [0.13, 0.13, 0.14];

@@ -65,7 +65,7 @@ impl Dfg {
     }
 
     /// A table from an image in the docs/CONVENTIONS.md layout (R = A, G = B).
-    pub fn from_image(img: &ibl_core::Image) -> Self {
+    pub(crate) fn from_image(img: &ibl_core::Image) -> Self {
         let data = (0..img.width * img.height).map(|k| {
             let t = img.texel(k % img.width, k / img.width);
             [t[0], t.get(1).copied().unwrap_or(0.0)]

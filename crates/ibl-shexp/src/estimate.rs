@@ -22,7 +22,7 @@ pub struct TableEntry {
 }
 
 /// Samples of one (view, α): directions under the horizon are dropped (they carry zero weight).
-pub fn sample_table(v: Vec3, alpha: f32, samples: usize, lod_bias: f32) -> Vec<TableEntry> {
+pub(crate) fn sample_table(v: Vec3, alpha: f32, samples: usize, lod_bias: f32) -> Vec<TableEntry> {
     let n = samples.max(1);
     let mut out = Vec::with_capacity(n);
     let g1v = g1(v.z, alpha);
@@ -105,7 +105,7 @@ impl Estimator {
 
 /// Σ weight · L(frame · l) over a table, accumulated in f64.
 #[inline]
-pub fn estimate_with_table(
+pub(crate) fn estimate_with_table(
     env: &BorderedMips,
     frame: (Vec3, Vec3, Vec3),
     table: &[TableEntry],
@@ -121,28 +121,6 @@ pub fn estimate_with_table(
         acc[2] += (c[2] * e.weight) as f64;
     }
     acc
-}
-
-/// E0 for an arbitrary (n, v) (world space), building the table on the fly: for tests and
-/// spot checks, not for loops.
-pub fn e0_at(
-    env: &BorderedMips,
-    n: Vec3,
-    v: Vec3,
-    alpha: f32,
-    samples: usize,
-    lod_bias: f32,
-) -> [f64; 3] {
-    let (t, b) = crate::basis::tangent_frame(n, 0.0);
-    let vl = Vec3::new(v.dot(t), v.dot(b), v.dot(n));
-    if vl.z <= 0.0 {
-        return [0.0; 3];
-    }
-    estimate_with_table(
-        env,
-        (t, b, n),
-        &sample_table(vl.normalize(), alpha, samples, lod_bias),
-    )
 }
 
 #[cfg(test)]

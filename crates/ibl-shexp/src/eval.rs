@@ -189,7 +189,7 @@ pub fn camera(view_deg: f32) -> (Vec3, Vec3, Vec3) {
 }
 
 /// Normal of pixel (i, j) of an s×s sphere image, or None outside the disc.
-pub fn pixel_normal(i: usize, j: usize, s: usize, cam: (Vec3, Vec3, Vec3)) -> Option<Vec3> {
+pub(crate) fn pixel_normal(i: usize, j: usize, s: usize, cam: (Vec3, Vec3, Vec3)) -> Option<Vec3> {
     let x = 2.0 * (i as f32 + 0.5) / s as f32 - 1.0;
     let y = 1.0 - 2.0 * (j as f32 + 0.5) / s as f32;
     let r2 = x * x + y * y;
@@ -275,7 +275,7 @@ pub fn compute_truth(cube: &Cubemap, params: &Params, progress: &dyn Progress) -
 
 /// SH-exp reflected radiance E = F0·E0 + (1−F0)·E1 at one pixel: eq. 11 times the Fresnel
 /// factor of `tail` (for a probe fitted on E0/(A+B), times F0·A + B·(…) — see [`crate::coeffs::Target`]).
-pub fn shexp_radiance(
+pub(crate) fn shexp_radiance(
     coeffs: &Coeffs,
     dfg: &crate::dfg::Dfg,
     n: Vec3,

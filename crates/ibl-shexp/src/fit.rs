@@ -139,7 +139,7 @@ impl Default for Params {
 }
 
 /// Largest row count accepted (normals × views × α).
-pub const MAX_ROWS: usize = 1 << 22;
+pub(crate) const MAX_ROWS: usize = 1 << 22;
 
 impl Params {
     pub fn validate(&self) -> Result<()> {
@@ -332,26 +332,6 @@ impl Rows {
             views: self.views,
         }
     }
-
-    /// Keeps only the rows of the α values whose indices are listed (for α-range ablations).
-    pub fn select_alphas(&self, keep: &[usize]) -> Rows {
-        let na = self.alphas.len();
-        let e0 = self
-            .e0
-            .chunks(na)
-            .flat_map(|c| keep.iter().map(move |&a| c[a]))
-            .collect();
-        Rows {
-            p_order: self.p_order,
-            q_order: self.q_order,
-            alphas: keep.iter().map(|&a| self.alphas[a]).collect(),
-            features: self.features.clone(),
-            n_dot_v: self.n_dot_v.clone(),
-            e0,
-            normals: self.normals,
-            views: self.views,
-        }
-    }
 }
 
 /// The normal i of `normals`, its turned tangent frame, and the world view k of `views`.
@@ -467,7 +447,7 @@ where
 
 /// Solve options beyond the rows themselves.
 #[derive(Clone, Copy, Debug)]
-pub struct SolveOptions {
+pub(crate) struct SolveOptions {
     /// Per-channel floor on E0.
     pub floor: [f64; 3],
     pub weight_power: f32,
@@ -479,13 +459,13 @@ pub struct SolveOptions {
 }
 
 /// p, q, the log-space RMS residual per channel and the condition number.
-pub type Solved = (Vec<[f32; 3]>, Vec<[f32; 3]>, [f64; 3], f64);
+pub(crate) type Solved = (Vec<[f32; 3]>, Vec<[f32; 3]>, [f64; 3], f64);
 
 /// Per knot p and q, the log-space RMS residual per channel and the condition number.
-pub type SolvedKnots = (Vec<Vec<[f32; 3]>>, Vec<Vec<[f32; 3]>>, [f64; 3], f64);
+pub(crate) type SolvedKnots = (Vec<Vec<[f32; 3]>>, Vec<Vec<[f32; 3]>>, [f64; 3], f64);
 
 /// Least squares of eq. 14 for each channel; returns (p, q, residual per channel, condition).
-pub fn solve_rows(rows: &Rows, opts: &SolveOptions) -> Result<Solved> {
+pub(crate) fn solve_rows(rows: &Rows, opts: &SolveOptions) -> Result<Solved> {
     let (mut p, mut q, residual, condition) = solve_rows_knots(rows, opts, &[])?;
     Ok((p.remove(0), q.remove(0), residual, condition))
 }
@@ -494,7 +474,11 @@ pub fn solve_rows(rows: &Rows, opts: &SolveOptions) -> Result<Solved> {
 /// and w₁·[eq. 14 row] in block s+1 (the hat weights of [`basis::knot_weights`]), so the
 /// coefficients are piecewise linear in α and the problem stays linear in log space. No knots
 /// is eq. 14 itself (one block).
-pub fn solve_rows_knots(rows: &Rows, opts: &SolveOptions, knots: &[f32]) -> Result<SolvedKnots> {
+pub(crate) fn solve_rows_knots(
+    rows: &Rows,
+    opts: &SolveOptions,
+    knots: &[f32],
+) -> Result<SolvedKnots> {
     let (p, q) = (rows.p_order, rows.q_order);
     let k1 = num_unknowns(p, q);
     let blocks = knots.len().max(1);

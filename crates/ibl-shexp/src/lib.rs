@@ -24,6 +24,8 @@
 //!   (1024 samples, mips ≥ 32², the same score). SH-exp loses mostly at α ≤ 0.36, where order-4
 //!   SH cannot hold the lobe-scale detail (per-α oracle fits reach 73%, 79% at P order 8), and
 //!   for the dielectric, where eq. 15 alone (exact E0) loses 19 of 96 cases.
+
+#![warn(missing_docs)]
 pub mod basis;
 pub mod coeffs;
 pub mod dfg;

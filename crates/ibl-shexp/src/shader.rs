@@ -70,7 +70,7 @@ impl Expr {
 
 /// Straight-line statements computing `y[i]` (i < (order+1)²) from a unit direction (x, y, z):
 /// `(target, expression)` where a target is a temporary name or `y[i]`.
-pub fn sh_statements(order: usize) -> Vec<(String, Expr)> {
+pub(crate) fn sh_statements(order: usize) -> Vec<(String, Expr)> {
     let bands = order + 1;
     let mut st: Vec<(String, Expr)> = Vec::new();
     for m in 0..bands {

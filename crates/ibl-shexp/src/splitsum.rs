@@ -65,7 +65,7 @@ impl SplitSum {
 /// The shared prefiltered chain: `ibl-prefilter`'s bake at level-0 size `size` with its
 /// defaults (levels halving down to 8², r = l/(N−1), filtered importance sampling at its
 /// default quality), from the working cube.
-pub fn shared_chain(source: &Cubemap, size: usize) -> crate::Result<CubeMips> {
+pub(crate) fn shared_chain(source: &Cubemap, size: usize) -> crate::Result<CubeMips> {
     let params = ibl_prefilter::Params {
         size,
         ..Default::default()

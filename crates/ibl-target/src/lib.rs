@@ -6,6 +6,7 @@
 //! [`lod`] holds the lookups' mappings, [`orient`] the exact cube re-orientations, [`sh`] the
 //! engines' SH forms, [`babylon`] the `.env` container.
 
+#![warn(missing_docs)]
 // Index loops read closer to the equations in the small numeric kernels.
 #![allow(clippy::needless_range_loop)]
 
@@ -50,8 +51,9 @@ pub enum Target {
     Unity,
 }
 
+#[cfg(test)]
 /// Every target, in help order.
-pub const ALL_TARGETS: [Target; 6] = [
+pub(crate) const ALL_TARGETS: [Target; 6] = [
     Target::Gltf,
     Target::Bevy,
     Target::Filament,
@@ -301,8 +303,9 @@ impl Target {
         }
     }
 
+    #[cfg(test)]
     /// Roughness the chain stores at each of its `levels` levels of base `size`.
-    pub fn level_roughnesses(self, levels: usize, size: usize) -> Vec<f32> {
+    pub(crate) fn level_roughnesses(self, levels: usize, size: usize) -> Vec<f32> {
         self.spec().lod.level_roughnesses(levels, size)
     }
 

@@ -15,7 +15,7 @@ pub enum Container {
 
 impl Container {
     /// The container `bytes` start like, if any.
-    pub fn sniff(bytes: &[u8]) -> Option<Container> {
+    pub(crate) fn sniff(bytes: &[u8]) -> Option<Container> {
         if bytes.starts_with(&super::ktx2::IDENTIFIER) {
             Some(Container::Ktx2)
         } else if bytes.starts_with(&super::ktx1::IDENTIFIER) {
@@ -28,7 +28,7 @@ impl Container {
     }
 
     /// Whether a file name's extension names a container (`.ktx2`, `.ktx`, `.dds`).
-    pub fn from_extension(path: &Path) -> Option<Container> {
+    pub(crate) fn from_extension(path: &Path) -> Option<Container> {
         match super::extension(path).as_str() {
             "ktx2" => Some(Container::Ktx2),
             "ktx" => Some(Container::Ktx1),

@@ -38,23 +38,12 @@ pub enum FloatDepth {
     F16,
 }
 
-impl FloatDepth {
-    /// The depth a bake's `--half` flag selects.
-    pub fn from_half(half: bool) -> Self {
-        if half {
-            FloatDepth::F16
-        } else {
-            FloatDepth::F32
-        }
-    }
-}
-
 /// f32 → half that saturates at ±65504, the largest finite half, instead of rounding to ±Inf:
 /// a sun of 10⁵ in a `--half` output stays finite (as GPU RGBA16F render targets clamp), so the
 /// file is still readable by every tool here, which refuse Inf. Energy above 65504 is lost:
 /// use float32 outputs for such environments.
 #[inline]
-pub fn f16_saturating(v: f32) -> half::f16 {
+pub(crate) fn f16_saturating(v: f32) -> half::f16 {
     half::f16::from_f32(v.clamp(-65504.0, 65504.0))
 }
 

@@ -27,12 +27,12 @@ pub struct Payload {
 
 impl Payload {
     /// Width and height of level `l` (halved per level, at least 1).
-    pub fn level_dims(&self, l: usize) -> (usize, usize) {
+    pub(crate) fn level_dims(&self, l: usize) -> (usize, usize) {
         ((self.width >> l).max(1), (self.height >> l).max(1))
     }
 
     /// Bytes of one face of level `l`.
-    pub fn face_bytes(&self, l: usize) -> usize {
+    pub(crate) fn face_bytes(&self, l: usize) -> usize {
         let (w, h) = self.level_dims(l);
         self.format.image_bytes(w, h)
     }
