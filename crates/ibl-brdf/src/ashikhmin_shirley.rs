@@ -25,7 +25,9 @@ use std::f64::consts::{FRAC_PI_2, PI, TAU};
 /// at the horizon.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct AshikhminShirley {
+    /// Phong exponent n_u along the tangent (x).
     pub nu: f64,
+    /// Phong exponent n_v along the bitangent (y).
     pub nv: f64,
 }
 
@@ -33,12 +35,16 @@ pub struct AshikhminShirley {
 /// the value the half-vector LUT stores in alpha.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct HalfVectorSample {
+    /// The sampled unit half vector h (tangent space, +z the normal).
     pub h: DVec3,
+    /// p_h(h), the half-vector density of the sample (per steradian).
     pub pdf: f64,
+    /// p_h(h) / p_h(n): the density relative to its peak, what the LUT stores in alpha.
     pub ratio: f64,
 }
 
 impl AshikhminShirley {
+    /// The lobe with exponents n_u, n_v (finite, ≥ 0; see `ibl_lut::hv::lobe` for the range the bakes accept).
     pub fn new(nu: f64, nv: f64) -> Self {
         AshikhminShirley { nu, nv }
     }

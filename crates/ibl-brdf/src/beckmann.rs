@@ -20,14 +20,18 @@ use std::f64::consts::PI;
 /// Anisotropic Beckmann with roughness α_x (tangent) and α_y (bitangent).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Beckmann {
+    /// Roughness α_x along the tangent.
     pub alpha_x: f32,
+    /// Roughness α_y along the bitangent.
     pub alpha_y: f32,
 }
 
 impl Beckmann {
+    /// The distribution with roughness α_x (tangent) and α_y (bitangent).
     pub fn new(alpha_x: f32, alpha_y: f32) -> Self {
         Beckmann { alpha_x, alpha_y }
     }
+    /// The isotropic distribution, α_x = α_y = α.
     pub fn isotropic(alpha: f32) -> Self {
         Beckmann {
             alpha_x: alpha,

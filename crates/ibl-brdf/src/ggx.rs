@@ -197,14 +197,18 @@ pub(crate) fn sample_vndf_aniso(v: Vec3, u1: f32, u2: f32, alpha_x: f32, alpha_y
 /// distribution of [`d_ggx`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Ggx {
+    /// Roughness α_x along the tangent (α = r², r the perceptual roughness).
     pub alpha_x: f32,
+    /// Roughness α_y along the bitangent.
     pub alpha_y: f32,
 }
 
 impl Ggx {
+    /// The distribution with roughness α_x (tangent) and α_y (bitangent).
     pub fn new(alpha_x: f32, alpha_y: f32) -> Self {
         Ggx { alpha_x, alpha_y }
     }
+    /// The isotropic distribution, α_x = α_y = α.
     pub fn isotropic(alpha: f32) -> Self {
         Ggx {
             alpha_x: alpha,

@@ -8,13 +8,18 @@ use glam::{DVec3, Vec3};
 /// The tangential transform of Atanasov et al. 2022 eq. 9, M = [[a, c, 0], [b, d, 0], [0, 0, 1]].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TangentTransform {
+    /// Row 0, column 0 of M.
     pub a: f64,
+    /// Row 1, column 0 of M.
     pub b: f64,
+    /// Row 0, column 1 of M.
     pub c: f64,
+    /// Row 1, column 1 of M.
     pub d: f64,
 }
 
 impl TangentTransform {
+    /// M = [[a, c, 0], [b, d, 0], [0, 0, 1]] (Atanasov et al. 2022 eq. 9).
     pub fn new(a: f64, b: f64, c: f64, d: f64) -> Self {
         TangentTransform { a, b, c, d }
     }
@@ -57,11 +62,14 @@ impl TangentTransform {
 /// The base microsurface transformed by M (Atanasov et al. 2022's "LTMD").
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Transformed<D> {
+    /// The microsurface before the transform.
     pub base: D,
+    /// The tangential transform M applied to its microfacet normals.
     pub m: TangentTransform,
 }
 
 impl<D: Microfacet> Transformed<D> {
+    /// The microsurface `base` transformed by `m`.
     pub fn new(base: D, m: TangentTransform) -> Self {
         Transformed { base, m }
     }

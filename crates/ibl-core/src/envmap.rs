@@ -23,8 +23,11 @@ pub enum Environment {
 /// An environment plus what the input checks found.
 #[derive(Clone, Debug)]
 pub struct LoadedEnvironment {
+    /// The environment as read (negative values clamped, NaN/Inf set to 0 if asked).
     pub env: Environment,
+    /// The file it was read from.
     pub path: PathBuf,
+    /// What the texel checks found (clamped negatives, non-finite values).
     pub report: TexelReport,
 }
 

@@ -20,6 +20,7 @@ pub struct Pcg32 {
 }
 
 impl Pcg32 {
+    /// The generator of O'Neill 2014 seeded with `seed` on sequence `stream` (each stream an independent sequence).
     pub fn new(seed: u64, stream: u64) -> Self {
         let mut rng = Pcg32 {
             state: 0,
@@ -31,6 +32,7 @@ impl Pcg32 {
         rng
     }
 
+    /// The next uniformly distributed 32-bit value (PCG-XSH-RR output function).
     pub fn next_u32(&mut self) -> u32 {
         let old = self.state;
         self.state = old.wrapping_mul(6364136223846793005).wrapping_add(self.inc);

@@ -55,6 +55,7 @@ impl Default for Params {
 pub(crate) const MAX_FACE_SIZE: usize = 6688;
 
 impl Params {
+    /// Checks the parameters before any input is read (face size within 1..=MAX_FACE_SIZE, ...).
     pub fn validate(&self) -> Result<()> {
         if let Some(n) = self.size {
             if n == 0 || n > MAX_FACE_SIZE {
@@ -86,6 +87,7 @@ impl Params {
 pub struct Baked {
     /// Encoded files, ready for [`io::write_many_atomic`].
     pub files: Vec<(PathBuf, Vec<u8>)>,
+    /// Face size of the cube written (the `--size` given or derived from the source width).
     pub face_size: usize,
     /// What the output encoding cost (one entry for the cube; none for --to-equirect).
     pub encoding: Vec<LevelEncoding>,

@@ -71,6 +71,7 @@ impl Default for Params {
 }
 
 impl Params {
+    /// Checks the parameters before any input is read (bands within 1..=MAX_BANDS, ...).
     pub fn validate(&self) -> Result<()> {
         if self.bands == 0 || self.bands > MAX_BANDS {
             return Err(Error::param(format!(
@@ -189,6 +190,7 @@ pub(crate) fn target_sh_bytes(target: Target, irradiance: &[[f32; 3]]) -> Option
 /// The coefficients file: radiance projection L_lm and the coefficients of E/π.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ShCoefficients {
+    /// SH bands projected (l = 0..bands−1, bands² coefficients per channel).
     pub bands: usize,
     /// L_lm = ∫ L(ω) Y_lm(ω) dω, as [r, g, b] in index order l(l+1)+m.
     pub radiance: Vec<[f32; 3]>,
@@ -456,7 +458,9 @@ pub fn cube_from_sh(coeffs: &[[f32; 3]], size: usize, progress: &dyn Progress) -
 
 /// What the bake produced, before anything is written.
 pub struct Baked {
+    /// Encoded files (coefficients and cube), ready for [`io::write_many_atomic`].
     pub files: Vec<(PathBuf, Vec<u8>)>,
+    /// The coefficients written to the coefficients file.
     pub coefficients: ShCoefficients,
     /// Irradiance-cube values below zero from SH ringing, clamped to 0.
     pub negative_clamped: usize,
@@ -711,16 +715,6 @@ mod tests {
     #[test]
     fn projection_is_thread_count_independent() {
         let env = load("sunset_256.exr");
-        let one = rayon::ThreadPoolBuilder::new()
-            .num_threads(1)
-            .build()
-            .unwrap();
-        let two = rayon::ThreadPoolBuilder::new()
-            .num_threads(2)
-            .build()
-            .unwrap();
-        let a = one.install(|| project(&env, 4, 0.0));
-        let b = two.install(|| project(&env, 4, 0.0));
-        assert_eq!(a, b);
+        ibl_testkit::thread_count_independent(&[1, 2, 3], || project(&env, 4, 0.0));
     }
 }

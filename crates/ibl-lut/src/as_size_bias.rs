@@ -118,6 +118,7 @@ impl Default for Params {
 }
 
 impl Params {
+    /// Checks the parameters before any work and returns the lobe they describe.
     pub fn validate(&self) -> Result<AshikhminShirley> {
         let a = hv::lobe(self.nu, self.nv)?;
         table::check_size("size", self.size)?;
@@ -151,6 +152,7 @@ pub(crate) fn coords_of(v: DVec3) -> (f64, f64) {
 /// every texel).
 #[derive(Clone, Debug)]
 pub struct SampleSet {
+    /// The unit half vectors h drawn from p_h (tangent space, +z the normal).
     pub h: Vec<DVec3>,
 }
 
@@ -225,6 +227,7 @@ pub fn size_bias_table(set: &SampleSet, size: usize, progress: &dyn Progress) ->
     })
 }
 
+/// How the bias table describes itself in its JSON/RON dump.
 pub fn describe(params: &Params) -> Describe<'static> {
     Describe {
         table:

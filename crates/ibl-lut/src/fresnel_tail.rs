@@ -55,6 +55,7 @@ impl Default for Params {
 }
 
 impl Params {
+    /// Checks the parameters (size, samples) before any work.
     pub fn validate(&self) -> Result<()> {
         table::check_size("size", self.size)?;
         table::check_samples(self.samples)
@@ -94,6 +95,7 @@ pub(crate) fn tail_table_with(
     })
 }
 
+/// How the Fresnel-tail table describes itself in its JSON/RON dump.
 pub fn describe(params: &Params) -> Describe<'static> {
     Describe {
         table:

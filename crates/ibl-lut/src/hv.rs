@@ -165,15 +165,23 @@ pub fn lookup(lut: &Image, xi1: f64, xi2: f64) -> (DVec3, f64) {
 /// The sidecar the shader reads to restore p_h.
 #[derive(Serialize, serde::Deserialize, Debug, PartialEq)]
 pub struct Sidecar {
+    /// What the table is, with its reference (Marcolongo 2020 §4.3.2).
     pub table: String,
+    /// The version of the tool that wrote it.
     pub tool_version: String,
+    /// Phong exponent n_u of the lobe.
     pub nu: f64,
+    /// Phong exponent n_v of the lobe.
     pub nv: f64,
     /// p_h(n) = √((n_u+1)(n_v+1))/(2π): multiply A by it to get p_h(h).
     pub p_h_n: f64,
+    /// Edge length of the square table in texels.
     pub size: usize,
+    /// File name of the table image beside the sidecar.
     pub image: String,
+    /// How the image stores values (PNG bits, EXR half or float).
     pub encoding: String,
+    /// How texel (i, j) maps to (ξ₁, ξ₂) and how the channels encode h and the pdf ratio.
     pub layout: String,
 }
 

@@ -48,9 +48,13 @@ where
 /// Output formats, chosen by extension.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Format {
+    /// OpenEXR, float or half.
     Exr,
+    /// PNG, 8 or 16 bits (values in [0, 1]).
     Png,
+    /// A JSON dump of every texel with the table's description.
     Json,
+    /// A RON dump of the same.
     Ron,
 }
 
@@ -110,10 +114,15 @@ pub(crate) struct TableDump<'a> {
 
 /// How a table describes itself in dumps and summaries.
 pub struct Describe<'a> {
+    /// What the table is, with its reference.
     pub table: &'a str,
+    /// Meaning of each channel, in order.
     pub channels: &'a [&'a str],
+    /// What the column coordinate s = (i+0.5)/width stands for.
     pub s: &'a str,
+    /// What the row coordinate t = (j+0.5)/height stands for.
     pub t: &'a str,
+    /// The parameters the table was baked with.
     pub params: serde_json::Value,
 }
 
@@ -215,17 +224,8 @@ mod tests {
                 t[1] = (texel_centre(j, 5) as f32).sin() * 1e-3 + 1.0;
             }
         };
-        let one = rayon::ThreadPoolBuilder::new()
-            .num_threads(1)
-            .build()
-            .unwrap();
-        let two = rayon::ThreadPoolBuilder::new()
-            .num_threads(2)
-            .build()
-            .unwrap();
-        let a = one.install(|| map_rows(7, 5, 2, &NoProgress, k));
-        let b = two.install(|| map_rows(7, 5, 2, &NoProgress, k));
-        assert_eq!(a, b);
+        let a =
+            ibl_testkit::thread_count_independent(&[1, 2, 3], || map_rows(7, 5, 2, &NoProgress, k));
         assert_eq!(a.texel(3, 0)[0], 0.5);
         assert_eq!(a.texel(0, 2)[1], (0.5f32).sin() * 1e-3 + 1.0);
     }

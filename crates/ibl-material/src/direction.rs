@@ -20,18 +20,36 @@ use std::str::FromStr;
 #[derive(Clone, Debug, PartialEq)]
 pub enum Preset {
     /// `constant:DEG`: the tangent turned by DEG about n (from +t towards +b).
-    Constant { deg: f64 },
+    Constant {
+        /// Angle in degrees.
+        deg: f64,
+    },
     /// `linear:DEG`: straight strokes at DEG counter-clockwise from the image's +x, as seen on
     /// the image (the same field as `constant:DEG` for +y-up tangent spaces).
-    Linear { deg: f64 },
+    Linear {
+        /// Angle in degrees from the image's +x.
+        deg: f64,
+    },
     /// `radial[:CX,CY]`: concentric circles about (CX, CY) in texture coordinates (v down the
     /// image, default the centre), tangent along the circle, counter-clockwise — a CD, a pan
     /// bottom.
-    Radial { cx: f64, cy: f64 },
+    Radial {
+        /// Centre u in texture coordinates.
+        cx: f64,
+        /// Centre v in texture coordinates (v down the image).
+        cy: f64,
+    },
     /// `spiral[:CX,CY,TURNS]`: the Archimedean spiral r = φ/(4π·TURNS) about (CX, CY): TURNS
     /// grooves between the centre and a distance of half the larger side; TURNS = 0 gives
     /// straight rays, negative TURNS winds the other way. Default 0.5,0.5,8.
-    Spiral { cx: f64, cy: f64, turns: f64 },
+    Spiral {
+        /// Centre u in texture coordinates.
+        cx: f64,
+        /// Centre v in texture coordinates (v down the image).
+        cy: f64,
+        /// Grooves between the centre and half the larger side.
+        turns: f64,
+    },
     /// `wave`: the thesis's example, x = cos πv, y = sin πv.
     Wave,
 }

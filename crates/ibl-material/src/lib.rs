@@ -21,4 +21,6 @@ pub mod quat_map;
 pub mod quaternion;
 pub mod tpr_map;
 
-pub use error::{MaterialError, Result};
+/// The former name of [`Error`], kept while the `quat-map` and `tpr-map` binaries still use it.
+pub use error::Error as MaterialError;
+pub use error::{Error, Result};

@@ -9,10 +9,12 @@ use std::path::{Path, PathBuf};
 /// An input map as read from disk.
 #[derive(Clone, Debug)]
 pub struct LoadedMap {
+    /// The texels as read (linear; 8-bit PNGs scaled to [0, 1]).
     pub image: Image,
     /// The file was a grey+alpha PNG (the reader expands it to (L, L, L, A)): its two
     /// channels are then L and A (BC5-style normal maps, direction maps saved as LA).
     pub grey_alpha: bool,
+    /// The file it was read from.
     pub path: PathBuf,
 }
 

@@ -29,12 +29,18 @@ pub enum Texel {
     /// A unit normal, with the length the stored vector had before normalisation and
     /// whether a two-channel texel lay outside the unit disk (x² + y² > 1, z set to 0).
     Unit {
+        /// The unit normal (tangent space).
         n: Vec3,
+        /// Length of the stored vector before normalisation.
         len: f64,
+        /// A two-channel texel with x² + y² > 1 (z set to 0).
         outside_disk: bool,
     },
     /// Shorter than `min_length` (e.g. mid-grey padding): no direction.
-    Degenerate { len: f64 },
+    Degenerate {
+        /// Length of the stored vector.
+        len: f64,
+    },
     /// NaN or infinite components.
     NonFinite,
 }
@@ -42,6 +48,7 @@ pub enum Texel {
 /// A [`Decoding`] bound to an image's channel layout.
 #[derive(Clone, Copy, Debug)]
 pub struct Decoder {
+    /// How stored values become a normal.
     pub decoding: Decoding,
     /// Channels holding x and y (and z unless two-channel).
     x: usize,
@@ -161,6 +168,7 @@ pub struct ConventionCheck {
     /// (flipped − as decoded)/(flipped + as decoded) ∈ [−1, 1]: the correlation of ∂p/∂y with
     /// ∂q/∂x; near +1 the decoded convention is right, near −1 the flipped one.
     pub agreement: f64,
+    /// Texel pairs the agreement was measured on.
     pub samples: u64,
 }
 

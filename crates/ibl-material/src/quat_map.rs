@@ -70,6 +70,7 @@ impl Default for Params {
 }
 
 impl Params {
+    /// Checks the parameters before any input is read.
     pub fn validate(&self) -> ibl_core::Result<()> {
         if self.bits != 8 && self.bits != 16 {
             return Err(Error::param(format!("--bits {} (use 8 or 16)", self.bits)));
@@ -89,6 +90,7 @@ impl Params {
         crate::output::validate(out, self.bits, self.half, "quaternion maps")
     }
 
+    /// How this run decodes the input normals.
     pub fn decoding(&self) -> Decoding {
         Decoding {
             y_down: self.y_down,
@@ -132,6 +134,7 @@ impl Params {
 /// What the conversion met in the input.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct ConvertStats {
+    /// Texels converted.
     pub texels: u64,
     /// Shorter than `min_length`: stored as the identity.
     pub degenerate: u64,
@@ -147,6 +150,7 @@ pub struct ConvertStats {
     pub short: u64,
     /// Range of decoded lengths of the texels with a direction (both 0 when none has one).
     pub min_length: f64,
+    /// Largest decoded length among the texels with a direction.
     pub max_length: f64,
     /// Whether the slopes are more integrable with green flipped (DirectX vs OpenGL).
     pub convention: Option<ConventionCheck>,
@@ -297,6 +301,7 @@ pub struct CheckReport {
     pub compared: u64,
     /// Angle between n' decoded from the stored quaternion and the input's unit normal.
     pub max_angle_error_rad: f64,
+    /// Mean angle between n' decoded from the stored quaternion and the input's unit normal.
     pub mean_angle_error_rad: f64,
     /// The quantisation bound 2·asin(√3·eps) for the output's storage.
     pub angle_bound_rad: f64,
@@ -309,10 +314,12 @@ pub struct CheckReport {
     pub max_orthonormality_error_renormalised: f64,
     /// Frames with det(t', b', n') ≤ 0 (must be 0).
     pub left_handed: u64,
+    /// How the output stores its texels (the bound depends on it).
     pub storage: StorageDepth,
 }
 
 impl CheckReport {
+    /// Whether every measured error is within its quantisation bound and no frame is left-handed.
     pub fn within_bounds(&self) -> bool {
         // 1e-6 rad / 1e-6 of slack for single-precision decoding of the input.
         self.left_handed == 0
@@ -320,6 +327,7 @@ impl CheckReport {
             && self.max_orthonormality_error <= self.orthonormality_bound + 1e-6
     }
 
+    /// The check as one line for the log.
     pub fn summary(&self) -> String {
         format!(
             "check: {} texels, n' error max {:.3e} rad ({:.4}°, bound {:.3e}), mean {:.3e} rad; orthonormality error {:.3e} (bound {:.3e}), {:.1e} renormalised; {} left-handed",
@@ -415,7 +423,9 @@ pub fn check(
 pub struct Baked {
     /// Encoded files, ready for [`io::write_many_atomic`].
     pub files: Vec<(PathBuf, Vec<u8>)>,
+    /// What the conversion met.
     pub stats: ConvertStats,
+    /// The round-trip check, with `--check`.
     pub check: Option<CheckReport>,
 }
 
@@ -762,19 +772,12 @@ mod tests {
     #[test]
     fn deterministic_across_thread_counts() {
         let normal = crate::normal::load(&fixture("0003_256.png")).unwrap();
-        let bake = |n: usize| {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(n)
-                .build()
-                .unwrap();
-            pool.install(|| {
-                run(&Params::default(), &normal, Path::new("q.png"), &NoProgress)
-                    .unwrap()
-                    .files[0]
-                    .1
-                    .clone()
-            })
-        };
-        assert_eq!(bake(1), bake(2));
+        ibl_testkit::thread_count_independent(&[1, 2, 3], || {
+            run(&Params::default(), &normal, Path::new("q.png"), &NoProgress)
+                .unwrap()
+                .files[0]
+                .1
+                .clone()
+        });
     }
 }

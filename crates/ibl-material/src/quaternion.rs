@@ -148,16 +148,21 @@ pub fn storage_eps(depth: StorageDepth) -> f64 {
 /// How a map's texels are stored on disk.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 pub enum StorageDepth {
+    /// Unsigned normalised integers of this many bits (8 or 16).
     Bits(u8),
+    /// Half floats (EXR).
     Half,
+    /// 32-bit floats (EXR).
     Float,
 }
 
+/// a·b.
 #[inline]
 pub fn dot(a: Vec3, b: Vec3) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
+/// a×b (right-handed).
 #[inline]
 pub fn cross(a: Vec3, b: Vec3) -> Vec3 {
     [
@@ -167,6 +172,7 @@ pub fn cross(a: Vec3, b: Vec3) -> Vec3 {
     ]
 }
 
+/// |a|.
 #[inline]
 pub fn length(a: Vec3) -> f64 {
     dot(a, a).sqrt()

@@ -9,7 +9,7 @@
 use crate::direction::{aspect_scale, resample_line_field, tangent_from_angle_value, taps, Preset};
 use crate::expr::{self, Program, Scratch};
 pub use crate::map::LoadedMap;
-use crate::{MaterialError, Result};
+use crate::Result;
 use ibl_core::image::check_texels;
 use ibl_core::io;
 use ibl_core::progress::Progress;
@@ -25,7 +25,9 @@ pub(crate) const MAX_SIDE: usize = 16384;
 /// Output size `W` or `WxH`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Size {
+    /// Columns.
     pub width: usize,
+    /// Rows.
     pub height: usize,
 }
 
@@ -243,6 +245,7 @@ impl Default for Params {
 }
 
 impl Params {
+    /// Checks the parameters (one direction source, ranges) before any input is read.
     pub fn validate(&self) -> ibl_core::Result<()> {
         let sources = self.preset.is_some() as u8
             + self.angle_map.is_some() as u8
@@ -281,6 +284,7 @@ impl Params {
         Ok(())
     }
 
+    /// [`Params::validate`] plus the checks on the output path (extension, bits, half).
     pub fn validate_output(&self, out: &Path) -> ibl_core::Result<()> {
         self.validate()?;
         crate::output::validate(out, self.bits, self.half, "TPR maps")
@@ -291,7 +295,7 @@ impl Params {
         let dir =
             match &self.expr {
                 Some(src) => Some(expr::compile(src, &["u", "v"], &["x", "y"]).map_err(
-                    |source| MaterialError::Expr {
+                    |source| crate::Error::Expr {
                         flag: "--expr",
                         source,
                     },
@@ -301,7 +305,7 @@ impl Params {
         let rough = match &self.roughness_expr {
             Some(src) => Some(
                 expr::compile(src, &["u", "v", "x", "y"], &["rx", "ry"]).map_err(|source| {
-                    MaterialError::Expr {
+                    crate::Error::Expr {
                         flag: "--roughness-expr",
                         source,
                     }
@@ -316,7 +320,9 @@ impl Params {
 /// Images the bake reads, loaded by the caller (or by [`load_inputs`]).
 #[derive(Clone, Debug, Default)]
 pub struct Inputs {
+    /// The angle map given with `--angle-map`, if any.
     pub angle_map: Option<LoadedMap>,
+    /// The roughness map given with `--roughness-map`, if any.
     pub roughness_map: Option<LoadedMap>,
     /// What loading them met (negative values clamped, NaN/Inf set to 0 with `--sanitize`),
     /// one line each; the bake's [`TprStats::warnings`] repeats them.
@@ -356,8 +362,11 @@ pub fn load_inputs(params: &Params) -> ibl_core::Result<Inputs> {
 /// What the bake met.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct TprStats {
+    /// Output columns.
     pub width: usize,
+    /// Output rows.
     pub height: usize,
+    /// Where the directions came from (preset, expression or angle map).
     pub source: String,
     /// Zero-length directions replaced by +x (the centre of a radial field, ...).
     pub zero_length: u64,
@@ -374,6 +383,7 @@ pub struct TprStats {
 }
 
 impl TprStats {
+    /// The one-line warnings of the bake (input warnings first).
     pub fn warnings(&self) -> Vec<String> {
         let mut w = self.input_warnings.clone();
         if self.zero_length > 0 {
@@ -485,7 +495,9 @@ fn sample(img: &Image, c: usize, u: f64, v: f64) -> f64 {
 
 /// What the bake produced, before anything is written.
 pub struct Baked {
+    /// Encoded files, ready for [`io::write_many_atomic`].
     pub files: Vec<(PathBuf, Vec<u8>)>,
+    /// What the bake met.
     pub stats: TprStats,
 }
 

@@ -47,6 +47,7 @@ pub enum Quality {
 }
 
 impl Quality {
+    /// The `--quality` value naming this preset.
     pub fn name(self) -> &'static str {
         match self {
             Quality::Draft => "draft",
@@ -111,6 +112,7 @@ pub enum Method {
 }
 
 impl Method {
+    /// The `--method` value naming this method.
     pub fn name(self) -> &'static str {
         match self {
             Method::Tree => "tree",
@@ -189,9 +191,10 @@ pub fn max_levels(size: usize) -> usize {
 }
 
 impl Params {
+    /// Checks the parameters before any input is read.
     pub fn validate(&self) -> Result<()> {
         if self.size == 0 || self.size > MAX_SIZE {
-            return Err(Error::Param(format!(
+            return Err(Error::param(format!(
                 "--size {} is out of range 1..={MAX_SIZE}",
                 self.size
             )));
@@ -199,7 +202,7 @@ impl Params {
         if let Some(n) = self.levels {
             let m = max_levels(self.size);
             if n == 0 || n > m {
-                return Err(Error::Param(format!(
+                return Err(Error::param(format!(
                     "--levels {n} is out of range 1..={m} for --size {}",
                     self.size
                 )));
@@ -207,17 +210,17 @@ impl Params {
         }
         if let Some(s) = self.samples {
             if s == 0 || s > MAX_SAMPLES {
-                return Err(Error::Param(format!(
+                return Err(Error::param(format!(
                     "--samples {s} is out of range 1..={MAX_SAMPLES}"
                 )));
             }
             if self.method != Method::Fis {
-                return Err(Error::Param("--samples applies to --method fis (the default tree method is tuned by --quality)".into()));
+                return Err(Error::param("--samples applies to --method fis (the default tree method is tuned by --quality)"));
             }
         }
         if let Some(r) = self.max_roughness {
             if !(0.0..=1.0).contains(&r) {
-                return Err(Error::Param(format!(
+                return Err(Error::param(format!(
                     "--max-roughness {r} is out of range 0..=1"
                 )));
             }
@@ -226,14 +229,14 @@ impl Params {
         if self.target == Target::Babylon
             && (!self.size.is_power_of_two() || self.baked_levels() != max_levels(self.size))
         {
-            return Err(Error::Param(format!(
+            return Err(Error::param(format!(
                 "--target babylon needs a power-of-two --size and its full chain down to 1×1 ({} levels for --size {}; no --max-roughness): Babylon's .env holds every level",
                 max_levels(self.size),
                 self.size
             )));
         }
         if !self.target.spec().lod.reads_chain() {
-            return Err(Error::Param(format!(
+            return Err(Error::param(format!(
                 "--target {} reads no prefiltered chain: three.js filters the environment itself (PMREMGenerator); bake its cube with equirect-to-cube --target three and its LightProbe with irradiance --target three",
                 self.target.name()
             )));
@@ -363,7 +366,9 @@ impl ErrorStats {
 /// What `prefilter.json` records.
 #[derive(Clone, Debug, Serialize)]
 pub struct Report {
+    /// The tool that wrote the report (`prefilter`).
     pub tool: &'static str,
+    /// The tool's version.
     pub version: &'static str,
     /// Face size of level 0.
     pub size: usize,
@@ -389,12 +394,17 @@ pub struct Report {
     pub source_size: usize,
     /// Knobs of the tree method, or of FIS (samples per texel, mip bias).
     pub tree: Option<TreeParams>,
+    /// FIS samples per texel (with `--method fis`).
     pub fis_samples: Option<u32>,
+    /// FIS source-mip bias (with `--method fis`).
     pub fis_lod_bias: Option<f32>,
+    /// Rotation about +Y applied to the source, in degrees.
     pub rotate: f32,
     /// --max-roughness, if given, and what it did.
     pub max_roughness: Option<f32>,
+    /// Why the chain stops early (`--max-roughness`), if it does.
     pub note: Option<String>,
+    /// One entry per level written.
     pub level: Vec<LevelReport>,
     /// The output encoding and what it cost per level against the float chain (filled by
     /// [`run`]; the bake alone leaves it empty).
@@ -403,11 +413,16 @@ pub struct Report {
     pub runtime: Option<RuntimeReport>,
 }
 
+/// What one level of `prefilter.json` records.
 #[derive(Clone, Debug, Serialize)]
 pub struct LevelReport {
+    /// Level index, 0 the mirror.
     pub level: usize,
+    /// Face size in texels.
     pub size: usize,
+    /// Perceptual roughness r of the level.
     pub roughness: f32,
+    /// GGX α = r².
     pub alpha: f32,
     /// Points per texel whose mean the texel stores (1: its centre; k² when the level's texels
     /// are not much smaller than the lobe, see [`footprint_factor`]).
@@ -420,18 +435,25 @@ pub struct LevelReport {
     pub estimated_error: Option<EstimatedError>,
 }
 
+/// The error of one level measured against the brute-force kernel on probe texels.
 #[derive(Clone, Debug, Serialize)]
 pub struct EstimatedError {
+    /// Mean |baked − exact| / exact over the probes and channels.
     pub mean_abs_rel: f64,
+    /// Root mean square of the same relative error.
     pub rms_rel: f64,
+    /// Largest relative error.
     pub max_abs_rel: f64,
+    /// Probe texels measured.
     pub probe_texels: usize,
 }
 
 /// A baked chain before encoding, with timings and work (not part of the report, which must
 /// be identical from run to run).
 pub struct Chain {
+    /// The levels, mirror first.
     pub mips: CubeMips,
+    /// What `prefilter.json` will record.
     pub report: Report,
     /// Seconds per level (0 for the mirror level).
     pub level_seconds: Vec<f64>,
@@ -453,6 +475,7 @@ pub struct Chain {
 pub struct Baked {
     /// Encoded files (the chain and `prefilter.json`), ready for [`io::write_many_atomic`].
     pub files: Vec<(PathBuf, Vec<u8>)>,
+    /// The float chain and its report.
     pub chain: Chain,
     /// What the output encoding cost per level (its seconds included).
     pub encoding: Vec<LevelEncoding>,

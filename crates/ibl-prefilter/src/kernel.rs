@@ -38,6 +38,7 @@ pub(crate) fn kernel_d_nl(s2: f32, alpha: f32) -> f32 {
 /// The source of a brute-force convolution: every texel of a cube as structure-of-arrays,
 /// grouped in square tiles so whole tiles below the horizon of `n` can be skipped exactly.
 pub struct SourceTexels {
+    /// Face size of the source cube.
     pub size: usize,
     x: Vec<f32>,
     y: Vec<f32>,
@@ -65,6 +66,7 @@ struct Tile {
 const TILE: usize = 8;
 
 impl SourceTexels {
+    /// Every texel of `cube` with its direction and solid angle.
     pub fn new(cube: &Cubemap) -> Self {
         use rayon::prelude::*;
         let n = cube.size;
@@ -146,6 +148,7 @@ impl SourceTexels {
         self.x.len()
     }
 
+    /// Whether the source has no texel.
     pub fn is_empty(&self) -> bool {
         self.x.is_empty()
     }

@@ -54,13 +54,18 @@ pub enum Reference<'a> {
     /// 0.02% of the brute force at the default preset), roughness 0 the source itself
     /// (bilinear).
     Tree {
+        /// The source's cell hierarchy.
         tree: &'a CellTree,
+        /// The source cube (roughness 0 reads it directly).
         source: &'a Cubemap,
+        /// The tree method's knobs.
         params: TreeParams,
     },
     /// The exact kernel summed over every source texel (`--reference`): slow, for tests.
     Brute {
+        /// Every source texel.
         texels: &'a SourceTexels,
+        /// The source cube (roughness 0 reads it directly).
         source: &'a Cubemap,
     },
 }
@@ -113,6 +118,7 @@ pub fn mean_abs_rel(
 /// What `prefilter.json` records under `"runtime"`.
 #[derive(Clone, Debug, Serialize)]
 pub struct RuntimeReport {
+    /// The engine whose lookup was evaluated.
     pub target: Target,
     /// The target's level ↔ roughness mapping as its shader computes the lod.
     pub lookup: &'static str,
@@ -122,6 +128,7 @@ pub struct RuntimeReport {
     pub mean_abs_rel: Vec<f64>,
     /// Directions per roughness (low-discrepancy, between texel centres).
     pub directions: usize,
+    /// What the lookups were compared with.
     pub reference: &'static str,
     /// The pixel format the looked-up chain was decoded from (the engine samples the decoded
     /// texels; rgba32f is the float chain itself).

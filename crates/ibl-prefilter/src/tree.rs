@@ -181,6 +181,7 @@ fn cone_radius(face: Face, centre: Vec3, s0: f32, s1: f32, t0: f32, t1: f32) -> 
 }
 
 impl CellTree {
+    /// The cell hierarchy of `cube`: per level, the texels' summed radiance × solid angle and their moments.
     pub fn new(cube: &Cubemap) -> Self {
         use rayon::prelude::*;
         let n = cube.size;

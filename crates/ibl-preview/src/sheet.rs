@@ -18,13 +18,17 @@ const TITLE: [f32; 3] = [1.0, 0.8, 0.35];
 /// A display-ready picture (RGBA, display values in [0, 1]; alpha 0 shows the background)
 /// and its caption.
 pub struct Tile {
+    /// Text drawn under the picture.
     pub caption: String,
+    /// The picture (RGBA, display values).
     pub image: Image,
 }
 
 /// A titled row of tiles.
 pub struct Row {
+    /// Text drawn left of the row.
     pub title: String,
+    /// The pictures, left to right.
     pub tiles: Vec<Tile>,
 }
 

@@ -60,11 +60,14 @@ pub(crate) fn reflection_pair(n: Vec3, v: Vec3) -> (Vec3, Vec3) {
 /// Y(r) for P (bands 0..=p_order) and Y(h_r) for Q (bands 0..=q_order; index 0 is unused).
 #[derive(Clone, Debug)]
 pub struct Features {
+    /// Y_lm(r), (p_order+1)² values in SH order.
     pub y_r: Vec<f32>,
+    /// Y_lm(h_r), (q_order+1)² values (index 0 unused).
     pub y_hr: Vec<f32>,
 }
 
 impl Features {
+    /// Zeroed features for the given orders.
     pub fn new(p_order: usize, q_order: usize) -> Self {
         Features {
             y_r: vec![0.0; coeffs_of_order(p_order)],

@@ -15,11 +15,15 @@ use std::path::Path;
 /// h_r = normalize(n + r)). Band l of both is damped by exp(−l(l+1)·α/2), α the GGX α = r².
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Coeffs {
+    /// Highest SH band of P.
     pub p_order: usize,
+    /// Highest SH band of Q.
     pub q_order: usize,
     /// GGX α values the rows were fitted at.
     pub alphas: Vec<f32>,
+    /// Coefficients of P, RGB.
     pub p: Vec<[f32; 3]>,
+    /// Coefficients of Q, RGB (index 0, the DC, unused).
     pub q: Vec<[f32; 3]>,
     /// Log-space RMS residual of the fit over all rows and channels.
     pub residual: f64,

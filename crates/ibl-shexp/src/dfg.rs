@@ -30,8 +30,11 @@ pub enum FresnelTail {
 /// A tabulated DFG: `data[(j * width + i)] = (A, B)` at n·v = (i+0.5)/width, r = (j+0.5)/height.
 #[derive(Clone, Debug)]
 pub struct Dfg {
+    /// Columns (n·v axis).
     pub width: usize,
+    /// Rows (roughness axis).
     pub height: usize,
+    /// (A, B) per texel, row by row.
     pub data: Vec<[f32; 2]>,
 }
 

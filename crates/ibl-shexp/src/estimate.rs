@@ -16,8 +16,11 @@ use ibl_core::sampling::hammersley;
 /// G2(v,l)/G1(v)/N and its lod before the environment's texel-size offset.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TableEntry {
+    /// Light direction l in the local frame (n = +z).
     pub l: [f32; 3],
+    /// G2(v,l)/G1(v)/N: the sample's weight in E0.
     pub weight: f32,
+    /// Source lod of the sample before the texel-size offset.
     pub lod: f32,
 }
 
@@ -51,8 +54,11 @@ pub(crate) fn sample_table(v: Vec3, alpha: f32, samples: usize, lod_bias: f32) -
 /// Tables for a fixed set of local views and α values: `tables[a * views + k]`.
 #[derive(Clone, Debug)]
 pub struct Estimator {
+    /// Local view directions (n = +z).
     pub views: Vec<Vec3>,
+    /// GGX α values.
     pub alphas: Vec<f32>,
+    /// Samples drawn per table.
     pub samples: usize,
     tables: Vec<Vec<TableEntry>>,
 }
@@ -85,6 +91,7 @@ impl Estimator {
         }
     }
 
+    /// The table of α `alpha_index` and view `view_index`.
     pub fn table(&self, alpha_index: usize, view_index: usize) -> &[TableEntry] {
         &self.tables[alpha_index * self.views.len() + view_index]
     }

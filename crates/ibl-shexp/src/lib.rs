@@ -50,7 +50,12 @@ pub enum Error {
     Core(#[from] ibl_core::Error),
     /// The least-squares system has too few rows or is numerically rank deficient.
     #[error("least-squares system of {rows} rows and {unknowns} unknowns is rank deficient (condition number above 1e12): use more --normals, --views or --alphas, or lower --p-order/--q-order")]
-    RankDeficient { rows: usize, unknowns: usize },
+    RankDeficient {
+        /// Rows of the system.
+        rows: usize,
+        /// Unknowns of the system.
+        unknowns: usize,
+    },
 }
 
 impl Classify for Error {
@@ -62,4 +67,5 @@ impl Classify for Error {
     }
 }
 
+/// A result with the SH-exp [`Error`].
 pub type Result<T, E = Error> = std::result::Result<T, E>;

@@ -14,9 +14,13 @@ use std::fmt::Write;
 pub enum Expr {
     /// A variable (x, y, z or an earlier temporary).
     Var(String),
+    /// A constant.
     Const(f64),
+    /// a·b.
     Mul(Box<Expr>, Box<Expr>),
+    /// a − b.
     Sub(Box<Expr>, Box<Expr>),
+    /// a + b.
     Add(Box<Expr>, Box<Expr>),
 }
 

@@ -19,12 +19,14 @@ use ibl_core::{CubeMips, Cubemap, Rgb};
 /// A prefiltered chain ready for lookups, with the DFG table.
 pub struct SplitSum {
     chain: BorderedMips,
+    /// The DFG table (A, B) of the split sum.
     pub dfg: Dfg,
     /// Where the chain came from (for reports).
     pub source: String,
 }
 
 impl SplitSum {
+    /// The chain with seamless bordered lookups, the DFG table and where the chain came from.
     pub fn new(chain: &CubeMips, dfg: Dfg, source: impl Into<String>) -> Self {
         SplitSum {
             chain: BorderedMips::new(chain),
@@ -33,10 +35,12 @@ impl SplitSum {
         }
     }
 
+    /// Levels in the chain.
     pub fn levels(&self) -> usize {
         self.chain.num_levels()
     }
 
+    /// Face size of every level.
     pub fn sizes(&self) -> Vec<usize> {
         self.chain.sizes()
     }

@@ -100,6 +100,7 @@ pub const NOTE_NAME: &str = "LOAD.txt";
 /// What one engine loads as-is.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct TargetSpec {
+    /// The target described.
     pub target: Target,
     /// Engine (and the part of it that reads the assets).
     pub engine: &'static str,
@@ -124,7 +125,9 @@ pub struct TargetSpec {
     /// Whether the engine's lookup fixes the level count: Unity reads mips 0–6 whatever the
     /// file holds, Babylon a full chain (prefilter refuses another), three none.
     pub levels_fixed: bool,
+    /// The diffuse (irradiance) form the engine reads.
     pub diffuse: DiffuseForm,
+    /// File names the engine expects.
     pub files: FileNames,
     /// How to load the outputs, written beside them as [`NOTE_NAME`].
     pub note: &'static str,

@@ -30,7 +30,10 @@ pub enum LodMapping {
     /// texture's lodGenerationScale and offset); its own prefilter stores α = 2^(l/scale)/size
     /// at level l (`packages/dev/core/src/Materials/Textures/Filtering/hdrFiltering.ts`,
     /// scale 0.8, offset 0, level 0 the mirror).
-    Babylon { scale: f32 },
+    Babylon {
+        /// Babylon's `lodGenerationScale` (0.8 by default).
+        scale: f32,
+    },
     /// three.js filters the environment itself at load time (PMREMGenerator): no baked
     /// chain is read, so no level ↔ roughness mapping applies to what we ship.
     Pmrem,

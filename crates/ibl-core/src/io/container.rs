@@ -8,8 +8,11 @@ use std::path::Path;
 /// A single-file GPU texture container.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Container {
+    /// KTX 2.0 (Khronos), optionally zstd supercompressed.
     Ktx2,
+    /// KTX 1.1 (Khronos).
     Ktx1,
+    /// DirectDraw Surface with the DX10 header.
     Dds,
 }
 
@@ -41,7 +44,9 @@ impl Container {
 /// A texture read from a container.
 #[derive(Clone, Debug)]
 pub struct Texture {
+    /// The container the texture was read from.
     pub container: Container,
+    /// The encoded levels and their pixel format.
     pub payload: Payload,
     /// Key/value metadata (KTX1 and KTX2; empty for DDS).
     pub metadata: Vec<(String, Vec<u8>)>,

@@ -25,13 +25,16 @@ use std::path::Path;
 /// angle maps) are stored linearly.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ColorSpace {
+    /// sRGB transfer function (colour images).
     Srgb,
+    /// Stored as is (data: normals, angles, tables).
     Linear,
 }
 
 /// Sample type of a float output.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum FloatDepth {
+    /// 32-bit floats.
     #[default]
     F32,
     /// Half floats, saturating at ±65504 (see [`f16_saturating`]).
