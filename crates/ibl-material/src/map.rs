@@ -16,6 +16,9 @@ pub struct LoadedMap {
     pub grey_alpha: bool,
     /// The file it was read from.
     pub path: PathBuf,
+    /// The one-line warning when the file's content and name disagree (EXR data named
+    /// `.png`, ...): it was read by its content ([`io::content_mismatch`]).
+    pub read_as: Option<String>,
 }
 
 /// PNG colour type from the IHDR chunk (0 grey, 2 RGB, 3 palette, 4 grey+alpha, 6 RGBA).
@@ -33,6 +36,7 @@ pub fn load(path: &Path) -> ibl_core::Result<LoadedMap> {
         image,
         grey_alpha: png_color_type(&bytes) == Some(4),
         path: path.to_path_buf(),
+        read_as: io::content_mismatch(path, &bytes),
     })
 }
 

@@ -252,6 +252,7 @@ mod tests {
             image: Image::new(1, 1, channels),
             grey_alpha,
             path: std::path::PathBuf::from("n.png"),
+            read_as: None,
         }
     }
 
@@ -387,6 +388,7 @@ mod tests {
             image: img,
             grey_alpha: false,
             path: std::path::PathBuf::from("h.png"),
+            read_as: None,
         }
     }
 

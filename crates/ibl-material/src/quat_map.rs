@@ -156,6 +156,10 @@ pub struct ConvertStats {
     pub convention: Option<ConventionCheck>,
     /// The y convention the map was read with.
     pub y_down: bool,
+    /// How the input was read when its content and name disagree
+    /// ([`crate::map::LoadedMap::read_as`]); a warning, not part of the reports.
+    #[serde(skip)]
+    pub read_as: Option<String>,
 }
 
 impl ConvertStats {
@@ -194,7 +198,7 @@ impl ConvertStats {
     /// One-line warnings about unusual texels.
     pub fn warnings(&self, path: &Path) -> Vec<String> {
         let p = path.display();
-        let mut w = Vec::new();
+        let mut w: Vec<String> = self.read_as.iter().cloned().collect();
         if self.degenerate > 0 {
             w.push(format!(
                 "{p}: {} zero-length normal texel(s) stored as the identity quaternion",
@@ -443,6 +447,7 @@ pub fn run(
     let (image, mut stats) = convert(&decoder, &normal.image, progress);
     stats.convention = Some(convention_check(&decoder, &normal.image));
     stats.y_down = params.y_down;
+    stats.read_as = normal.read_as.clone();
     if stats.non_finite > 0 && !params.sanitize {
         return Err(Error::NonFinite {
             path: normal.path.clone(),
@@ -566,6 +571,7 @@ mod tests {
             image: Image::from_data(1, 1, 3, rgb.to_vec()).unwrap(),
             grey_alpha: false,
             path: "t.exr".into(),
+            read_as: None,
         }
     }
 
@@ -598,6 +604,7 @@ mod tests {
             image: Image::from_data(1, 1, 3, vec![0.5; 3]).unwrap(),
             grey_alpha: false,
             path: "g.exr".into(),
+            read_as: None,
         };
         let (img, stats) = convert(&dec, &grey.image, &NoProgress);
         assert_eq!(
@@ -691,6 +698,7 @@ mod tests {
             image: img,
             grey_alpha: false,
             path: "bc5.png".into(),
+            read_as: None,
         };
         let p = Params {
             two_channel: true,
@@ -749,6 +757,7 @@ mod tests {
             image: Image::from_data(2, 1, 3, vec![f32::NAN, 0.5, 1.0, 0.5, 0.5, 1.0]).unwrap(),
             grey_alpha: false,
             path: "n.exr".into(),
+            read_as: None,
         };
         let e = run(&Params::default(), &img, Path::new("q.png"), &NoProgress)
             .err()
@@ -767,6 +776,34 @@ mod tests {
         .unwrap();
         assert_eq!(ok.stats.non_finite, 1);
         assert_eq!(ok.check.unwrap().compared, 1);
+    }
+
+    #[test]
+    fn a_normal_map_read_against_its_name_is_one_warning() {
+        let d = tempfile::tempdir().unwrap();
+        let png = std::fs::read(fixture("0003_256.png")).unwrap();
+        let named_exr = d.path().join("n.exr");
+        std::fs::write(&named_exr, &png).unwrap();
+        let normal = crate::normal::load(&named_exr).unwrap();
+        let baked = run(&Params::default(), &normal, Path::new("q.png"), &NoProgress).unwrap();
+        let w = baked.stats.warnings(&named_exr);
+        assert_eq!(
+            w[0],
+            format!(
+                "{}: holds PNG data but is named .exr; read as PNG (by its content)",
+                named_exr.display()
+            )
+        );
+        // Read as the PNG it is: the same bytes as from its proper name.
+        let proper = crate::normal::load(&fixture("0003_256.png")).unwrap();
+        assert!(proper.read_as.is_none());
+        let want = run(&Params::default(), &proper, Path::new("q.png"), &NoProgress).unwrap();
+        assert_eq!(baked.files[0].1, want.files[0].1);
+        assert!(!want
+            .stats
+            .warnings(Path::new("n.png"))
+            .iter()
+            .any(|l| l.contains("read as")));
     }
 
     #[test]

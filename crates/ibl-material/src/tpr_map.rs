@@ -338,6 +338,7 @@ fn load_map(
 ) -> ibl_core::Result<LoadedMap> {
     let mut map = crate::map::load(path)?;
     let report = check_texels(&mut map.image, path, sanitize)?;
+    warnings.extend(map.read_as.clone());
     warnings.extend(report.warnings(path));
     Ok(map)
 }
@@ -845,7 +846,44 @@ mod tests {
             image: img,
             grey_alpha,
             path: "m.png".into(),
+            read_as: None,
         }
+    }
+
+    #[test]
+    fn an_angle_map_read_against_its_name_is_one_warning() {
+        let d = tempfile::tempdir().unwrap();
+        let img = Image::from_data(4, 2, 1, vec![0.25; 8]).unwrap();
+        let exr = ibl_core::io::encode_image(
+            Path::new("a.exr"),
+            &img,
+            &ibl_core::io::WriteOptions::default(),
+        )
+        .unwrap();
+        let named_png = d.path().join("angle.png");
+        std::fs::write(&named_png, &exr).unwrap();
+        let inputs = load_inputs(&Params {
+            angle_map: Some(named_png.clone()),
+            ..Default::default()
+        })
+        .unwrap();
+        assert_eq!(
+            inputs.warnings,
+            [format!(
+                "{}: holds OpenEXR data but is named .png; read as OpenEXR (by its content)",
+                named_png.display()
+            )]
+        );
+        // The texels are the EXR's, not a failed PNG decode.
+        assert_eq!(inputs.angle_map.unwrap().image.data[0], 0.25);
+        let named_exr = d.path().join("angle.exr");
+        std::fs::write(&named_exr, &exr).unwrap();
+        let inputs = load_inputs(&Params {
+            angle_map: Some(named_exr),
+            ..Default::default()
+        })
+        .unwrap();
+        assert!(inputs.warnings.is_empty(), "{:?}", inputs.warnings);
     }
 
     #[test]
