@@ -1,14 +1,11 @@
 //! End-to-end tests: the real `bake` binary on temporary copies of pipelines and fixtures.
 
+use ibl_testkit::{copy_tree, stderr, stdout, stdout_json, workspace_root as root};
 use serde_json::Value;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
-
-fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
 
 /// A temporary workspace laid out like the real one (pipelines/, fixtures/, out/).
 struct Work {
@@ -58,21 +55,8 @@ impl Work {
     }
 }
 
-fn copy_tree(from: &Path, to: &Path) {
-    if from.is_dir() {
-        for e in std::fs::read_dir(from).unwrap() {
-            let e = e.unwrap();
-            copy_tree(&e.path(), &to.join(e.file_name()));
-        }
-    } else {
-        std::fs::create_dir_all(to.parent().unwrap()).unwrap();
-        std::fs::copy(from, to).unwrap();
-    }
-}
-
 fn statuses(out: &Output) -> BTreeMap<String, String> {
-    let v: Value = serde_json::from_slice(&out.stdout)
-        .unwrap_or_else(|e| panic!("{e}: {}", String::from_utf8_lossy(&out.stdout)));
+    let v: Value = stdout_json(out);
     v["stages"]
         .as_array()
         .unwrap()
@@ -86,37 +70,9 @@ fn statuses(out: &Output) -> BTreeMap<String, String> {
         .collect()
 }
 
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn stdout(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
 /// Every file under `dir` (relative paths), `.bake/` excluded.
 fn files_under(dir: &Path) -> Vec<String> {
-    let mut out = Vec::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        let Ok(rd) = std::fs::read_dir(&d) else {
-            continue;
-        };
-        for e in rd.flatten() {
-            let p = e.path();
-            let rel = p.strip_prefix(dir).unwrap().to_string_lossy().into_owned();
-            if rel == ".bake" {
-                continue;
-            }
-            if p.is_dir() {
-                stack.push(p);
-            } else {
-                out.push(rel);
-            }
-        }
-    }
-    out.sort();
-    out
+    ibl_testkit::files_under(dir, &[".bake"])
 }
 
 fn ids_with(st: &BTreeMap<String, String>, status: &str) -> Vec<String> {

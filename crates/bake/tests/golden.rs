@@ -8,25 +8,10 @@
 //! --test golden` and say why in the commit: the manifest's diff shows exactly which files moved.
 //! The CLIs are held to the same bytes by e2e's ninja test, which runs them and compares.
 
+use ibl_testkit::{copy_tree, workspace_root as root};
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
-
-fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
-
-fn copy_tree(from: &Path, to: &Path) {
-    if from.is_dir() {
-        for e in std::fs::read_dir(from).unwrap() {
-            let e = e.unwrap();
-            copy_tree(&e.path(), &to.join(e.file_name()));
-        }
-    } else {
-        std::fs::create_dir_all(to.parent().unwrap()).unwrap();
-        std::fs::copy(from, to).unwrap();
-    }
-}
 
 /// Relative path → BLAKE3 hex of every file under `dir`, the runner's own `.bake/` excluded.
 fn hashes(dir: &Path, rel: &Path, out: &mut BTreeMap<String, String>) {

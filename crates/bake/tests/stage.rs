@@ -3,13 +3,10 @@
 //! folders. Checked against `bake run` itself: same bytes, and a pipeline built stage by stage
 //! is up to date for `bake run`.
 
+use ibl_testkit::{copy_tree, stderr, stdout, stdout_json, workspace_root as root};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
-
-fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
 
 fn bake(dir: &Path, args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_bake"))
@@ -21,47 +18,19 @@ fn bake(dir: &Path, args: &[&str]) -> Output {
 }
 
 fn ok(o: Output) -> Output {
-    assert!(
-        o.status.success(),
-        "{}\n{}",
-        String::from_utf8_lossy(&o.stderr),
-        String::from_utf8_lossy(&o.stdout)
-    );
+    assert!(o.status.success(), "{}\n{}", stderr(&o), stdout(&o));
     o
-}
-
-fn copy_tree(from: &Path, to: &Path) {
-    if from.is_dir() {
-        for e in std::fs::read_dir(from).unwrap() {
-            let e = e.unwrap();
-            copy_tree(&e.path(), &to.join(e.file_name()));
-        }
-    } else {
-        std::fs::create_dir_all(to.parent().unwrap()).unwrap();
-        std::fs::copy(from, to).unwrap();
-    }
 }
 
 /// Every file under `dir` but the cache, with its bytes.
 fn tree(dir: &Path) -> Vec<(String, Vec<u8>)> {
-    let mut out = Vec::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).into_iter().flatten().flatten() {
-            let p = e.path();
-            let rel = p.strip_prefix(dir).unwrap().to_string_lossy().into_owned();
-            if rel == ".bake" {
-                continue;
-            }
-            if p.is_dir() {
-                stack.push(p);
-            } else {
-                out.push((rel, std::fs::read(&p).unwrap()));
-            }
-        }
-    }
-    out.sort();
-    out
+    ibl_testkit::files_under(dir, &[".bake"])
+        .into_iter()
+        .map(|rel| {
+            let bytes = std::fs::read(dir.join(&rel)).unwrap();
+            (rel, bytes)
+        })
+        .collect()
 }
 
 /// A workspace copy holding the probe pipeline writing into `out/<name>`.
@@ -78,7 +47,7 @@ fn workspace(dir: &Path, name: &str) -> PathBuf {
 
 fn plan(dir: &Path, pipeline: &Path) -> Vec<Value> {
     let o = ok(bake(dir, &["plan", pipeline.to_str().unwrap(), "--json"]));
-    let v: Value = serde_json::from_slice(&o.stdout).unwrap();
+    let v: Value = stdout_json(&o);
     v["stages"].as_array().unwrap().clone()
 }
 

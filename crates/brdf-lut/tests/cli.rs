@@ -4,23 +4,13 @@
 use ibl_core::io::{read_image, ColorSpace};
 use ibl_core::progress::NoProgress;
 use ibl_lut::{as_size_bias, dfg, fresnel_tail};
+use ibl_testkit::Bin;
 use std::path::Path;
-use std::process::{Command, Output};
 
-fn brdf_lut(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_brdf-lut"))
-        .args(args)
-        .output()
-        .expect("runs")
-}
+const BIN: Bin = Bin::new(env!("CARGO_BIN_EXE_brdf-lut"), "brdf-lut");
 
 fn ok(args: &[&str]) {
-    let out = brdf_lut(args);
-    assert!(
-        out.status.success(),
-        "{args:?}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    BIN.run_ok(args);
 }
 
 /// Reads the R and G channels of an EXR (the core reader keeps a lone R of an RG file).
@@ -237,21 +227,9 @@ fn ibl_brdf_as(nu: f64, nv: f64) -> ibl_brdf::AshikhminShirley {
 
 /// A bad invocation: exit code, exactly one line on stderr, nothing written.
 fn refused(args: &[&str], dir: &Path, code: i32) {
-    let out = brdf_lut(args);
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(code), "{args:?}: {err}");
-    assert_eq!(
-        err.trim_end().lines().count(),
-        1,
-        "{args:?}: not one line: {err}"
-    );
-    assert!(err.starts_with("brdf-lut: error: "), "{err}");
-    let left: Vec<_> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().file_name())
-        .collect();
+    BIN.refused(args, code, "");
+    let left = ibl_testkit::files_in(dir);
     assert!(left.iter().all(|n| n == "file"), "{args:?} left {left:?}");
-    eprintln!("{args:?} -> {}", err.trim_end());
 }
 
 #[test]

@@ -4,14 +4,14 @@
 
 use ibl_core::io::{self, ColorSpace, FloatDepth, WriteOptions};
 use ibl_core::{CubeMips, Cubemap, Image};
+use ibl_testkit::{assert_one_line_error, Bin};
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
+
+const BIN: Bin = Bin::new(env!("CARGO_BIN_EXE_contact-sheet"), "contact-sheet");
 
 fn run(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_contact-sheet"))
-        .args(args)
-        .output()
-        .unwrap()
+    BIN.run(args)
 }
 
 fn write_faces(dir: &Path, prefix: &str, cube: &Cubemap) {
@@ -136,13 +136,6 @@ fn sheet_has_every_row_in_order_and_the_lut_as_stored() {
         "{r:?} {g:?} {b:?} {l:?}"
     );
     assert_eq!((l.1 - l.0 + 1), 48);
-}
-
-fn assert_one_line_error(out: &Output, code: i32, names: &str) {
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(code), "{err}");
-    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
-    assert!(err.contains(names), "{err}");
 }
 
 #[test]

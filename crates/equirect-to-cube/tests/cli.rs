@@ -7,29 +7,18 @@ use ibl_core::envmap::read_cube_chain;
 use ibl_core::equirect::pixel_direction;
 use ibl_core::io::{self, ColorSpace, WriteOptions};
 use ibl_core::Image;
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use ibl_testkit::{assert_one_line_error, files_in, fixture, stderr, Bin};
+use std::path::Path;
+use std::process::Output;
 
-fn bin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_equirect-to-cube"))
-}
-
-fn fixture(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../fixtures")
-        .join(rel)
-}
+const BIN: Bin = Bin::new(env!("CARGO_BIN_EXE_equirect-to-cube"), "equirect-to-cube");
 
 fn run(args: &[&str]) -> Output {
-    bin()
+    BIN.cmd()
         .args(args)
         .arg("--quiet")
         .output()
         .expect("binary runs")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
 /// An equirect whose texels hold their own direction (offset by 2 to stay positive).
@@ -214,15 +203,8 @@ fn horizontal_cross_input_is_read() {
 }
 
 fn assert_fails_cleanly(args: &[&str], out: &Path, expect: &str, code: i32) {
-    let o = bin().args(args).output().unwrap();
-    let err = stderr(&o);
-    assert_eq!(o.status.code(), Some(code), "{err}");
-    assert!(err.contains(expect), "{err}");
-    assert_eq!(err.trim().lines().count(), 1, "one line: {err}");
-    assert!(
-        !out.exists() || std::fs::read_dir(out).unwrap().next().is_none(),
-        "nothing written"
-    );
+    assert_one_line_error(&BIN.run(args), code, expect);
+    assert!(files_in(out).is_empty(), "nothing written");
 }
 
 #[test]
@@ -250,7 +232,8 @@ fn bad_inputs_fail_with_one_line_and_write_nothing() {
     let nan = dir.path().join("nan.exr");
     io::write_image(&nan, &img, &WriteOptions::default()).unwrap();
     assert_fails_cleanly(&[nan.to_str().unwrap(), "-o", o], &out, "2 NaN/Inf", 2);
-    let ok = bin()
+    let ok = BIN
+        .cmd()
         .args([nan.to_str().unwrap(), "-o", o, "--sanitize"])
         .output()
         .unwrap();
@@ -365,7 +348,8 @@ fn rotate_applies_to_the_equirect_output_too() {
 fn damaged_fixture_negatives_are_clamped_with_a_warning() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out");
-    let o = bin()
+    let o = BIN
+        .cmd()
         .args([
             fixture("hdri-damaged/esplanade.exr").to_str().unwrap(),
             "-o",

@@ -3,24 +3,19 @@
 //! finiteness over the exponent range, and one-line errors with no output.
 
 use ibl_core::io::{read_image, ColorSpace};
+use ibl_testkit::Bin;
 use std::f64::consts::{FRAC_PI_2, PI};
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
+
+const BIN: Bin = Bin::new(env!("CARGO_BIN_EXE_hv-lut"), "hv-lut");
 
 fn hv_lut(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_hv-lut"))
-        .args(args)
-        .output()
-        .expect("runs")
+    BIN.run(args)
 }
 
 fn ok(args: &[&str]) {
-    let out = hv_lut(args);
-    assert!(
-        out.status.success(),
-        "{args:?}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    BIN.run_ok(args);
 }
 
 /// The thesis's formulas as printed (tan form, with the quadrant cases), written again here
@@ -184,17 +179,8 @@ fn extreme_exponents_give_finite_texels() {
 }
 
 fn refused(args: &[&str], dir: &Path, code: i32) {
-    let out = hv_lut(args);
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(code), "{args:?}: {err}");
-    assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: {err}");
-    assert!(err.starts_with("hv-lut: error: "), "{err}");
-    assert_eq!(
-        std::fs::read_dir(dir).unwrap().count(),
-        1,
-        "{args:?} left output"
-    );
-    eprintln!("{args:?} -> {}", err.trim_end());
+    BIN.refused(args, code, "");
+    assert_eq!(ibl_testkit::files_in(dir).len(), 1, "{args:?} left output");
 }
 
 #[test]

@@ -25,7 +25,9 @@ use std::f64::consts::{FRAC_PI_2, PI, TAU};
 /// at the horizon.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct AshikhminShirley {
+    /// Phong exponent n_u along the tangent (x).
     pub nu: f64,
+    /// Phong exponent n_v along the bitangent (y).
     pub nv: f64,
 }
 
@@ -33,12 +35,16 @@ pub struct AshikhminShirley {
 /// the value the half-vector LUT stores in alpha.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct HalfVectorSample {
+    /// The sampled unit half vector h (tangent space, +z the normal).
     pub h: DVec3,
+    /// p_h(h), the half-vector density of the sample (per steradian).
     pub pdf: f64,
+    /// p_h(h) / p_h(n): the density relative to its peak, what the LUT stores in alpha.
     pub ratio: f64,
 }
 
 impl AshikhminShirley {
+    /// The lobe with exponents n_u, n_v (finite, ≥ 0; see `ibl_lut::hv::lobe` for the range the bakes accept).
     pub fn new(nu: f64, nv: f64) -> Self {
         AshikhminShirley { nu, nv }
     }
@@ -59,7 +65,7 @@ impl AshikhminShirley {
     }
 
     /// (n·h)^{e(h)} for a unit h, from its tangential part: exp(e ln(1 − sin²θ)/2).
-    pub fn pdf_ratio(&self, h: DVec3) -> f64 {
+    pub(crate) fn pdf_ratio(&self, h: DVec3) -> f64 {
         if h.z <= 0.0 {
             return 0.0;
         }
@@ -122,7 +128,7 @@ impl AshikhminShirley {
     }
 
     /// Inverse of [`AshikhminShirley::sample`]: (ξ1, ξ2) of a unit h with h.z > 0.
-    pub fn invert(&self, h: DVec3) -> (f64, f64) {
+    pub(crate) fn invert(&self, h: DVec3) -> (f64, f64) {
         let mut phi = h.y.atan2(h.x);
         if phi < 0.0 {
             phi += TAU;
@@ -169,7 +175,7 @@ impl AshikhminShirley {
     /// cos θ = cos θ₀ s^{1/e} onto the measure cos^{e−1}θ sin θ dθ (resolving the boundary
     /// layer of large exponents) and the azimuth follows the AS azimuthal warp (resolving
     /// strong anisotropy). 4 × 48 azimuths × 24 polar nodes.
-    pub fn lambda_numeric(&self, v: DVec3) -> f64 {
+    pub(crate) fn lambda_numeric(&self, v: DVec3) -> f64 {
         if v.z <= 0.0 {
             return f64::INFINITY;
         }

@@ -20,14 +20,18 @@ use std::f64::consts::PI;
 /// Anisotropic Beckmann with roughness α_x (tangent) and α_y (bitangent).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Beckmann {
+    /// Roughness α_x along the tangent.
     pub alpha_x: f32,
+    /// Roughness α_y along the bitangent.
     pub alpha_y: f32,
 }
 
 impl Beckmann {
+    /// The distribution with roughness α_x (tangent) and α_y (bitangent).
     pub fn new(alpha_x: f32, alpha_y: f32) -> Self {
         Beckmann { alpha_x, alpha_y }
     }
+    /// The isotropic distribution, α_x = α_y = α.
     pub fn isotropic(alpha: f32) -> Self {
         Beckmann {
             alpha_x: alpha,
@@ -38,7 +42,7 @@ impl Beckmann {
 
 /// Smith Λ of the Beckmann profile as a function of a = 1/(α_v tan θ_v) (Walter et al. 2007
 /// eq. 27 in Λ form): (erf(a) − 1)/2 + exp(−a²)/(2a√π).
-pub fn lambda_beckmann(a: f64) -> f64 {
+pub(crate) fn lambda_beckmann(a: f64) -> f64 {
     if a <= 0.0 {
         return f64::INFINITY;
     }

@@ -41,15 +41,17 @@ pub fn sample_ggx_d(u1: f32, u2: f32, alpha: f32) -> Vec3 {
     Vec3::new((sin_t * c) as f32, (sin_t * s) as f32, cos2.sqrt() as f32)
 }
 
+#[cfg(test)]
 /// Density of [`sample_ggx_d`] with respect to solid angle of h: D(h)(n·h).
 #[inline]
-pub fn pdf_ggx_d(n_dot_h: f32, alpha: f32) -> f32 {
+pub(crate) fn pdf_ggx_d(n_dot_h: f32, alpha: f32) -> f32 {
     d_ggx(n_dot_h, alpha) * n_dot_h
 }
 
+#[cfg(test)]
 /// Inverse of [`sample_ggx_d`]: the (u1, u2) that produce h (h.z > 0).
 #[inline]
-pub fn invert_ggx_d(h: Vec3, alpha: f32) -> (f32, f32) {
+pub(crate) fn invert_ggx_d(h: Vec3, alpha: f32) -> (f32, f32) {
     let a2 = alpha as f64 * alpha as f64;
     let s2 = h.x as f64 * h.x as f64 + h.y as f64 * h.y as f64;
     let c2 = h.z as f64 * h.z as f64;
@@ -100,7 +102,7 @@ pub fn g2(n_dot_v: f32, n_dot_l: f32, alpha: f32) -> f32 {
 /// 0.5 / (n·l sqrt(n·v²(1−α²)+α²) + n·v sqrt(n·l²(1−α²)+α²)) (Heitz 2014; Filament),
 /// finite at grazing angles and 0 when both cosines are 0.
 #[inline]
-pub fn v_smith(n_dot_v: f32, n_dot_l: f32, alpha: f32) -> f32 {
+pub(crate) fn v_smith(n_dot_v: f32, n_dot_l: f32, alpha: f32) -> f32 {
     let a2 = alpha * alpha;
     let gv = n_dot_l * (n_dot_v * n_dot_v * (1.0 - a2) + a2).sqrt();
     let gl = n_dot_v * (n_dot_l * n_dot_l * (1.0 - a2) + a2).sqrt();
@@ -129,9 +131,10 @@ pub fn sample_vndf(v: Vec3, u1: f32, u2: f32, alpha: f32) -> Vec3 {
     sample_vndf_aniso(v, u1, u2, alpha, alpha)
 }
 
+#[cfg(test)]
 /// Density of [`sample_vndf`]: G1(v) max(0, v·h) D(h) / (n·v).
 #[inline]
-pub fn pdf_vndf(v: Vec3, h: Vec3, alpha: f32) -> f32 {
+pub(crate) fn pdf_vndf(v: Vec3, h: Vec3, alpha: f32) -> f32 {
     if v.z <= 0.0 || h.z <= 0.0 {
         return 0.0;
     }
@@ -151,7 +154,7 @@ pub fn pdf_vndf_reflected(v: Vec3, h: Vec3, alpha: f32) -> f32 {
 /// Heitz 2018, "Sampling the GGX Distribution of Visible Normals", listing 1, for (α_x, α_y):
 /// stretch v to the α = 1 configuration, sample the projected hemisphere as a disk warped
 /// towards the visible half, and unstretch the normal.
-pub fn sample_vndf_aniso(v: Vec3, u1: f32, u2: f32, alpha_x: f32, alpha_y: f32) -> Vec3 {
+pub(crate) fn sample_vndf_aniso(v: Vec3, u1: f32, u2: f32, alpha_x: f32, alpha_y: f32) -> Vec3 {
     let (ax, ay) = (alpha_x as f64, alpha_y as f64);
     let vh = [ax * v.x as f64, ay * v.y as f64, v.z as f64];
     let len = (vh[0] * vh[0] + vh[1] * vh[1] + vh[2] * vh[2]).sqrt();
@@ -194,14 +197,18 @@ pub fn sample_vndf_aniso(v: Vec3, u1: f32, u2: f32, alpha_x: f32, alpha_y: f32) 
 /// distribution of [`d_ggx`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Ggx {
+    /// Roughness α_x along the tangent (α = r², r the perceptual roughness).
     pub alpha_x: f32,
+    /// Roughness α_y along the bitangent.
     pub alpha_y: f32,
 }
 
 impl Ggx {
+    /// The distribution with roughness α_x (tangent) and α_y (bitangent).
     pub fn new(alpha_x: f32, alpha_y: f32) -> Self {
         Ggx { alpha_x, alpha_y }
     }
+    /// The isotropic distribution, α_x = α_y = α.
     pub fn isotropic(alpha: f32) -> Self {
         Ggx {
             alpha_x: alpha,

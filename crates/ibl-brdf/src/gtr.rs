@@ -16,7 +16,9 @@ use std::f64::consts::PI;
 /// masking.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Gtr {
+    /// Roughness α of the GTR distribution (Burley 2012).
     pub alpha: f32,
+    /// Tail exponent γ: γ = 2 is GGX, γ = 1 Berry; larger γ gives shorter tails.
     pub gamma: f32,
 }
 
@@ -40,6 +42,7 @@ fn ln_q(x: f64) -> f64 {
 }
 
 impl Gtr {
+    /// The distribution with roughness α and tail exponent γ.
     pub fn new(alpha: f32, gamma: f32) -> Self {
         Gtr { alpha, gamma }
     }
@@ -57,7 +60,7 @@ impl Gtr {
 
     /// Dimov's average visibility S_γ(μ), μ = |cot θ_v| (Atanasov et al. 2022 eqs. 35–39) for
     /// γ ∈ {0,…,4}, G1 = χ⁺ S_γ (eq. 34).
-    pub fn s_integer(gamma: u32, mu: f64, alpha: f64) -> f64 {
+    pub(crate) fn s_integer(gamma: u32, mu: f64, alpha: f64) -> f64 {
         if mu.is_infinite() {
             return 1.0;
         }

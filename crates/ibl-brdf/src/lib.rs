@@ -9,6 +9,8 @@
 //! - [`transformed`]: linearly transformed microsurfaces of any of them (Atanasov et al. 2022 §4).
 //! - [`microfacet::Microfacet`]: the trait they share; [`fresnel`]: Schlick.
 
+#![warn(missing_docs)]
+
 pub mod ashikhmin_shirley;
 pub mod beckmann;
 pub mod fresnel;

@@ -2,7 +2,7 @@
 
 /// erfc(x) with fractional error below 1.2e-7 everywhere (Numerical Recipes, 2nd ed., §6.2,
 /// `erfcc`: a Chebyshev fit of exp(−x²) erfc), finite for all x (2 at −∞, 0 at +∞).
-pub fn erfc(x: f64) -> f64 {
+pub(crate) fn erfc(x: f64) -> f64 {
     let z = x.abs();
     let t = 1.0 / (1.0 + 0.5 * z);
     let poly = -z * z - 1.26551223
@@ -22,7 +22,7 @@ pub fn erfc(x: f64) -> f64 {
 }
 
 /// erf(x) = 1 − erfc(x).
-pub fn erf(x: f64) -> f64 {
+pub(crate) fn erf(x: f64) -> f64 {
     1.0 - erfc(x)
 }
 

@@ -8,13 +8,18 @@ use glam::{DVec3, Vec3};
 /// The tangential transform of Atanasov et al. 2022 eq. 9, M = [[a, c, 0], [b, d, 0], [0, 0, 1]].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TangentTransform {
+    /// Row 0, column 0 of M.
     pub a: f64,
+    /// Row 1, column 0 of M.
     pub b: f64,
+    /// Row 0, column 1 of M.
     pub c: f64,
+    /// Row 1, column 1 of M.
     pub d: f64,
 }
 
 impl TangentTransform {
+    /// M = [[a, c, 0], [b, d, 0], [0, 0, 1]] (Atanasov et al. 2022 eq. 9).
     pub fn new(a: f64, b: f64, c: f64, d: f64) -> Self {
         TangentTransform { a, b, c, d }
     }
@@ -25,7 +30,7 @@ impl TangentTransform {
     }
 
     /// Mᵀ m = (a m_x + b m_y, c m_x + d m_y, m_z) (Atanasov et al. 2022, after eq. 13).
-    pub fn transpose_mul(&self, m: DVec3) -> DVec3 {
+    pub(crate) fn transpose_mul(&self, m: DVec3) -> DVec3 {
         DVec3::new(
             self.a * m.x + self.b * m.y,
             self.c * m.x + self.d * m.y,
@@ -34,7 +39,7 @@ impl TangentTransform {
     }
 
     /// M⁻¹ v.
-    pub fn inverse_mul(&self, v: DVec3) -> DVec3 {
+    pub(crate) fn inverse_mul(&self, v: DVec3) -> DVec3 {
         let k = 1.0 / self.det();
         DVec3::new(
             k * (self.d * v.x - self.c * v.y),
@@ -44,7 +49,7 @@ impl TangentTransform {
     }
 
     /// (M⁻¹)ᵀ u, the transform of normals (Atanasov et al. 2022 eq. 10).
-    pub fn inverse_transpose_mul(&self, u: DVec3) -> DVec3 {
+    pub(crate) fn inverse_transpose_mul(&self, u: DVec3) -> DVec3 {
         let k = 1.0 / self.det();
         DVec3::new(
             k * (self.d * u.x - self.b * u.y),
@@ -57,11 +62,14 @@ impl TangentTransform {
 /// The base microsurface transformed by M (Atanasov et al. 2022's "LTMD").
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Transformed<D> {
+    /// The microsurface before the transform.
     pub base: D,
+    /// The tangential transform M applied to its microfacet normals.
     pub m: TangentTransform,
 }
 
 impl<D: Microfacet> Transformed<D> {
+    /// The microsurface `base` transformed by `m`.
     pub fn new(base: D, m: TangentTransform) -> Self {
         Transformed { base, m }
     }

@@ -17,7 +17,7 @@ use glam::Vec3;
 use ibl_core::sampling::Pcg32;
 
 /// A uniformly random direction on the upper hemisphere, kept off the exact horizon.
-pub fn random_direction(rng: &mut Pcg32) -> Vec3 {
+pub(crate) fn random_direction(rng: &mut Pcg32) -> Vec3 {
     let z = 0.02 + 0.98 * rng.next_f64();
     let phi = std::f64::consts::TAU * rng.next_f64();
     let s = (1.0 - z * z).sqrt();
@@ -68,7 +68,7 @@ fn integrate_plane(a: [f64; 4], n_psi: usize, f: impl Fn(Vec3, f64) -> f64) -> f
 }
 
 /// Atanasov et al. 2022 eq. 3: ∫ D(m)(n·m) dm, which must be 1.
-pub fn normalisation_with(d: &dyn Microfacet, a: [f64; 4]) -> f64 {
+pub(crate) fn normalisation_with(d: &dyn Microfacet, a: [f64; 4]) -> f64 {
     integrate_plane(a, 256, |m, c| d.d(m) as f64 * c * c * c * c)
 }
 
@@ -80,7 +80,7 @@ pub fn normalisation(d: &dyn Microfacet, scale: [f64; 2]) -> f64 {
 /// Λ(v) is evaluated once (G1 = χ⁺/(1+Λ(v)) depends on m only through χ⁺; some Λ are
 /// quadratures themselves). No distribution overrides `Microfacet::g1`, so the trait's
 /// 1/(1+Λ) is what is integrated here; a type that overrides it must test it on its own.
-pub fn weak_furnace_with(d: &dyn Microfacet, v: Vec3, a: [f64; 4]) -> (f64, f64) {
+pub(crate) fn weak_furnace_with(d: &dyn Microfacet, v: Vec3, a: [f64; 4]) -> (f64, f64) {
     let g1v = 1.0 / (1.0 + d.lambda(v) as f64);
     let got = integrate_plane(a, 1024, |m, c| {
         let vm = v.dot(m) as f64;
@@ -93,7 +93,7 @@ pub fn weak_furnace_with(d: &dyn Microfacet, v: Vec3, a: [f64; 4]) -> (f64, f64)
     (got, v.z as f64)
 }
 
-pub fn weak_furnace(d: &dyn Microfacet, v: Vec3, scale: [f64; 2]) -> (f64, f64) {
+pub(crate) fn weak_furnace(d: &dyn Microfacet, v: Vec3, scale: [f64; 2]) -> (f64, f64) {
     weak_furnace_with(d, v, diag(scale))
 }
 
@@ -107,7 +107,7 @@ fn chi2_z(chi2: f64, dof: f64) -> f64 {
 /// lobe-adapted plane: u = ρ/(1+ρ) of t = A⁻¹p (ρ = |t|), and its azimuth. Expected counts
 /// integrate the pdf over each bin (8×8 Gauss–Legendre); bins expecting < 5 are pooled. Fails when the
 /// Wilson–Hilferty z-score exceeds 4.5 (p ≈ 3e-6) or a sample leaves the hemisphere.
-pub fn chi2_test_with(
+pub(crate) fn chi2_test_with(
     sample: impl Fn(f32, f32) -> Vec3,
     pdf: impl Fn(Vec3) -> f32,
     a: [f64; 4],
@@ -192,7 +192,7 @@ pub fn chi2_test_with(
     z
 }
 
-pub fn chi2_test(
+pub(crate) fn chi2_test(
     sample: impl Fn(f32, f32) -> Vec3,
     pdf: impl Fn(Vec3) -> f32,
     scale: [f64; 2],
@@ -203,7 +203,7 @@ pub fn chi2_test(
 
 /// invert_d(sample_d(u)) = u away from the singular ends (u1 → 1, where m reaches the
 /// horizon and f32 cannot resolve u1).
-pub fn round_trip(d: &dyn Microfacet, seed: u64) {
+pub(crate) fn round_trip(d: &dyn Microfacet, seed: u64) {
     let mut rng = Pcg32::new(seed, 5);
     let mut worst = 0.0f32;
     for _ in 0..20_000 {

@@ -23,7 +23,7 @@ const GAUSS: [(f64, f64); 3] = [
 
 /// Per-source tables shared by every texel: cos θ at each row boundary, and the source
 /// stored column-major as RGB so that a column's run of rows is contiguous in memory.
-pub struct EquirectTables {
+pub(crate) struct EquirectTables {
     w: usize,
     h: usize,
     /// cos(π j / H) for j = 0 … H.
@@ -121,7 +121,7 @@ fn side_frame(face: Face) -> ([f64; 2], [f64; 2]) {
 /// `rotate_rad` about +Y, and the solid angle the integration covered (equals the exact
 /// solid angle of the square up to quadrature error; the tests check it).
 #[allow(clippy::too_many_arguments)]
-pub fn footprint_mean(
+pub(crate) fn footprint_mean(
     tab: &EquirectTables,
     face: Face,
     s0: f64,

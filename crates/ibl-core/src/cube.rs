@@ -9,15 +9,22 @@ use glam::Vec3;
 /// Cube faces in file and KTX2 order: +X −X +Y −Y +Z −Z.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Face {
+    /// +X.
     Px = 0,
+    /// −X.
     Nx = 1,
+    /// +Y (up).
     Py = 2,
+    /// −Y.
     Ny = 3,
+    /// +Z.
     Pz = 4,
+    /// −Z.
     Nz = 5,
 }
 
 impl Face {
+    /// The six faces in file and KTX2 order (the `Face as usize` index).
     pub const ALL: [Face; 6] = [Face::Px, Face::Nx, Face::Py, Face::Ny, Face::Pz, Face::Nz];
 
     /// File-name stem (`px` … `nz`).
@@ -25,6 +32,7 @@ impl Face {
         ["px", "nx", "py", "ny", "pz", "nz"][self as usize]
     }
 
+    /// The face at index `i` of [`Face::ALL`] (panics above 5).
     pub fn from_index(i: usize) -> Face {
         Face::ALL[i]
     }
@@ -77,7 +85,7 @@ impl Face {
 
 /// Face coordinate of the centre of texel `i` on an `n`-texel edge: 2(i+0.5)/n − 1.
 #[inline]
-pub fn texel_coord(i: usize, n: usize) -> f32 {
+pub(crate) fn texel_coord(i: usize, n: usize) -> f32 {
     (2.0 * (i as f32 + 0.5)) / n as f32 - 1.0
 }
 
@@ -146,11 +154,14 @@ pub fn mip_sizes(size: usize, min_size: usize) -> Vec<usize> {
 /// A cubemap of RGB float faces, each `size`×`size`, in [`Face::ALL`] order.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Cubemap {
+    /// Edge length of each face in texels.
     pub size: usize,
+    /// The faces, in [`Face::ALL`] order (RGB, row 0 at the top as in docs/CONVENTIONS.md).
     pub faces: [Image; 6],
 }
 
 impl Cubemap {
+    /// A black cube with faces of `size`×`size` texels.
     pub fn new(size: usize) -> Self {
         Cubemap {
             size,
@@ -204,6 +215,7 @@ impl Cubemap {
         cube
     }
 
+    /// RGB of texel column `i`, row `j` of `face` (no bounds clamping).
     #[inline]
     pub fn texel(&self, face: Face, i: usize, j: usize) -> Rgb {
         let o = (j * self.size + i) * 3;
@@ -251,13 +263,6 @@ impl Cubemap {
             out[k] = top + (bot - top) * fy;
         }
         out
-    }
-
-    /// Nearest texel in direction `d`.
-    pub fn sample_nearest(&self, d: Vec3) -> Rgb {
-        let (face, sc, tc) = Face::from_direction(d);
-        let (i, j) = face_texel_index(sc, tc, self.size);
-        self.texel(face, i, j)
     }
 
     /// Solid-angle-weighted 2×2 box reduction to a cube of half the size (odd sizes: the
@@ -328,6 +333,7 @@ pub fn face_texel_index(sc: f32, tc: f32, n: usize) -> (usize, usize) {
 /// A mip chain of cubemaps, level 0 the largest.
 #[derive(Clone, Debug, PartialEq)]
 pub struct CubeMips {
+    /// The levels, each half the size of the previous (rounded down, at least 1).
     pub levels: Vec<Cubemap>,
 }
 

@@ -23,15 +23,24 @@ pub enum Environment {
 /// An environment plus what the input checks found.
 #[derive(Clone, Debug)]
 pub struct LoadedEnvironment {
+    /// The environment as read (negative values clamped, NaN/Inf set to 0 if asked).
     pub env: Environment,
+    /// The file it was read from.
     pub path: PathBuf,
+    /// What the texel checks found (clamped negatives, non-finite values).
     pub report: TexelReport,
+    /// How files whose content and name disagree were read ([`io::content_mismatch`]), one
+    /// line each.
+    pub read_as: Vec<String>,
 }
 
 impl LoadedEnvironment {
-    /// Warnings to print (negative texels clamped, NaN/Inf zeroed).
+    /// Warnings to print: files read by content against their name, then negative texels
+    /// clamped and NaN/Inf zeroed.
     pub fn warnings(&self) -> Vec<String> {
-        self.report.warnings(&self.path)
+        let mut w = self.read_as.clone();
+        w.extend(self.report.warnings(&self.path));
+        w
     }
 }
 
@@ -124,11 +133,15 @@ pub(crate) fn find_with_stem(dir: &Path, stem: &str) -> Option<PathBuf> {
 }
 
 /// Reads one HDR image and applies the input policy (NaN/Inf refused unless `sanitize`,
-/// negatives clamped).
-pub fn read_hdr_image(path: &Path, sanitize: bool) -> Result<(Image, TexelReport)> {
-    let mut img = io::read_image(path, ColorSpace::Srgb)?;
+/// negatives clamped), with the warning when its content and name disagree.
+pub(crate) fn read_hdr_image(
+    path: &Path,
+    sanitize: bool,
+) -> Result<(Image, TexelReport, Option<String>)> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let mut img = io::decode_image(path, &bytes, ColorSpace::Srgb)?;
     let report = check_texels(&mut img, path, sanitize)?;
-    Ok((img, report))
+    Ok((img, report, io::content_mismatch(path, &bytes)))
 }
 
 /// Loads an environment from a file or a folder of faces.
@@ -158,9 +171,11 @@ pub fn load_environment(path: &Path, sanitize: bool) -> Result<LoadedEnvironment
             .map(|p| read_hdr_image(p, sanitize))
             .collect::<Result<Vec<_>>>()?;
         let mut report = TexelReport::default();
+        let mut read_as = Vec::new();
         let mut faces = Vec::with_capacity(6);
-        for (img, r) in decoded {
+        for (img, r, note) in decoded {
             merge(&mut report, &r);
+            read_as.extend(note);
             faces.push(img);
         }
         let faces: [Image; 6] = faces.try_into().expect("six faces");
@@ -169,6 +184,7 @@ pub fn load_environment(path: &Path, sanitize: bool) -> Result<LoadedEnvironment
             env: Environment::Cube(cube),
             path: path.to_path_buf(),
             report,
+            read_as,
         });
     }
     if !path.exists() {
@@ -177,7 +193,7 @@ pub fn load_environment(path: &Path, sanitize: bool) -> Result<LoadedEnvironment
             std::io::Error::new(std::io::ErrorKind::NotFound, "no such file or folder"),
         ));
     }
-    if let Some(mut mips) = read_container_cube(path)? {
+    if let Some((mut mips, note)) = read_container_cube(path)? {
         let mut cube = mips.levels.swap_remove(0);
         let mut report = TexelReport::default();
         for face in &mut cube.faces {
@@ -187,14 +203,16 @@ pub fn load_environment(path: &Path, sanitize: bool) -> Result<LoadedEnvironment
             env: Environment::Cube(cube),
             path: path.to_path_buf(),
             report,
+            read_as: note.into_iter().collect(),
         });
     }
-    let (img, report) = read_hdr_image(path, sanitize)?;
+    let (img, report, note) = read_hdr_image(path, sanitize)?;
     let env = classify_layout(path, img)?;
     Ok(LoadedEnvironment {
         env,
         path: path.to_path_buf(),
         report,
+        read_as: note.into_iter().collect(),
     })
 }
 
@@ -264,8 +282,9 @@ pub use crate::output::Layout;
 
 /// Reads `path` as a KTX2, KTX1 or DDS cube (found by its magic bytes, or by its extension
 /// when it is too short to have any); `None` if it is not a container file. A container
-/// holding a 2D image is refused here (cube readers need six faces).
-fn read_container_cube(path: &Path) -> Result<Option<CubeMips>> {
+/// holding a 2D image is refused here (cube readers need six faces). With the cube, the
+/// warning when the file's name says another format ([`io::content_mismatch`]).
+fn read_container_cube(path: &Path) -> Result<Option<(CubeMips, Option<String>)>> {
     if path.is_dir() {
         return Ok(None);
     }
@@ -293,12 +312,13 @@ fn read_container_cube(path: &Path) -> Result<Option<CubeMips>> {
             "a 2D texture, not a cube map (convert it to an equirect .exr first)",
         ));
     }
-    io::texture::decode_cube(path, &tex.payload).map(Some)
+    let note = io::content_mismatch(path, &head[..n]);
+    io::texture::decode_cube(path, &tex.payload).map(|m| Some((m, note)))
 }
 
 /// Loads a cube chain written by [`crate::output::encode_cube`] (faces or any container).
 pub fn read_cube_chain(path: &Path) -> Result<CubeMips> {
-    if let Some(mips) = read_container_cube(path)? {
+    if let Some((mips, _)) = read_container_cube(path)? {
         return Ok(mips);
     }
     if find_with_stem(path, "m0_px").is_some() && find_with_stem(path, "px").is_some() {
@@ -358,6 +378,95 @@ pub fn read_cube_chain(path: &Path) -> Result<CubeMips> {
 mod tests {
     use super::*;
     use glam::Vec3;
+
+    /// Writes `img` encoded as `as_ext` under the name `name` (a name that may disagree).
+    fn write_as(dir: &Path, name: &str, as_ext: &str, img: &Image) -> PathBuf {
+        let bytes = io::encode_image(
+            Path::new(&format!("x.{as_ext}")),
+            img,
+            &io::WriteOptions::default(),
+        )
+        .unwrap();
+        let p = dir.join(name);
+        std::fs::write(&p, bytes).unwrap();
+        p
+    }
+
+    #[test]
+    fn a_file_read_against_its_name_is_one_warning_naming_it() {
+        let d = tempfile::tempdir().unwrap();
+        let img = Image::from_data(8, 4, 3, vec![0.5; 96]).unwrap();
+        for (name, ext, holds) in [
+            ("exr_data.png", "exr", "OpenEXR"),
+            ("png_data.exr", "png", "PNG"),
+            ("radiance.txt", "hdr", "Radiance HDR"),
+            ("no_extension", "exr", "OpenEXR"),
+        ] {
+            let p = write_as(d.path(), name, ext, &img);
+            let loaded = load_environment(&p, false).unwrap();
+            let w = loaded.warnings();
+            assert_eq!(w.len(), 1, "{name}: {w:?}");
+            assert!(
+                w[0].starts_with(&p.display().to_string())
+                    && w[0].contains(&format!("holds {holds} data"))
+                    && w[0].contains(&format!("read as {holds}"))
+                    && !w[0].contains('\n'),
+                "{}",
+                w[0]
+            );
+            let named = name
+                .rsplit_once('.')
+                .map_or("has no extension".into(), |(_, e)| format!("named .{e}"));
+            assert!(w[0].contains(&named), "{}", w[0]);
+        }
+        // Named as what it holds: nothing to say.
+        let p = write_as(d.path(), "fine.exr", "exr", &img);
+        assert!(load_environment(&p, false).unwrap().warnings().is_empty());
+    }
+
+    #[test]
+    fn a_face_or_container_read_against_its_name_is_warned_about() {
+        let d = tempfile::tempdir().unwrap();
+        let faces = d.path().join("faces");
+        std::fs::create_dir(&faces).unwrap();
+        let face = Image::from_data(4, 4, 3, vec![1.0; 48]).unwrap();
+        for f in Face::ALL {
+            let (name, ext) = if f == Face::Nz {
+                ("nz.png".to_string(), "exr")
+            } else {
+                (format!("{}.exr", f.name()), "exr")
+            };
+            write_as(&faces, &name, ext, &face);
+        }
+        let w = load_environment(&faces, false).unwrap().warnings();
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert!(
+            w[0].contains("nz.png: holds OpenEXR data but is named .png"),
+            "{}",
+            w[0]
+        );
+
+        let mips = CubeMips {
+            levels: vec![Cubemap::constant(4, [1.0, 2.0, 3.0])],
+        };
+        let ktx = io::ktx2::encode_cube(&mips, io::FloatDepth::F32);
+        let p = d.path().join("cube.exr");
+        std::fs::write(&p, &ktx).unwrap();
+        let loaded = load_environment(&p, false).unwrap();
+        assert!(matches!(loaded.env, Environment::Cube(_)));
+        let w = loaded.warnings();
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert!(
+            w[0].ends_with(
+                "cube.exr: holds KTX2 data but is named .exr; read as KTX2 (by its content)"
+            ),
+            "{}",
+            w[0]
+        );
+        let p = d.path().join("cube.ktx2");
+        std::fs::write(&p, &ktx).unwrap();
+        assert!(load_environment(&p, false).unwrap().warnings().is_empty());
+    }
 
     fn labelled_cube(n: usize) -> Cubemap {
         let mut c = Cubemap::new(n);

@@ -10,7 +10,7 @@ use std::f32::consts::PI;
 /// (u, v) ∈ [0, 1]² of a direction: u = 0.5 + atan2(z, x)/(2π), v = acos(y)/π.
 /// Works on unnormalised directions.
 #[inline]
-pub fn direction_to_uv(d: Vec3) -> (f32, f32) {
+pub(crate) fn direction_to_uv(d: Vec3) -> (f32, f32) {
     let u = 0.5 + d.z.atan2(d.x) / (2.0 * PI);
     let v = (d.x * d.x + d.z * d.z).sqrt().atan2(d.y) / PI;
     (u, v)
@@ -18,7 +18,7 @@ pub fn direction_to_uv(d: Vec3) -> (f32, f32) {
 
 /// Unit direction of (u, v): the inverse of [`direction_to_uv`].
 #[inline]
-pub fn uv_to_direction(u: f32, v: f32) -> Vec3 {
+pub(crate) fn uv_to_direction(u: f32, v: f32) -> Vec3 {
     let phi = (u - 0.5) * 2.0 * PI;
     let theta = v * PI;
     let (st, ct) = theta.sin_cos();
@@ -62,7 +62,7 @@ fn pixel_of(u: f32, v: f32, w: usize, h: usize) -> (usize, usize) {
 
 /// Nearest-pixel lookup: the piecewise-constant reading of the source.
 #[inline]
-pub fn sample_nearest(img: &Image, d: Vec3) -> Rgb {
+pub(crate) fn sample_nearest(img: &Image, d: Vec3) -> Rgb {
     let (u, v) = direction_to_uv(d);
     let (x, y) = pixel_of(u, v, img.width, img.height);
     img.rgb(x, y)

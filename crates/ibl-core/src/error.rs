@@ -12,19 +12,33 @@ pub enum Error {
     /// The input is malformed, out of range or inconsistent.
     #[error("{}: {reason}", path_or_param(.path))]
     InvalidInput {
+        /// The file, or `None` for a parameter.
         path: Option<PathBuf>,
+        /// What is wrong.
         reason: String,
     },
     /// The input has NaN or infinite texels (use `--sanitize` to set them to 0).
     #[error("{}: {count} NaN/Inf texel values (use --sanitize to set them to 0)", .path.display())]
-    NonFinite { path: PathBuf, count: usize },
+    NonFinite {
+        /// The file read.
+        path: PathBuf,
+        /// Non-finite channel values found.
+        count: usize,
+    },
     /// The input is well-formed but uses something we do not implement.
     #[error("{}: unsupported: {what}", path_or_param(.path))]
-    Unsupported { path: Option<PathBuf>, what: String },
+    Unsupported {
+        /// The file, or `None` for a parameter.
+        path: Option<PathBuf>,
+        /// What is not supported.
+        what: String,
+    },
     /// Reading or writing a file failed.
     #[error("{}: {source}", .path.display())]
     Io {
+        /// The path read or written.
         path: PathBuf,
+        /// The operating system's error.
         #[source]
         source: std::io::Error,
     },
@@ -40,8 +54,11 @@ fn path_or_param(p: &Option<PathBuf>) -> String {
 /// Exit-code class of an error, shared by all binaries.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ErrorClass {
+    /// Bad data or parameters: exit code 2.
     InvalidInput,
+    /// Valid input the tools do not handle: exit code 3.
     Unsupported,
+    /// A file-system failure: exit code 4.
     Io,
 }
 
@@ -84,11 +101,13 @@ impl Error {
     }
 }
 
+/// A result with the core [`Error`].
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
 /// Errors of any library of the workspace say which exit-code class they belong to, so
 /// binaries can map them without knowing the library.
 pub trait Classify: std::error::Error {
+    /// The exit-code class of this error.
     fn class(&self) -> ErrorClass;
 }
 

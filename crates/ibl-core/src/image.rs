@@ -9,9 +9,13 @@ pub const MAX_TEXELS: u64 = 1 << 28;
 /// A linear float image, row 0 at the top, channels interleaved.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Image {
+    /// Columns.
     pub width: usize,
+    /// Rows.
     pub height: usize,
+    /// Channels per texel (1 to 4).
     pub channels: usize,
+    /// Texels row by row, `channels` values each: `width·height·channels` values.
     pub data: Vec<f32>,
 }
 
@@ -62,12 +66,14 @@ impl Image {
         Ok(())
     }
 
+    /// The channels of texel (x, y), x the column and y the row from the top.
     #[inline]
     pub fn texel(&self, x: usize, y: usize) -> &[f32] {
         let o = (y * self.width + x) * self.channels;
         &self.data[o..o + self.channels]
     }
 
+    /// The channels of texel (x, y), mutable.
     #[inline]
     pub fn texel_mut(&mut self, x: usize, y: usize) -> &mut [f32] {
         let o = (y * self.width + x) * self.channels;

@@ -5,6 +5,8 @@
 //! the parallel texel traversal every bake shares ([`traverse`]) and file I/O with atomic
 //! writes ([`io`]).
 
+#![warn(missing_docs)]
+
 pub mod approx;
 pub mod area;
 pub mod bordered;
@@ -14,6 +16,8 @@ pub mod equirect;
 pub mod error;
 pub mod image;
 pub mod io;
+// Moving to ibl-cli with the other CLI helpers (issue 16 item 4); documented there.
+#[allow(missing_docs)]
 pub mod output;
 pub mod params;
 pub mod progress;

@@ -2,7 +2,7 @@
 
 /// Van der Corput radical inverse in base 2 of `i`, in [0, 1).
 #[inline]
-pub fn radical_inverse_base2(i: u32) -> f32 {
+pub(crate) fn radical_inverse_base2(i: u32) -> f32 {
     (i.reverse_bits() >> 8) as f32 * (1.0 / 16777216.0)
 }
 
@@ -20,6 +20,7 @@ pub struct Pcg32 {
 }
 
 impl Pcg32 {
+    /// The generator of O'Neill 2014 seeded with `seed` on sequence `stream` (each stream an independent sequence).
     pub fn new(seed: u64, stream: u64) -> Self {
         let mut rng = Pcg32 {
             state: 0,
@@ -31,6 +32,7 @@ impl Pcg32 {
         rng
     }
 
+    /// The next uniformly distributed 32-bit value (PCG-XSH-RR output function).
     pub fn next_u32(&mut self) -> u32 {
         let old = self.state;
         self.state = old.wrapping_mul(6364136223846793005).wrapping_add(self.inc);

@@ -9,7 +9,9 @@ use std::path::{Path, PathBuf};
 /// One folder's entries, each list sorted by path.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct Listing {
+    /// Subfolders (symlinks to folders followed).
     pub dirs: Vec<PathBuf>,
+    /// Regular files (symlinks to files followed).
     pub files: Vec<PathBuf>,
 }
 

@@ -22,16 +22,13 @@ mod mutate;
 use ibl_core::cube::{CubeMips, Cubemap};
 use ibl_core::image::Image;
 use ibl_core::io::{self, ktx2, ColorSpace, FloatDepth, WriteOptions};
+use ibl_testkit::workspace_root as workspace;
 use images::{run_image_target, IMAGE_TARGETS};
 use mutate::{crc32, files_in};
 use std::path::{Path, PathBuf};
 
 fn fuzz_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz")
-}
-
-fn workspace() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+    workspace().join("fuzz")
 }
 
 #[test]

@@ -1,11 +1,8 @@
 //! The repository stands alone: no file points outside it (the conventions, engine notes and
 //! bibliography live in docs/), and papers are cited by author and year, not by file number.
 
+use ibl_testkit::workspace_root as root;
 use std::path::{Path, PathBuf};
-
-fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
 
 /// Every file a clone holds, skipping build output and VCS data.
 fn files(dir: &Path, out: &mut Vec<PathBuf>) {

@@ -52,9 +52,10 @@ impl Default for Params {
 
 /// Largest face accepted: 6·n² texels must fit the image limit (`ibl_core::image::MAX_TEXELS`,
 /// 2^28) so that a KTX2 cube of that size can be read back (⌊√(2^28/6)⌋ = 6688).
-pub const MAX_FACE_SIZE: usize = 6688;
+pub(crate) const MAX_FACE_SIZE: usize = 6688;
 
 impl Params {
+    /// Checks the parameters before any input is read (face size within 1..=MAX_FACE_SIZE, ...).
     pub fn validate(&self) -> Result<()> {
         if let Some(n) = self.size {
             if n == 0 || n > MAX_FACE_SIZE {
@@ -86,6 +87,7 @@ impl Params {
 pub struct Baked {
     /// Encoded files, ready for [`io::write_many_atomic`].
     pub files: Vec<(PathBuf, Vec<u8>)>,
+    /// Face size of the cube written (the `--size` given or derived from the source width).
     pub face_size: usize,
     /// What the output encoding cost (one entry for the cube; none for --to-equirect).
     pub encoding: Vec<LevelEncoding>,
@@ -106,7 +108,7 @@ fn source_face_texels(env: &Environment) -> f64 {
 
 /// A warning when face size `n` upsamples the source: the bake then costs n² per face and adds
 /// no detail (`prefilter` warns the same way).
-pub fn upsampling_warning(input: &LoadedEnvironment, n: usize) -> Option<String> {
+pub(crate) fn upsampling_warning(input: &LoadedEnvironment, n: usize) -> Option<String> {
     let have = source_face_texels(&input.env);
     (n as f64 > have * 1.001).then(|| {
         let what = match &input.env {

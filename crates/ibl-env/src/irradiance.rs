@@ -17,7 +17,7 @@ use ibl_target::{DiffuseForm, Target};
 use std::path::{Path, PathBuf};
 
 /// Largest band count accepted (l ≤ 15).
-pub const MAX_BANDS: usize = 16;
+pub(crate) const MAX_BANDS: usize = 16;
 
 ibl_core::cube_output_params! {
 /// Parameters of the bake: CLI flags and RON keys alike.
@@ -71,6 +71,7 @@ impl Default for Params {
 }
 
 impl Params {
+    /// Checks the parameters before any input is read (bands within 1..=MAX_BANDS, ...).
     pub fn validate(&self) -> Result<()> {
         if self.bands == 0 || self.bands > MAX_BANDS {
             return Err(Error::param(format!(
@@ -103,7 +104,7 @@ impl Params {
     }
 
     /// The engine's own SH file, if the target takes one.
-    pub fn target_sh_file(&self) -> Option<&'static str> {
+    pub(crate) fn target_sh_file(&self) -> Option<&'static str> {
         self.target.spec().files.sh
     }
 
@@ -145,7 +146,7 @@ impl Params {
 
 /// The engine's SH file for `target` from the 3-band irradiance coefficients (E/π, our basis
 /// and frame), or `None` when the engine takes the irradiance cube only.
-pub fn target_sh_bytes(target: Target, irradiance: &[[f32; 3]]) -> Option<Vec<u8>> {
+pub(crate) fn target_sh_bytes(target: Target, irradiance: &[[f32; 3]]) -> Option<Vec<u8>> {
     use ibl_target::sh;
     let spec = target.spec();
     let json = |v: serde_json::Value| {
@@ -189,6 +190,7 @@ pub fn target_sh_bytes(target: Target, irradiance: &[[f32; 3]]) -> Option<Vec<u8
 /// The coefficients file: radiance projection L_lm and the coefficients of E/π.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ShCoefficients {
+    /// SH bands projected (l = 0..bands−1, bands² coefficients per channel).
     pub bands: usize,
     /// L_lm = ∫ L(ω) Y_lm(ω) dω, as [r, g, b] in index order l(l+1)+m.
     pub radiance: Vec<[f32; 3]>,
@@ -200,7 +202,7 @@ pub struct ShCoefficients {
 
 /// Lanczos σ factor of band l for `bands` bands: sinc(l/bands), sinc(x) = sin(πx)/(πx)
 /// (Sloan 2008, "Stupid Spherical Harmonics Tricks", §"windowing").
-pub fn lanczos_window(l: usize, bands: usize) -> f64 {
+pub(crate) fn lanczos_window(l: usize, bands: usize) -> f64 {
     if l == 0 {
         return 1.0;
     }
@@ -210,7 +212,7 @@ pub fn lanczos_window(l: usize, bands: usize) -> f64 {
 
 /// ∫ L Y_lm dω over an equirect image's own pixels, each at its centre direction (turned by
 /// `rotate_deg`) with the exact row solid angle. Ordered row sums: thread-count independent.
-pub fn project_equirect(img: &Image, bands: usize, rotate_deg: f32) -> Vec<[f64; 3]> {
+pub(crate) fn project_equirect(img: &Image, bands: usize, rotate_deg: f32) -> Vec<[f64; 3]> {
     let n = num_coeffs(bands);
     let (w, h) = (img.width, img.height);
     let row = |j: usize| {
@@ -456,7 +458,9 @@ pub fn cube_from_sh(coeffs: &[[f32; 3]], size: usize, progress: &dyn Progress) -
 
 /// What the bake produced, before anything is written.
 pub struct Baked {
+    /// Encoded files (coefficients and cube), ready for [`io::write_many_atomic`].
     pub files: Vec<(PathBuf, Vec<u8>)>,
+    /// The coefficients written to the coefficients file.
     pub coefficients: ShCoefficients,
     /// Irradiance-cube values below zero from SH ringing, clamped to 0.
     pub negative_clamped: usize,
@@ -711,16 +715,6 @@ mod tests {
     #[test]
     fn projection_is_thread_count_independent() {
         let env = load("sunset_256.exr");
-        let one = rayon::ThreadPoolBuilder::new()
-            .num_threads(1)
-            .build()
-            .unwrap();
-        let two = rayon::ThreadPoolBuilder::new()
-            .num_threads(2)
-            .build()
-            .unwrap();
-        let a = one.install(|| project(&env, 4, 0.0));
-        let b = two.install(|| project(&env, 4, 0.0));
-        assert_eq!(a, b);
+        ibl_testkit::thread_count_independent(&[1, 2, 3], || project(&env, 4, 0.0));
     }
 }

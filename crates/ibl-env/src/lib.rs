@@ -1,5 +1,7 @@
 //! Environment bakes that resample or project an environment: `equirect-to-cube` and
 //! `irradiance`. Each module holds its `Params` and a pure `run`.
 
+#![warn(missing_docs)]
+
 pub mod equirect_to_cube;
 pub mod irradiance;

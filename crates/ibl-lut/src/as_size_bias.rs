@@ -118,6 +118,7 @@ impl Default for Params {
 }
 
 impl Params {
+    /// Checks the parameters before any work and returns the lobe they describe.
     pub fn validate(&self) -> Result<AshikhminShirley> {
         let a = hv::lobe(self.nu, self.nv)?;
         table::check_size("size", self.size)?;
@@ -135,9 +136,10 @@ pub fn view_of(s: f64, t: f64) -> DVec3 {
     DVec3::new(cp * st, sp * st, nv)
 }
 
+#[cfg(test)]
 /// The table coordinates (s, t) of a view vector (the thesis's forward mapping, valid for any
 /// azimuth thanks to the rectangular symmetry).
-pub fn coords_of(v: DVec3) -> (f64, f64) {
+pub(crate) fn coords_of(v: DVec3) -> (f64, f64) {
     let s = if v.x == 0.0 && v.y == 0.0 {
         0.0
     } else {
@@ -150,6 +152,7 @@ pub fn coords_of(v: DVec3) -> (f64, f64) {
 /// every texel).
 #[derive(Clone, Debug)]
 pub struct SampleSet {
+    /// The unit half vectors h drawn from p_h (tangent space, +z the normal).
     pub h: Vec<DVec3>,
 }
 
@@ -202,7 +205,7 @@ pub fn size_bias(set: &SampleSet, v: DVec3) -> [f64; 2] {
 }
 
 /// The sample set the parameters ask for.
-pub fn sample_set(a: &AshikhminShirley, params: &Params) -> SampleSet {
+pub(crate) fn sample_set(a: &AshikhminShirley, params: &Params) -> SampleSet {
     match params.sampler {
         Sampler::Direct => SampleSet::direct(a, params.samples),
         Sampler::HvLut => SampleSet::through_lut(
@@ -224,6 +227,7 @@ pub fn size_bias_table(set: &SampleSet, size: usize, progress: &dyn Progress) ->
     })
 }
 
+/// How the bias table describes itself in its JSON/RON dump.
 pub fn describe(params: &Params) -> Describe<'static> {
     Describe {
         table:

@@ -26,7 +26,7 @@ use std::path::Path;
 
 /// Smallest GGX α a table row uses: rows with r² below it (only r < 0.01) integrate α = 1e-4,
 /// a lobe 0.006° wide, indistinguishable from the mirror at 16-bit precision.
-pub const ALPHA_MIN: f32 = 1e-4;
+pub(crate) const ALPHA_MIN: f32 = 1e-4;
 
 /// The shader side of the multiple-scattering channel (Fdez-Agüera 2019, §4–5):
 /// ```glsl
@@ -62,7 +62,7 @@ pub enum Estimator {
 }
 
 /// The per-row sample table of an estimator.
-pub enum RowSamples {
+pub(crate) enum RowSamples {
     Vndf(DiskTable),
     Ndf(HalfVectorTable),
 }
@@ -123,6 +123,7 @@ impl Default for Params {
 }
 
 impl Params {
+    /// Checks the parameters (size, samples) before any work.
     pub fn validate(&self) -> Result<()> {
         table::check_size("size", self.size)?;
         table::check_samples(self.samples)
@@ -139,11 +140,14 @@ pub fn alpha_of(roughness: f32) -> f32 {
 /// (h_x, h_z) the estimator needs.
 #[derive(Clone, Debug)]
 pub struct HalfVectorTable {
+    /// h_x of each sampled half vector (tangent space, v in the x–z plane).
     pub hx: Vec<f32>,
+    /// h_z = n·h of each sampled half vector.
     pub hz: Vec<f32>,
 }
 
 impl HalfVectorTable {
+    /// `samples` GGX half vectors of roughness α from the Hammersley set.
     pub fn new(alpha: f32, samples: u32) -> Self {
         let (mut hx, mut hz) = (
             Vec::with_capacity(samples as usize),
@@ -213,7 +217,7 @@ pub fn integrate(table: &HalfVectorTable, n_dot_v: f32, alpha: f32) -> [f32; 2] 
 /// The α- and view-independent part of Heitz 2018's visible-normal sampler for N Hammersley
 /// points: the disk point (t1, t2) = √u1 (cos 2πu2, sin 2πu2) and √(1 − t1²).
 #[derive(Clone, Debug)]
-pub struct DiskTable {
+pub(crate) struct DiskTable {
     pub t1: Vec<f32>,
     pub t2: Vec<f32>,
     pub c1: Vec<f32>,
@@ -244,7 +248,7 @@ impl DiskTable {
 /// G2/G1(v) = (1+Λ(v))/(1+Λ(v)+Λ(l)) = n·l (n·v + s_v) / (n·l s_v + n·v s_l) with
 /// s_x = √(α² + (1−α²) x²): bounded by 1, which is why this estimator's error is far lower
 /// than D sampling's at grazing views.
-pub fn integrate_vndf(table: &DiskTable, n_dot_v: f32, alpha: f32) -> [f32; 2] {
+pub(crate) fn integrate_vndf(table: &DiskTable, n_dot_v: f32, alpha: f32) -> [f32; 2] {
     #[cfg(target_arch = "x86_64")]
     if std::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU has AVX2 (checked just above).
@@ -324,14 +328,16 @@ fn integrate_vndf_portable(table: &DiskTable, n_dot_v: f32, alpha: f32) -> [f32;
     ]
 }
 
+#[cfg(test)]
 /// One DFG value (A, B) at (n·v, roughness) with `samples` Hammersley samples and the default
 /// (VNDF) estimator — the same number the default table stores at that texel.
-pub fn dfg_value(n_dot_v: f32, roughness: f32, samples: u32) -> [f32; 2] {
+pub(crate) fn dfg_value(n_dot_v: f32, roughness: f32, samples: u32) -> [f32; 2] {
     dfg_value_with(Estimator::Vndf, n_dot_v, roughness, samples)
 }
 
+#[cfg(test)]
 /// [`dfg_value`] with a chosen estimator.
-pub fn dfg_value_with(
+pub(crate) fn dfg_value_with(
     estimator: Estimator,
     n_dot_v: f32,
     roughness: f32,
@@ -676,18 +682,10 @@ mod tests {
 
     #[test]
     fn value_and_table_agree_and_threads_do_not_matter() {
-        let one = rayon::ThreadPoolBuilder::new()
-            .num_threads(1)
-            .build()
-            .unwrap();
-        let two = rayon::ThreadPoolBuilder::new()
-            .num_threads(2)
-            .build()
-            .unwrap();
         for e in [Estimator::Vndf, Estimator::Ndf] {
-            let a = one.install(|| dfg_table_with(e, 8, 64, false, &NoProgress));
-            let b = two.install(|| dfg_table_with(e, 8, 64, false, &NoProgress));
-            assert_eq!(a, b);
+            let a = ibl_testkit::thread_count_independent(&[1, 2, 3], || {
+                dfg_table_with(e, 8, 64, false, &NoProgress)
+            });
             let v = dfg_value_with(e, texel_centre(3, 8) as f32, texel_centre(5, 8) as f32, 64);
             assert_eq!(a.texel(3, 5), &v);
         }

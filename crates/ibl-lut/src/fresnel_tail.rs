@@ -55,20 +55,23 @@ impl Default for Params {
 }
 
 impl Params {
+    /// Checks the parameters (size, samples) before any work.
     pub fn validate(&self) -> Result<()> {
         table::check_size("size", self.size)?;
         table::check_samples(self.samples)
     }
 }
 
+#[cfg(test)]
 /// T(n·v, r) = ∫ f_DV (1 − v·h)⁵ (n·l) dl (Silvennoinen et al. 2025 eq. 15's integral) with `samples`
 /// Hammersley samples; the value the table stores in R at that texel.
-pub fn tail_value(n_dot_v: f32, roughness: f32, samples: u32) -> f32 {
+pub(crate) fn tail_value(n_dot_v: f32, roughness: f32, samples: u32) -> f32 {
     tail_and_albedo(n_dot_v, roughness, samples)[0]
 }
 
+#[cfg(test)]
 /// (T, E_dir) at (n·v, r): the tail integral and the directional albedo ∫ f_DV (n·l) dl.
-pub fn tail_and_albedo(n_dot_v: f32, roughness: f32, samples: u32) -> [f32; 2] {
+pub(crate) fn tail_and_albedo(n_dot_v: f32, roughness: f32, samples: u32) -> [f32; 2] {
     let [a, b] = crate::dfg::dfg_value(n_dot_v, roughness, samples);
     [b, a + b]
 }
@@ -79,7 +82,7 @@ pub fn tail_table(size: usize, samples: u32, progress: &dyn Progress) -> Image {
 }
 
 /// [`tail_table`] with a chosen estimator.
-pub fn tail_table_with(
+pub(crate) fn tail_table_with(
     estimator: Estimator,
     size: usize,
     samples: u32,
@@ -92,6 +95,7 @@ pub fn tail_table_with(
     })
 }
 
+/// How the Fresnel-tail table describes itself in its JSON/RON dump.
 pub fn describe(params: &Params) -> Describe<'static> {
     Describe {
         table:

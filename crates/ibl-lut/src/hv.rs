@@ -19,10 +19,10 @@ use serde::Serialize;
 use std::path::{Path, PathBuf};
 
 /// The exponent range the bakes accept (and test): 1 ≤ n ≤ 10⁶.
-pub const EXPONENT_RANGE: (f64, f64) = (1.0, 1e6);
+pub(crate) const EXPONENT_RANGE: (f64, f64) = (1.0, 1e6);
 
 /// Checks an AS exponent given as `--name`.
-pub fn check_exponent(name: &str, value: Option<f64>) -> Result<f64> {
+pub(crate) fn check_exponent(name: &str, value: Option<f64>) -> Result<f64> {
     let v = value.ok_or_else(|| Error::param(format!("--{name} is required")))?;
     if !v.is_finite() || v < EXPONENT_RANGE.0 || v > EXPONENT_RANGE.1 {
         return Err(Error::param(format!(
@@ -42,7 +42,7 @@ pub fn lobe(nu: Option<f64>, nv: Option<f64>) -> Result<AshikhminShirley> {
 }
 
 /// `out` itself, or with thesis names `out/STEM[NU,NV].png` (see [`thesis_file_name`]).
-pub fn thesis_or_plain_path(
+pub(crate) fn thesis_or_plain_path(
     out: &Path,
     thesis_names: bool,
     stem: &str,
@@ -117,7 +117,7 @@ impl Params {
 
 /// The thesis's file name for a LUT: `halfVectorSampling[NU,NV].png` (§4.3.2; §5.2 prints it
 /// with a space before '[' — we follow §4.3.2), numbers in their shortest decimal form.
-pub fn thesis_file_name(stem: &str, nu: f64, nv: f64) -> String {
+pub(crate) fn thesis_file_name(stem: &str, nu: f64, nv: f64) -> String {
     format!("{stem}[{nu},{nv}].png")
 }
 
@@ -165,15 +165,23 @@ pub fn lookup(lut: &Image, xi1: f64, xi2: f64) -> (DVec3, f64) {
 /// The sidecar the shader reads to restore p_h.
 #[derive(Serialize, serde::Deserialize, Debug, PartialEq)]
 pub struct Sidecar {
+    /// What the table is, with its reference (Marcolongo 2020 §4.3.2).
     pub table: String,
+    /// The version of the tool that wrote it.
     pub tool_version: String,
+    /// Phong exponent n_u of the lobe.
     pub nu: f64,
+    /// Phong exponent n_v of the lobe.
     pub nv: f64,
     /// p_h(n) = √((n_u+1)(n_v+1))/(2π): multiply A by it to get p_h(h).
     pub p_h_n: f64,
+    /// Edge length of the square table in texels.
     pub size: usize,
+    /// File name of the table image beside the sidecar.
     pub image: String,
+    /// How the image stores values (PNG bits, EXR half or float).
     pub encoding: String,
+    /// How texel (i, j) maps to (ξ₁, ξ₂) and how the channels encode h and the pdf ratio.
     pub layout: String,
 }
 

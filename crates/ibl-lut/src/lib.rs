@@ -8,6 +8,8 @@
 //!
 //! [`reference`] holds the independent quadratures the tests and the benchmark compare with.
 
+#![warn(missing_docs)]
+
 pub mod as_size_bias;
 pub mod dfg;
 pub mod error;

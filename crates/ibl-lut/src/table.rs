@@ -22,7 +22,7 @@ pub fn texel_centre(i: usize, n: usize) -> f64 {
 
 /// Builds a width × height table with `channels` channels by calling `kernel(row, out)` for
 /// each row in parallel over [`ibl_core::traverse`]; `out` is that row's interleaved data.
-pub fn map_rows<K>(
+pub(crate) fn map_rows<K>(
     width: usize,
     height: usize,
     channels: usize,
@@ -48,9 +48,13 @@ where
 /// Output formats, chosen by extension.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Format {
+    /// OpenEXR, float or half.
     Exr,
+    /// PNG, 8 or 16 bits (values in [0, 1]).
     Png,
+    /// A JSON dump of every texel with the table's description.
     Json,
+    /// A RON dump of the same.
     Ron,
 }
 
@@ -68,7 +72,7 @@ impl Format {
 
     /// The format of an output that must be an image (`.exr` or `.png`); `what` says why,
     /// e.g. "the half-vector LUT is an image".
-    pub fn image_of(path: &Path, what: &str) -> Result<Format> {
+    pub(crate) fn image_of(path: &Path, what: &str) -> Result<Format> {
         match Format::of(path) {
             Ok(f @ (Format::Exr | Format::Png)) => Ok(f),
             _ => Err(unsupported(path, &format!("{what}: write .exr or .png"))),
@@ -92,7 +96,7 @@ fn unsupported(path: &Path, hint: &str) -> Error {
 
 /// The float dump written for `.json` / `.ron`: self-describing, row 0 first.
 #[derive(Serialize)]
-pub struct TableDump<'a> {
+pub(crate) struct TableDump<'a> {
     pub table: &'a str,
     pub tool_version: &'a str,
     pub width: usize,
@@ -110,10 +114,15 @@ pub struct TableDump<'a> {
 
 /// How a table describes itself in dumps and summaries.
 pub struct Describe<'a> {
+    /// What the table is, with its reference.
     pub table: &'a str,
+    /// Meaning of each channel, in order.
     pub channels: &'a [&'a str],
+    /// What the column coordinate s = (i+0.5)/width stands for.
     pub s: &'a str,
+    /// What the row coordinate t = (j+0.5)/height stands for.
     pub t: &'a str,
+    /// The parameters the table was baked with.
     pub params: serde_json::Value,
 }
 
@@ -193,7 +202,7 @@ pub fn check_size(name: &str, n: usize) -> Result<()> {
 }
 
 /// Checks a sample count against 1..=MAX_SAMPLES.
-pub fn check_samples(n: u32) -> Result<()> {
+pub(crate) fn check_samples(n: u32) -> Result<()> {
     if n == 0 || n > MAX_SAMPLES {
         return Err(Error::param(format!(
             "--samples {n} is out of range 1..={MAX_SAMPLES}"
@@ -215,17 +224,8 @@ mod tests {
                 t[1] = (texel_centre(j, 5) as f32).sin() * 1e-3 + 1.0;
             }
         };
-        let one = rayon::ThreadPoolBuilder::new()
-            .num_threads(1)
-            .build()
-            .unwrap();
-        let two = rayon::ThreadPoolBuilder::new()
-            .num_threads(2)
-            .build()
-            .unwrap();
-        let a = one.install(|| map_rows(7, 5, 2, &NoProgress, k));
-        let b = two.install(|| map_rows(7, 5, 2, &NoProgress, k));
-        assert_eq!(a, b);
+        let a =
+            ibl_testkit::thread_count_independent(&[1, 2, 3], || map_rows(7, 5, 2, &NoProgress, k));
         assert_eq!(a.texel(3, 0)[0], 0.5);
         assert_eq!(a.texel(0, 2)[1], (0.5f32).sin() * 1e-3 + 1.0);
     }

@@ -13,7 +13,7 @@
 
 use crate::normal;
 use crate::quat_map::{self, CheckReport, ConvertStats, Params};
-use crate::{MaterialError, Result};
+use crate::Result;
 use ibl_core::error::ErrorClass;
 use ibl_core::io;
 use ibl_core::progress::{NoProgress, Progress};
@@ -82,7 +82,7 @@ pub fn inputs_in<'a>(
 }
 
 /// Case-insensitive match of a file name against a pattern with `*` and `?`.
-pub fn glob_match(pattern: &str, name: &str) -> bool {
+pub(crate) fn glob_match(pattern: &str, name: &str) -> bool {
     let p: Vec<char> = pattern.to_lowercase().chars().collect();
     let n: Vec<char> = name.to_lowercase().chars().collect();
     let (mut pi, mut ni) = (0, 0);
@@ -108,6 +108,7 @@ pub fn glob_match(pattern: &str, name: &str) -> bool {
 /// What the planner decided for one material folder.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub enum Action {
+    /// Converted: no output, or the input or options changed.
     Convert,
     /// Up to date.
     Skip,
@@ -120,8 +121,11 @@ pub enum Action {
 /// One material folder's conversion.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Job {
+    /// The material folder or file read.
     pub input: PathBuf,
+    /// The output written for it.
     pub output: PathBuf,
+    /// Whether it converts or is up to date.
     pub action: Action,
     /// Why it converts (no output, options changed, ...), for `plan` listings.
     pub reason: String,
@@ -130,13 +134,21 @@ pub struct Job {
 /// The sidecar written next to each output.
 #[derive(Clone, Debug, PartialEq, Serialize, serde::Deserialize)]
 pub struct Sidecar {
+    /// The tool that wrote the output (`quat-map`).
     pub tool: String,
+    /// The tool's version.
     pub version: String,
+    /// BLAKE3 of the options that change the output bytes.
     pub options_hash: String,
+    /// Those options, for people reading the sidecar.
     pub options: serde_json::Value,
+    /// File name of the input converted.
     pub input_name: String,
+    /// Input size in bytes when converted.
     pub input_len: u64,
+    /// Input modification time (ns since the epoch) when converted.
     pub input_modified_ns: u128,
+    /// Output size in bytes as written (a changed size marks it edited).
     pub output_len: u64,
 }
 
@@ -274,19 +286,26 @@ pub fn plan(params: &Params, root: &Path) -> Result<Vec<Job>> {
 /// A converted material.
 #[derive(Clone, Debug, Serialize)]
 pub struct Converted {
+    /// The input read.
     pub input: PathBuf,
+    /// The output written.
     pub output: PathBuf,
+    /// What the conversion met.
     pub stats: ConvertStats,
+    /// The round-trip check, with `--check`.
     pub check: Option<CheckReport>,
+    /// One-line warnings about this material.
     pub warnings: Vec<String>,
 }
 
 /// A material that could not be converted.
 #[derive(Clone, Debug, Serialize)]
 pub struct Failed {
+    /// The input that failed.
     pub input: PathBuf,
     /// The one-line error, naming the file.
     pub error: String,
+    /// Its exit-code class.
     #[serde(skip)]
     pub class: ErrorClass,
 }
@@ -294,17 +313,23 @@ pub struct Failed {
 /// What a batch did.
 #[derive(Clone, Debug, Serialize)]
 pub struct BatchReport {
+    /// The folder the batch walked.
     pub root: PathBuf,
+    /// Materials converted, in path order.
     pub converted: Vec<Converted>,
+    /// Materials up to date, in path order.
     pub skipped: Vec<PathBuf>,
+    /// Materials that failed, in path order.
     pub failed: Vec<Failed>,
 }
 
 impl BatchReport {
+    /// Materials seen: converted, skipped and failed.
     pub fn total(&self) -> usize {
         self.converted.len() + self.skipped.len() + self.failed.len()
     }
 
+    /// One line: how many converted, skipped and failed.
     pub fn summary(&self) -> String {
         format!(
             "{}: {} converted, {} skipped (up to date), {} failed",
@@ -316,9 +341,9 @@ impl BatchReport {
     }
 
     /// The error to exit with when anything failed (class of the first failure).
-    pub fn error(&self) -> Option<MaterialError> {
+    pub fn error(&self) -> Option<crate::Error> {
         let first = self.failed.first()?;
-        Some(MaterialError::BatchFailed {
+        Some(crate::Error::BatchFailed {
             root: self.root.clone(),
             total: self.total(),
             converted: self.converted.len(),

@@ -20,18 +20,36 @@ use std::str::FromStr;
 #[derive(Clone, Debug, PartialEq)]
 pub enum Preset {
     /// `constant:DEG`: the tangent turned by DEG about n (from +t towards +b).
-    Constant { deg: f64 },
+    Constant {
+        /// Angle in degrees.
+        deg: f64,
+    },
     /// `linear:DEG`: straight strokes at DEG counter-clockwise from the image's +x, as seen on
     /// the image (the same field as `constant:DEG` for +y-up tangent spaces).
-    Linear { deg: f64 },
+    Linear {
+        /// Angle in degrees from the image's +x.
+        deg: f64,
+    },
     /// `radial[:CX,CY]`: concentric circles about (CX, CY) in texture coordinates (v down the
     /// image, default the centre), tangent along the circle, counter-clockwise — a CD, a pan
     /// bottom.
-    Radial { cx: f64, cy: f64 },
+    Radial {
+        /// Centre u in texture coordinates.
+        cx: f64,
+        /// Centre v in texture coordinates (v down the image).
+        cy: f64,
+    },
     /// `spiral[:CX,CY,TURNS]`: the Archimedean spiral r = φ/(4π·TURNS) about (CX, CY): TURNS
     /// grooves between the centre and a distance of half the larger side; TURNS = 0 gives
     /// straight rays, negative TURNS winds the other way. Default 0.5,0.5,8.
-    Spiral { cx: f64, cy: f64, turns: f64 },
+    Spiral {
+        /// Centre u in texture coordinates.
+        cx: f64,
+        /// Centre v in texture coordinates (v down the image).
+        cy: f64,
+        /// Grooves between the centre and half the larger side.
+        turns: f64,
+    },
     /// `wave`: the thesis's example, x = cos πv, y = sin πv.
     Wave,
 }
@@ -70,12 +88,12 @@ impl Preset {
 
 /// Position relative to (cx, cy) in image space: +x right, +y up, in units of the larger side.
 #[inline]
-pub fn image_offset(u: f64, v: f64, cx: f64, cy: f64, scale: [f64; 2]) -> [f64; 2] {
+pub(crate) fn image_offset(u: f64, v: f64, cx: f64, cy: f64, scale: [f64; 2]) -> [f64; 2] {
     [(u - cx) * scale[0], -(v - cy) * scale[1]]
 }
 
 /// (W, H) / max(W, H).
-pub fn aspect_scale(width: usize, height: usize) -> [f64; 2] {
+pub(crate) fn aspect_scale(width: usize, height: usize) -> [f64; 2] {
     let m = width.max(height) as f64;
     [width as f64 / m, height as f64 / m]
 }
@@ -164,7 +182,7 @@ impl<'de> serde::Deserialize<'de> for Preset {
 
 /// Angle in [0, π) stored as a value in [0, 1] (Cocco et al. 2024 Fig. 22) → unit tangent.
 #[inline]
-pub fn tangent_from_angle_value(value: f64) -> [f64; 2] {
+pub(crate) fn tangent_from_angle_value(value: f64) -> [f64; 2] {
     let (s, c) = (value * PI).sin_cos();
     [c, s]
 }
@@ -173,7 +191,7 @@ pub fn tangent_from_angle_value(value: f64) -> [f64; 2] {
 /// interpolation at texel centres of the doubled-angle vectors (x² − y², 2xy): t and −t are
 /// the same anisotropy axis, so averaging them must not cancel. Zero input texels carry no
 /// weight; an output with no consistent direction comes out as (0, 0).
-pub fn resample_line_field(
+pub(crate) fn resample_line_field(
     src: &[[f64; 2]],
     sw: usize,
     sh: usize,

@@ -25,7 +25,9 @@ use std::fmt;
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 #[error("column {column}: {message}")]
 pub struct ExprError {
+    /// 1-based column of the expression where the problem starts.
     pub column: usize,
+    /// What is wrong there.
     pub message: String,
 }
 

@@ -8,6 +8,8 @@
 //! texel stores a vector v as v·0.5 + 0.5, texture coordinates are texel centres
 //! u = (i + 0.5)/W, v = (j + 0.5)/H with row j = 0 stored first.
 
+#![warn(missing_docs)]
+
 pub mod batch;
 pub mod direction;
 pub mod error;
@@ -19,4 +21,6 @@ pub mod quat_map;
 pub mod quaternion;
 pub mod tpr_map;
 
-pub use error::{MaterialError, Result};
+/// The former name of [`Error`], kept while the `quat-map` and `tpr-map` binaries still use it.
+pub use error::Error as MaterialError;
+pub use error::{Error, Result};

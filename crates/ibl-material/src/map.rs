@@ -9,15 +9,20 @@ use std::path::{Path, PathBuf};
 /// An input map as read from disk.
 #[derive(Clone, Debug)]
 pub struct LoadedMap {
+    /// The texels as read (linear; 8-bit PNGs scaled to [0, 1]).
     pub image: Image,
     /// The file was a grey+alpha PNG (the reader expands it to (L, L, L, A)): its two
     /// channels are then L and A (BC5-style normal maps, direction maps saved as LA).
     pub grey_alpha: bool,
+    /// The file it was read from.
     pub path: PathBuf,
+    /// The one-line warning when the file's content and name disagree (EXR data named
+    /// `.png`, ...): it was read by its content ([`io::content_mismatch`]).
+    pub read_as: Option<String>,
 }
 
 /// PNG colour type from the IHDR chunk (0 grey, 2 RGB, 3 palette, 4 grey+alpha, 6 RGBA).
-pub fn png_color_type(bytes: &[u8]) -> Option<u8> {
+pub(crate) fn png_color_type(bytes: &[u8]) -> Option<u8> {
     (bytes.len() > 25 && bytes.starts_with(&[0x89, b'P', b'N', b'G']) && &bytes[12..16] == b"IHDR")
         .then(|| bytes[25])
 }
@@ -31,6 +36,7 @@ pub fn load(path: &Path) -> ibl_core::Result<LoadedMap> {
         image,
         grey_alpha: png_color_type(&bytes) == Some(4),
         path: path.to_path_buf(),
+        read_as: io::content_mismatch(path, &bytes),
     })
 }
 

@@ -5,7 +5,7 @@ use crate::quaternion::Vec3;
 use ibl_core::traverse::ordered_row_reduce;
 use ibl_core::{Error, Image};
 
-pub use crate::map::{load, png_color_type};
+pub use crate::map::load;
 
 /// A normal map as read from disk ([`load`]): the material bakes' one map type.
 pub type NormalImage = crate::map::LoadedMap;
@@ -29,12 +29,18 @@ pub enum Texel {
     /// A unit normal, with the length the stored vector had before normalisation and
     /// whether a two-channel texel lay outside the unit disk (x² + y² > 1, z set to 0).
     Unit {
+        /// The unit normal (tangent space).
         n: Vec3,
+        /// Length of the stored vector before normalisation.
         len: f64,
+        /// A two-channel texel with x² + y² > 1 (z set to 0).
         outside_disk: bool,
     },
     /// Shorter than `min_length` (e.g. mid-grey padding): no direction.
-    Degenerate { len: f64 },
+    Degenerate {
+        /// Length of the stored vector.
+        len: f64,
+    },
     /// NaN or infinite components.
     NonFinite,
 }
@@ -42,6 +48,7 @@ pub enum Texel {
 /// A [`Decoding`] bound to an image's channel layout.
 #[derive(Clone, Copy, Debug)]
 pub struct Decoder {
+    /// How stored values become a normal.
     pub decoding: Decoding,
     /// Channels holding x and y (and z unless two-channel).
     x: usize,
@@ -99,7 +106,7 @@ impl Decoder {
     /// Decodes one texel without normalising it (the conversion's fast path: the quaternion
     /// formula takes the length instead).
     #[inline(always)]
-    pub fn decode_raw(&self, texel: &[f32]) -> RawTexel {
+    pub(crate) fn decode_raw(&self, texel: &[f32]) -> RawTexel {
         let d = &self.decoding;
         let (scale, offset) = if d.signed { (1.0, 0.0) } else { (2.0, -1.0) };
         let y_sign = if d.y_down { -1.0 } else { 1.0 };
@@ -135,7 +142,7 @@ impl Decoder {
 
 /// A decoded texel before normalisation.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum RawTexel {
+pub(crate) enum RawTexel {
     /// The decoded vector and its length (≥ `min_length`).
     Vector {
         v: Vec3,
@@ -161,6 +168,7 @@ pub struct ConventionCheck {
     /// (flipped − as decoded)/(flipped + as decoded) ∈ [−1, 1]: the correlation of ∂p/∂y with
     /// ∂q/∂x; near +1 the decoded convention is right, near −1 the flipped one.
     pub agreement: f64,
+    /// Texel pairs the agreement was measured on.
     pub samples: u64,
 }
 
@@ -168,7 +176,7 @@ impl ConventionCheck {
     /// The other convention is more integrable. Real maps (painted, photo-derived, lossy)
     /// are far from exact gradient fields: they reach |agreement| ≈ 0.3–0.8 where an exact
     /// height field gives 1, hence the modest threshold (the warning shows the number).
-    pub fn suggests_flip(&self) -> bool {
+    pub(crate) fn suggests_flip(&self) -> bool {
         self.samples >= 256 && self.agreement < -0.25
     }
 }
@@ -244,6 +252,7 @@ mod tests {
             image: Image::new(1, 1, channels),
             grey_alpha,
             path: std::path::PathBuf::from("n.png"),
+            read_as: None,
         }
     }
 
@@ -379,6 +388,7 @@ mod tests {
             image: img,
             grey_alpha: false,
             path: std::path::PathBuf::from("h.png"),
+            read_as: None,
         }
     }
 

@@ -24,7 +24,7 @@ pub fn validate(out: &Path, bits: u8, half: bool, what: &str) -> ibl_core::Resul
 }
 
 /// Encoder options of a data map: linear, no tone mapping; `bits` for PNG, `half` for EXR.
-pub fn write_options(bits: u8, half: bool) -> WriteOptions {
+pub(crate) fn write_options(bits: u8, half: bool) -> WriteOptions {
     WriteOptions {
         float: if half {
             FloatDepth::F16
@@ -69,7 +69,7 @@ pub fn same_file(a: &Path, b: &Path) -> bool {
 }
 
 /// Refuses an output that is one of the inputs (writing it would destroy the input).
-pub fn refuse_overwriting_input<'a>(
+pub(crate) fn refuse_overwriting_input<'a>(
     out: &Path,
     inputs: impl IntoIterator<Item = &'a Path>,
 ) -> ibl_core::Result<()> {

@@ -70,6 +70,7 @@ impl Default for Params {
 }
 
 impl Params {
+    /// Checks the parameters before any input is read.
     pub fn validate(&self) -> ibl_core::Result<()> {
         if self.bits != 8 && self.bits != 16 {
             return Err(Error::param(format!("--bits {} (use 8 or 16)", self.bits)));
@@ -89,6 +90,7 @@ impl Params {
         crate::output::validate(out, self.bits, self.half, "quaternion maps")
     }
 
+    /// How this run decodes the input normals.
     pub fn decoding(&self) -> Decoding {
         Decoding {
             y_down: self.y_down,
@@ -107,7 +109,7 @@ impl Params {
     }
 
     /// Everything that changes the output's bytes (not `check`): the batch's skip key.
-    pub fn output_key(&self) -> serde_json::Value {
+    pub(crate) fn output_key(&self) -> serde_json::Value {
         serde_json::json!({
             "y_down": self.y_down, "two_channel": self.two_channel, "signed": self.signed,
             "min_length": self.min_length, "bits": self.bits, "half": self.half, "sanitize": self.sanitize,
@@ -132,6 +134,7 @@ impl Params {
 /// What the conversion met in the input.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct ConvertStats {
+    /// Texels converted.
     pub texels: u64,
     /// Shorter than `min_length`: stored as the identity.
     pub degenerate: u64,
@@ -147,11 +150,16 @@ pub struct ConvertStats {
     pub short: u64,
     /// Range of decoded lengths of the texels with a direction (both 0 when none has one).
     pub min_length: f64,
+    /// Largest decoded length among the texels with a direction.
     pub max_length: f64,
     /// Whether the slopes are more integrable with green flipped (DirectX vs OpenGL).
     pub convention: Option<ConventionCheck>,
     /// The y convention the map was read with.
     pub y_down: bool,
+    /// How the input was read when its content and name disagree
+    /// ([`crate::map::LoadedMap::read_as`]); a warning, not part of the reports.
+    #[serde(skip)]
+    pub read_as: Option<String>,
 }
 
 impl ConvertStats {
@@ -190,7 +198,7 @@ impl ConvertStats {
     /// One-line warnings about unusual texels.
     pub fn warnings(&self, path: &Path) -> Vec<String> {
         let p = path.display();
-        let mut w = Vec::new();
+        let mut w: Vec<String> = self.read_as.iter().cloned().collect();
         if self.degenerate > 0 {
             w.push(format!(
                 "{p}: {} zero-length normal texel(s) stored as the identity quaternion",
@@ -297,6 +305,7 @@ pub struct CheckReport {
     pub compared: u64,
     /// Angle between n' decoded from the stored quaternion and the input's unit normal.
     pub max_angle_error_rad: f64,
+    /// Mean angle between n' decoded from the stored quaternion and the input's unit normal.
     pub mean_angle_error_rad: f64,
     /// The quantisation bound 2·asin(√3·eps) for the output's storage.
     pub angle_bound_rad: f64,
@@ -309,10 +318,12 @@ pub struct CheckReport {
     pub max_orthonormality_error_renormalised: f64,
     /// Frames with det(t', b', n') ≤ 0 (must be 0).
     pub left_handed: u64,
+    /// How the output stores its texels (the bound depends on it).
     pub storage: StorageDepth,
 }
 
 impl CheckReport {
+    /// Whether every measured error is within its quantisation bound and no frame is left-handed.
     pub fn within_bounds(&self) -> bool {
         // 1e-6 rad / 1e-6 of slack for single-precision decoding of the input.
         self.left_handed == 0
@@ -320,6 +331,7 @@ impl CheckReport {
             && self.max_orthonormality_error <= self.orthonormality_bound + 1e-6
     }
 
+    /// The check as one line for the log.
     pub fn summary(&self) -> String {
         format!(
             "check: {} texels, n' error max {:.3e} rad ({:.4}°, bound {:.3e}), mean {:.3e} rad; orthonormality error {:.3e} (bound {:.3e}), {:.1e} renormalised; {} left-handed",
@@ -415,7 +427,9 @@ pub fn check(
 pub struct Baked {
     /// Encoded files, ready for [`io::write_many_atomic`].
     pub files: Vec<(PathBuf, Vec<u8>)>,
+    /// What the conversion met.
     pub stats: ConvertStats,
+    /// The round-trip check, with `--check`.
     pub check: Option<CheckReport>,
 }
 
@@ -433,6 +447,7 @@ pub fn run(
     let (image, mut stats) = convert(&decoder, &normal.image, progress);
     stats.convention = Some(convention_check(&decoder, &normal.image));
     stats.y_down = params.y_down;
+    stats.read_as = normal.read_as.clone();
     if stats.non_finite > 0 && !params.sanitize {
         return Err(Error::NonFinite {
             path: normal.path.clone(),
@@ -556,6 +571,7 @@ mod tests {
             image: Image::from_data(1, 1, 3, rgb.to_vec()).unwrap(),
             grey_alpha: false,
             path: "t.exr".into(),
+            read_as: None,
         }
     }
 
@@ -588,6 +604,7 @@ mod tests {
             image: Image::from_data(1, 1, 3, vec![0.5; 3]).unwrap(),
             grey_alpha: false,
             path: "g.exr".into(),
+            read_as: None,
         };
         let (img, stats) = convert(&dec, &grey.image, &NoProgress);
         assert_eq!(
@@ -681,6 +698,7 @@ mod tests {
             image: img,
             grey_alpha: false,
             path: "bc5.png".into(),
+            read_as: None,
         };
         let p = Params {
             two_channel: true,
@@ -739,6 +757,7 @@ mod tests {
             image: Image::from_data(2, 1, 3, vec![f32::NAN, 0.5, 1.0, 0.5, 0.5, 1.0]).unwrap(),
             grey_alpha: false,
             path: "n.exr".into(),
+            read_as: None,
         };
         let e = run(&Params::default(), &img, Path::new("q.png"), &NoProgress)
             .err()
@@ -760,21 +779,42 @@ mod tests {
     }
 
     #[test]
+    fn a_normal_map_read_against_its_name_is_one_warning() {
+        let d = tempfile::tempdir().unwrap();
+        let png = std::fs::read(fixture("0003_256.png")).unwrap();
+        let named_exr = d.path().join("n.exr");
+        std::fs::write(&named_exr, &png).unwrap();
+        let normal = crate::normal::load(&named_exr).unwrap();
+        let baked = run(&Params::default(), &normal, Path::new("q.png"), &NoProgress).unwrap();
+        let w = baked.stats.warnings(&named_exr);
+        assert_eq!(
+            w[0],
+            format!(
+                "{}: holds PNG data but is named .exr; read as PNG (by its content)",
+                named_exr.display()
+            )
+        );
+        // Read as the PNG it is: the same bytes as from its proper name.
+        let proper = crate::normal::load(&fixture("0003_256.png")).unwrap();
+        assert!(proper.read_as.is_none());
+        let want = run(&Params::default(), &proper, Path::new("q.png"), &NoProgress).unwrap();
+        assert_eq!(baked.files[0].1, want.files[0].1);
+        assert!(!want
+            .stats
+            .warnings(Path::new("n.png"))
+            .iter()
+            .any(|l| l.contains("read as")));
+    }
+
+    #[test]
     fn deterministic_across_thread_counts() {
         let normal = crate::normal::load(&fixture("0003_256.png")).unwrap();
-        let bake = |n: usize| {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(n)
-                .build()
-                .unwrap();
-            pool.install(|| {
-                run(&Params::default(), &normal, Path::new("q.png"), &NoProgress)
-                    .unwrap()
-                    .files[0]
-                    .1
-                    .clone()
-            })
-        };
-        assert_eq!(bake(1), bake(2));
+        ibl_testkit::thread_count_independent(&[1, 2, 3], || {
+            run(&Params::default(), &normal, Path::new("q.png"), &NoProgress)
+                .unwrap()
+                .files[0]
+                .1
+                .clone()
+        });
     }
 }

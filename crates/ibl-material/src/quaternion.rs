@@ -11,7 +11,7 @@
 //! rotation's sign; the tests check it against an independent Hamilton-product rotation.
 
 /// Quaternion components (a, b, c) of a + b·i + c·j; the k component is 0 by construction.
-pub type Quat3 = [f64; 3];
+pub(crate) type Quat3 = [f64; 3];
 /// A vector in tangent space: (t, b, n) components.
 pub type Vec3 = [f64; 3];
 
@@ -35,7 +35,7 @@ pub fn quat_from_normal(n: Vec3) -> Quat3 {
 /// return the half-turn about t, q = (0, 1, 0), the limit approached from the +y side, which
 /// keeps t' = t. A zero vector gives the identity; NaN/∞ components give NaN.
 #[inline(always)]
-pub fn quat_from_vector(v: Vec3, len: f64) -> Quat3 {
+pub(crate) fn quat_from_vector(v: Vec3, len: f64) -> Quat3 {
     let [x, y, z] = v;
     let r2 = x * x + y * y;
     let w = if z >= 0.0 { len + z } else { r2 / (len - z) };
@@ -99,7 +99,7 @@ pub fn frame_from_quat(q: Quat3) -> [Vec3; 3] {
 
 /// A unit quaternion stored in a texel: q·0.5 + 0.5 (identity → (1, 0.5, 0.5)).
 #[inline]
-pub fn encode_quat(q: Quat3) -> [f32; 3] {
+pub(crate) fn encode_quat(q: Quat3) -> [f32; 3] {
     q.map(|v| (v * 0.5 + 0.5) as f32)
 }
 
@@ -114,7 +114,7 @@ pub fn decode_quat(rgb: &[f32]) -> Quat3 {
 }
 
 /// q / |q| (the identity for a zero quaternion).
-pub fn normalize_quat(q: Quat3) -> Quat3 {
+pub(crate) fn normalize_quat(q: Quat3) -> Quat3 {
     let len = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2]).sqrt();
     if len > 0.0 {
         q.map(|v| v / len)
@@ -148,16 +148,21 @@ pub fn storage_eps(depth: StorageDepth) -> f64 {
 /// How a map's texels are stored on disk.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 pub enum StorageDepth {
+    /// Unsigned normalised integers of this many bits (8 or 16).
     Bits(u8),
+    /// Half floats (EXR).
     Half,
+    /// 32-bit floats (EXR).
     Float,
 }
 
+/// a·b.
 #[inline]
 pub fn dot(a: Vec3, b: Vec3) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
+/// a×b (right-handed).
 #[inline]
 pub fn cross(a: Vec3, b: Vec3) -> Vec3 {
     [
@@ -167,6 +172,7 @@ pub fn cross(a: Vec3, b: Vec3) -> Vec3 {
     ]
 }
 
+/// |a|.
 #[inline]
 pub fn length(a: Vec3) -> f64 {
     dot(a, a).sqrt()
@@ -180,7 +186,7 @@ pub fn angle_between(a: Vec3, b: Vec3) -> f64 {
 }
 
 /// max |f_i·f_j − δ_ij| over the frame's Gram matrix.
-pub fn orthonormality_error(f: &[Vec3; 3]) -> f64 {
+pub(crate) fn orthonormality_error(f: &[Vec3; 3]) -> f64 {
     let mut e = 0.0f64;
     for i in 0..3 {
         for j in i..3 {
@@ -193,7 +199,7 @@ pub fn orthonormality_error(f: &[Vec3; 3]) -> f64 {
 
 /// det(t', b', n') = (t' × b')·n': +1 for a right-handed orthonormal frame.
 #[inline]
-pub fn handedness(f: &[Vec3; 3]) -> f64 {
+pub(crate) fn handedness(f: &[Vec3; 3]) -> f64 {
     dot(cross(f[0], f[1]), f[2])
 }
 

@@ -9,7 +9,7 @@
 use crate::direction::{aspect_scale, resample_line_field, tangent_from_angle_value, taps, Preset};
 use crate::expr::{self, Program, Scratch};
 pub use crate::map::LoadedMap;
-use crate::{MaterialError, Result};
+use crate::Result;
 use ibl_core::image::check_texels;
 use ibl_core::io;
 use ibl_core::progress::Progress;
@@ -20,12 +20,14 @@ use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
 /// Largest side accepted.
-pub const MAX_SIDE: usize = 16384;
+pub(crate) const MAX_SIDE: usize = 16384;
 
 /// Output size `W` or `WxH`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Size {
+    /// Columns.
     pub width: usize,
+    /// Rows.
     pub height: usize,
 }
 
@@ -152,7 +154,7 @@ impl<'de> serde::Deserialize<'de> for Roughness {
 }
 
 /// The thesis's α_x = 0.1, α_y = 1.0 (§3.5) as perceptual roughness.
-pub const DEFAULT_ROUGHNESS: [f64; 2] = [0.316_227_766_016_837_94, 1.0];
+pub(crate) const DEFAULT_ROUGHNESS: [f64; 2] = [0.316_227_766_016_837_94, 1.0];
 
 /// How `--angle-map` values are read.
 #[derive(
@@ -243,6 +245,7 @@ impl Default for Params {
 }
 
 impl Params {
+    /// Checks the parameters (one direction source, ranges) before any input is read.
     pub fn validate(&self) -> ibl_core::Result<()> {
         let sources = self.preset.is_some() as u8
             + self.angle_map.is_some() as u8
@@ -281,6 +284,7 @@ impl Params {
         Ok(())
     }
 
+    /// [`Params::validate`] plus the checks on the output path (extension, bits, half).
     pub fn validate_output(&self, out: &Path) -> ibl_core::Result<()> {
         self.validate()?;
         crate::output::validate(out, self.bits, self.half, "TPR maps")
@@ -291,7 +295,7 @@ impl Params {
         let dir =
             match &self.expr {
                 Some(src) => Some(expr::compile(src, &["u", "v"], &["x", "y"]).map_err(
-                    |source| MaterialError::Expr {
+                    |source| crate::Error::Expr {
                         flag: "--expr",
                         source,
                     },
@@ -301,7 +305,7 @@ impl Params {
         let rough = match &self.roughness_expr {
             Some(src) => Some(
                 expr::compile(src, &["u", "v", "x", "y"], &["rx", "ry"]).map_err(|source| {
-                    MaterialError::Expr {
+                    crate::Error::Expr {
                         flag: "--roughness-expr",
                         source,
                     }
@@ -316,7 +320,9 @@ impl Params {
 /// Images the bake reads, loaded by the caller (or by [`load_inputs`]).
 #[derive(Clone, Debug, Default)]
 pub struct Inputs {
+    /// The angle map given with `--angle-map`, if any.
     pub angle_map: Option<LoadedMap>,
+    /// The roughness map given with `--roughness-map`, if any.
     pub roughness_map: Option<LoadedMap>,
     /// What loading them met (negative values clamped, NaN/Inf set to 0 with `--sanitize`),
     /// one line each; the bake's [`TprStats::warnings`] repeats them.
@@ -332,6 +338,7 @@ fn load_map(
 ) -> ibl_core::Result<LoadedMap> {
     let mut map = crate::map::load(path)?;
     let report = check_texels(&mut map.image, path, sanitize)?;
+    warnings.extend(map.read_as.clone());
     warnings.extend(report.warnings(path));
     Ok(map)
 }
@@ -356,8 +363,11 @@ pub fn load_inputs(params: &Params) -> ibl_core::Result<Inputs> {
 /// What the bake met.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct TprStats {
+    /// Output columns.
     pub width: usize,
+    /// Output rows.
     pub height: usize,
+    /// Where the directions came from (preset, expression or angle map).
     pub source: String,
     /// Zero-length directions replaced by +x (the centre of a radial field, ...).
     pub zero_length: u64,
@@ -374,6 +384,7 @@ pub struct TprStats {
 }
 
 impl TprStats {
+    /// The one-line warnings of the bake (input warnings first).
     pub fn warnings(&self) -> Vec<String> {
         let mut w = self.input_warnings.clone();
         if self.zero_length > 0 {
@@ -485,7 +496,9 @@ fn sample(img: &Image, c: usize, u: f64, v: f64) -> f64 {
 
 /// What the bake produced, before anything is written.
 pub struct Baked {
+    /// Encoded files, ready for [`io::write_many_atomic`].
     pub files: Vec<(PathBuf, Vec<u8>)>,
+    /// What the bake met.
     pub stats: TprStats,
 }
 
@@ -833,7 +846,44 @@ mod tests {
             image: img,
             grey_alpha,
             path: "m.png".into(),
+            read_as: None,
         }
+    }
+
+    #[test]
+    fn an_angle_map_read_against_its_name_is_one_warning() {
+        let d = tempfile::tempdir().unwrap();
+        let img = Image::from_data(4, 2, 1, vec![0.25; 8]).unwrap();
+        let exr = ibl_core::io::encode_image(
+            Path::new("a.exr"),
+            &img,
+            &ibl_core::io::WriteOptions::default(),
+        )
+        .unwrap();
+        let named_png = d.path().join("angle.png");
+        std::fs::write(&named_png, &exr).unwrap();
+        let inputs = load_inputs(&Params {
+            angle_map: Some(named_png.clone()),
+            ..Default::default()
+        })
+        .unwrap();
+        assert_eq!(
+            inputs.warnings,
+            [format!(
+                "{}: holds OpenEXR data but is named .png; read as OpenEXR (by its content)",
+                named_png.display()
+            )]
+        );
+        // The texels are the EXR's, not a failed PNG decode.
+        assert_eq!(inputs.angle_map.unwrap().image.data[0], 0.25);
+        let named_exr = d.path().join("angle.exr");
+        std::fs::write(&named_exr, &exr).unwrap();
+        let inputs = load_inputs(&Params {
+            angle_map: Some(named_exr),
+            ..Default::default()
+        })
+        .unwrap();
+        assert!(inputs.warnings.is_empty(), "{:?}", inputs.warnings);
     }
 
     #[test]

@@ -7,24 +7,9 @@
 //! and writes it to `bench/bake.md` under the workspace root.
 
 use ibl_pipeline::exec::{self, Quiet, Status};
-use std::path::{Path, PathBuf};
+use ibl_testkit::{copy_tree, workspace_root as root};
+use std::path::Path;
 use std::time::Instant;
-
-fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
-
-fn copy_tree(from: &Path, to: &Path) {
-    if from.is_dir() {
-        for e in std::fs::read_dir(from).unwrap() {
-            let e = e.unwrap();
-            copy_tree(&e.path(), &to.join(e.file_name()));
-        }
-    } else {
-        std::fs::create_dir_all(to.parent().unwrap()).unwrap();
-        std::fs::copy(from, to).unwrap();
-    }
-}
 
 /// Runs `file` once; (seconds, stages baked).
 fn run(file: &Path, jobs: usize) -> (f64, usize) {

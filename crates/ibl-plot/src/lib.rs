@@ -1,12 +1,16 @@
 //! Time-against-error charts for the benchmark reports: log-log line charts as self-contained
 //! SVG text, with the default of each knob marked and optional target lines.
 
+#![warn(missing_docs)]
+
 use std::fmt::Write as _;
 
 /// One curve: points (x, y) in the order they are joined, and which one is the default.
 #[derive(Clone, Debug, Default)]
 pub struct Series {
+    /// Legend text.
     pub label: String,
+    /// Points (x, y), joined in this order; both coordinates must be positive (log axes).
     pub points: Vec<(f64, f64)>,
     /// Index into `points` of the knob's default, drawn as a ring and labelled "default".
     pub default: Option<usize>,
@@ -15,9 +19,13 @@ pub struct Series {
 /// A chart: both axes logarithmic (decades from the data), horizontal target lines.
 #[derive(Clone, Debug, Default)]
 pub struct Chart {
+    /// Chart title.
     pub title: String,
+    /// Horizontal axis label, with its unit.
     pub x_label: String,
+    /// Vertical axis label, with its unit.
     pub y_label: String,
+    /// The curves.
     pub series: Vec<Series>,
     /// (y, label) lines, e.g. an accuracy goal.
     pub targets: Vec<(f64, String)>,

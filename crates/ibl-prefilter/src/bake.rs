@@ -47,6 +47,7 @@ pub enum Quality {
 }
 
 impl Quality {
+    /// The `--quality` value naming this preset.
     pub fn name(self) -> &'static str {
         match self {
             Quality::Draft => "draft",
@@ -56,7 +57,7 @@ impl Quality {
     }
 
     /// Opening angle, leaf size and horizon split of the hierarchical sum.
-    pub fn tree_params(self) -> TreeParams {
+    pub(crate) fn tree_params(self) -> TreeParams {
         match self {
             Quality::Draft => TreeParams {
                 theta: 1.0,
@@ -77,7 +78,7 @@ impl Quality {
     }
 
     /// Hammersley points per texel of filtered importance sampling (`--method fis`).
-    pub fn fis_samples(self) -> u32 {
+    pub(crate) fn fis_samples(self) -> u32 {
         match self {
             Quality::Draft => 64,
             Quality::Default => 256,
@@ -111,6 +112,7 @@ pub enum Method {
 }
 
 impl Method {
+    /// The `--method` value naming this method.
     pub fn name(self) -> &'static str {
         match self {
             Method::Tree => "tree",
@@ -122,7 +124,7 @@ impl Method {
 /// Mip bias added to the solid-angle lod of every FIS sample. Lagarde & de Rousiers use 1;
 /// against the brute-force reference 0 measured best at most levels and sample counts
 /// (studio, sunset, interior fixtures at 32², 32–1024 samples, biases 0, 0.5, 1).
-pub const LOD_BIAS: f32 = 0.0;
+pub(crate) const LOD_BIAS: f32 = 0.0;
 
 ibl_core::cube_output_params! {
 /// Parameters of the bake: CLI flags and RON keys alike.
@@ -181,7 +183,7 @@ pub const MAX_SAMPLES: u32 = 1 << 16;
 /// The source is at most this many times the output size (see [`source_face_size`]): finer
 /// would change the levels by far less than their error while the tree's memory grows 4× per
 /// step (about 200 MB for a 512² source).
-pub const MAX_SOURCE_FACTOR: usize = 2;
+pub(crate) const MAX_SOURCE_FACTOR: usize = 2;
 
 /// Levels a chain from `size` can hold (halving down to 1×1).
 pub fn max_levels(size: usize) -> usize {
@@ -189,9 +191,10 @@ pub fn max_levels(size: usize) -> usize {
 }
 
 impl Params {
+    /// Checks the parameters before any input is read.
     pub fn validate(&self) -> Result<()> {
         if self.size == 0 || self.size > MAX_SIZE {
-            return Err(Error::Param(format!(
+            return Err(Error::param(format!(
                 "--size {} is out of range 1..={MAX_SIZE}",
                 self.size
             )));
@@ -199,7 +202,7 @@ impl Params {
         if let Some(n) = self.levels {
             let m = max_levels(self.size);
             if n == 0 || n > m {
-                return Err(Error::Param(format!(
+                return Err(Error::param(format!(
                     "--levels {n} is out of range 1..={m} for --size {}",
                     self.size
                 )));
@@ -207,17 +210,17 @@ impl Params {
         }
         if let Some(s) = self.samples {
             if s == 0 || s > MAX_SAMPLES {
-                return Err(Error::Param(format!(
+                return Err(Error::param(format!(
                     "--samples {s} is out of range 1..={MAX_SAMPLES}"
                 )));
             }
             if self.method != Method::Fis {
-                return Err(Error::Param("--samples applies to --method fis (the default tree method is tuned by --quality)".into()));
+                return Err(Error::param("--samples applies to --method fis (the default tree method is tuned by --quality)"));
             }
         }
         if let Some(r) = self.max_roughness {
             if !(0.0..=1.0).contains(&r) {
-                return Err(Error::Param(format!(
+                return Err(Error::param(format!(
                     "--max-roughness {r} is out of range 0..=1"
                 )));
             }
@@ -226,14 +229,14 @@ impl Params {
         if self.target == Target::Babylon
             && (!self.size.is_power_of_two() || self.baked_levels() != max_levels(self.size))
         {
-            return Err(Error::Param(format!(
+            return Err(Error::param(format!(
                 "--target babylon needs a power-of-two --size and its full chain down to 1×1 ({} levels for --size {}; no --max-roughness): Babylon's .env holds every level",
                 max_levels(self.size),
                 self.size
             )));
         }
         if !self.target.spec().lod.reads_chain() {
-            return Err(Error::Param(format!(
+            return Err(Error::param(format!(
                 "--target {} reads no prefiltered chain: three.js filters the environment itself (PMREMGenerator); bake its cube with equirect-to-cube --target three and its LightProbe with irradiance --target three",
                 self.target.name()
             )));
@@ -272,7 +275,7 @@ impl Params {
     }
 
     /// Levels actually baked: all N, or those with r ≤ --max-roughness.
-    pub fn baked_levels(&self) -> usize {
+    pub(crate) fn baked_levels(&self) -> usize {
         let n = self.chain_levels();
         match self.max_roughness {
             Some(r) if n > 1 => (0..n)
@@ -284,7 +287,7 @@ impl Params {
     }
 
     /// Hammersley points per texel with --method fis.
-    pub fn fis_samples(&self) -> u32 {
+    pub(crate) fn fis_samples(&self) -> u32 {
         self.samples.unwrap_or_else(|| self.quality.fis_samples())
     }
 }
@@ -363,7 +366,9 @@ impl ErrorStats {
 /// What `prefilter.json` records.
 #[derive(Clone, Debug, Serialize)]
 pub struct Report {
+    /// The tool that wrote the report (`prefilter`).
     pub tool: &'static str,
+    /// The tool's version.
     pub version: &'static str,
     /// Face size of level 0.
     pub size: usize,
@@ -389,12 +394,17 @@ pub struct Report {
     pub source_size: usize,
     /// Knobs of the tree method, or of FIS (samples per texel, mip bias).
     pub tree: Option<TreeParams>,
+    /// FIS samples per texel (with `--method fis`).
     pub fis_samples: Option<u32>,
+    /// FIS source-mip bias (with `--method fis`).
     pub fis_lod_bias: Option<f32>,
+    /// Rotation about +Y applied to the source, in degrees.
     pub rotate: f32,
     /// --max-roughness, if given, and what it did.
     pub max_roughness: Option<f32>,
+    /// Why the chain stops early (`--max-roughness`), if it does.
     pub note: Option<String>,
+    /// One entry per level written.
     pub level: Vec<LevelReport>,
     /// The output encoding and what it cost per level against the float chain (filled by
     /// [`run`]; the bake alone leaves it empty).
@@ -403,11 +413,16 @@ pub struct Report {
     pub runtime: Option<RuntimeReport>,
 }
 
+/// What one level of `prefilter.json` records.
 #[derive(Clone, Debug, Serialize)]
 pub struct LevelReport {
+    /// Level index, 0 the mirror.
     pub level: usize,
+    /// Face size in texels.
     pub size: usize,
+    /// Perceptual roughness r of the level.
     pub roughness: f32,
+    /// GGX α = r².
     pub alpha: f32,
     /// Points per texel whose mean the texel stores (1: its centre; k² when the level's texels
     /// are not much smaller than the lobe, see [`footprint_factor`]).
@@ -420,18 +435,25 @@ pub struct LevelReport {
     pub estimated_error: Option<EstimatedError>,
 }
 
+/// The error of one level measured against the brute-force kernel on probe texels.
 #[derive(Clone, Debug, Serialize)]
 pub struct EstimatedError {
+    /// Mean |baked − exact| / exact over the probes and channels.
     pub mean_abs_rel: f64,
+    /// Root mean square of the same relative error.
     pub rms_rel: f64,
+    /// Largest relative error.
     pub max_abs_rel: f64,
+    /// Probe texels measured.
     pub probe_texels: usize,
 }
 
 /// A baked chain before encoding, with timings and work (not part of the report, which must
 /// be identical from run to run).
 pub struct Chain {
+    /// The levels, mirror first.
     pub mips: CubeMips,
+    /// What `prefilter.json` will record.
     pub report: Report,
     /// Seconds per level (0 for the mirror level).
     pub level_seconds: Vec<f64>,
@@ -453,16 +475,17 @@ pub struct Chain {
 pub struct Baked {
     /// Encoded files (the chain and `prefilter.json`), ready for [`io::write_many_atomic`].
     pub files: Vec<(PathBuf, Vec<u8>)>,
+    /// The float chain and its report.
     pub chain: Chain,
     /// What the output encoding cost per level (its seconds included).
     pub encoding: Vec<LevelEncoding>,
 }
 
 /// Name of the Babylon.js `.env` written with `--target babylon`.
-pub const BABYLON_ENV_NAME: &str = "environment.env";
+pub(crate) const BABYLON_ENV_NAME: &str = "environment.env";
 
 /// Name of the sidecar report.
-pub const REPORT_NAME: &str = "prefilter.json";
+pub(crate) const REPORT_NAME: &str = "prefilter.json";
 
 /// Bakes the chain and encodes the outputs for `out_dir` (nothing is written).
 pub fn run(
@@ -736,16 +759,16 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
 
 /// A texel's edge must be at most this fraction of the lobe's width α (radians) to be stored
 /// as its centre value; coarser texels store their footprint's mean.
-pub const FOOTPRINT_LOBE_FRACTION: f32 = 0.25;
+pub(crate) const FOOTPRINT_LOBE_FRACTION: f32 = 0.25;
 /// Finest face the footprint means are computed at (bounds their cost: a few thousand texels).
-pub const FOOTPRINT_MAX_SIZE: usize = 64;
+pub(crate) const FOOTPRINT_MAX_SIZE: usize = 64;
 
 /// Sub-texels per edge k (a power of two) whose mean an n×n texel of roughness r stores: the
 /// smallest with a sub-texel edge (π/2)/(n·k) ≤ [`FOOTPRINT_LOBE_FRACTION`]·α, at most
 /// [`FOOTPRINT_MAX_SIZE`]/n; 1 (the centre value) where texels are already small next to the
 /// lobe. Mean over the footprint = ∫ over the texel of the convolved radiance / Ω, so the
 /// level keeps the environment's power whatever its size.
-pub fn footprint_factor(n: usize, roughness: f32) -> usize {
+pub(crate) fn footprint_factor(n: usize, roughness: f32) -> usize {
     let alpha = (roughness * roughness).max(1e-6);
     let edge = std::f32::consts::FRAC_PI_2 / n as f32;
     let mut k = 1;
@@ -779,7 +802,11 @@ const ESTIMATE_BUDGET: usize = 10_000_000;
 
 /// Estimated error of a level: its probe texels against the exact kernel summed by brute force
 /// over every source texel.
-pub fn estimate_error(level: &Cubemap, texels: &SourceTexels, roughness: f32) -> EstimatedError {
+pub(crate) fn estimate_error(
+    level: &Cubemap,
+    texels: &SourceTexels,
+    roughness: f32,
+) -> EstimatedError {
     use rayon::prelude::*;
     let per_face = (ESTIMATE_BUDGET / (6 * texels.len().max(1))).max(1);
     let g = ((per_face as f64).sqrt() as usize).clamp(1, 4);

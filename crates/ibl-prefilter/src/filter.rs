@@ -13,7 +13,7 @@ use ibl_core::Rgb;
 /// frame of n. Sums in f64 so a constant environment comes back to the last bit that f32
 /// output can hold.
 #[inline]
-pub fn filter_direction(pyr: &BorderedMips, table: &SampleTable, n: Vec3) -> Rgb {
+pub(crate) fn filter_direction(pyr: &BorderedMips, table: &SampleTable, n: Vec3) -> Rgb {
     let (t, b) = tangent_frame(n);
     let mut acc = [0.0f64; 3];
     for k in 0..table.dirs.len() {
@@ -29,7 +29,7 @@ pub fn filter_direction(pyr: &BorderedMips, table: &SampleTable, n: Vec3) -> Rgb
 }
 
 /// One level of the chain: an n×n cube, every texel filtered with `table`.
-pub fn filter_level(
+pub(crate) fn filter_level(
     pyr: &BorderedMips,
     table: &SampleTable,
     n: usize,

@@ -16,18 +16,20 @@ use ibl_core::progress::Progress;
 use ibl_core::traverse::map_cube_texels;
 use ibl_core::Rgb;
 
+#[cfg(test)]
 /// sin²θ_h of the half vector of unit `n` and `l`: |n − l|²/4. Computed from the chord so it
 /// stays exact where 1 − n·l cancels (narrow lobes).
 #[inline]
-pub fn sin2_half(n: Vec3, l: Vec3) -> f32 {
+pub(crate) fn sin2_half(n: Vec3, l: Vec3) -> f32 {
     (n - l).length_squared() * 0.25
 }
 
+#[cfg(test)]
 /// D_GGX(n·h, α)·max(n·l, 0) as a function of s2 = sin²θ_h (n = v): with cos²θ_h = 1 − s2 the
 /// GGX denominator (Walter et al. 2007, eq. 33) is (n·h)²(α²−1)+1 = α² + (1−α²)·s2, and
 /// n·l = cos 2θ_h = 1 − 2·s2. Needs α > 0 (roughness 0 is the mirror, a delta).
 #[inline]
-pub fn kernel_d_nl(s2: f32, alpha: f32) -> f32 {
+pub(crate) fn kernel_d_nl(s2: f32, alpha: f32) -> f32 {
     let a2 = alpha * alpha;
     let t = a2 + (1.0 - a2) * s2;
     a2 * (1.0 - 2.0 * s2).max(0.0) / (std::f32::consts::PI * t * t)
@@ -36,6 +38,7 @@ pub fn kernel_d_nl(s2: f32, alpha: f32) -> f32 {
 /// The source of a brute-force convolution: every texel of a cube as structure-of-arrays,
 /// grouped in square tiles so whole tiles below the horizon of `n` can be skipped exactly.
 pub struct SourceTexels {
+    /// Face size of the source cube.
     pub size: usize,
     x: Vec<f32>,
     y: Vec<f32>,
@@ -63,6 +66,7 @@ struct Tile {
 const TILE: usize = 8;
 
 impl SourceTexels {
+    /// Every texel of `cube` with its direction and solid angle.
     pub fn new(cube: &Cubemap) -> Self {
         use rayon::prelude::*;
         let n = cube.size;
@@ -144,6 +148,7 @@ impl SourceTexels {
         self.x.len()
     }
 
+    /// Whether the source has no texel.
     pub fn is_empty(&self) -> bool {
         self.x.is_empty()
     }
@@ -223,7 +228,7 @@ impl SourceTexels {
 /// The brute-force reference of one level: every output texel of an n×n cube convolved with
 /// the exact kernel over every source texel. Roughness 0 is the mirror: the source box-reduced
 /// to n (the source size must then be n·2^k).
-pub fn reference_level(
+pub(crate) fn reference_level(
     src: &Cubemap,
     texels: &SourceTexels,
     n: usize,

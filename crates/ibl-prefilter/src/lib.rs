@@ -8,6 +8,7 @@
 //! sample tables and the per-texel loop, reading the source seamlessly and trilinearly through
 //! `ibl_core::bordered`), kept as `--method fis`; [`kernel`] the exact kernel and the brute-force reference.
 
+#![warn(missing_docs)]
 // Index loops read closer to the papers' sums than iterator chains in the numeric kernels.
 #![allow(clippy::needless_range_loop)]
 

@@ -14,19 +14,19 @@ use ibl_target::{LodMapping, Target};
 use serde::Serialize;
 
 /// Roughness values of the report: k/32, k = 0 … 32.
-pub const ROUGHNESS_STEPS: usize = 33;
+pub(crate) const ROUGHNESS_STEPS: usize = 33;
 /// Directions of the report (a modest count: the sidecar must not dominate the bake).
 pub const REPORT_DIRECTIONS: usize = 128;
 
 /// `steps` roughness values evenly spaced over [0, 1].
-pub fn roughness_grid(steps: usize) -> Vec<f32> {
+pub(crate) fn roughness_grid(steps: usize) -> Vec<f32> {
     let d = steps.saturating_sub(1).max(1) as f32;
     (0..steps).map(|k| k as f32 / d).collect()
 }
 
 /// `n` low-discrepancy unit directions (a spherical Fibonacci lattice, turned by an
 /// irrational angle so no point falls on a texel centre or a face edge of any level).
-pub fn probe_directions(n: usize) -> Vec<Vec3> {
+pub(crate) fn probe_directions(n: usize) -> Vec<Vec3> {
     let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
     let (s, c) = (0.7390851332f64.sin(), 0.7390851332f64.cos());
     (0..n)
@@ -54,13 +54,18 @@ pub enum Reference<'a> {
     /// 0.02% of the brute force at the default preset), roughness 0 the source itself
     /// (bilinear).
     Tree {
+        /// The source's cell hierarchy.
         tree: &'a CellTree,
+        /// The source cube (roughness 0 reads it directly).
         source: &'a Cubemap,
+        /// The tree method's knobs.
         params: TreeParams,
     },
     /// The exact kernel summed over every source texel (`--reference`): slow, for tests.
     Brute {
+        /// Every source texel.
         texels: &'a SourceTexels,
+        /// The source cube (roughness 0 reads it directly).
         source: &'a Cubemap,
     },
 }
@@ -113,6 +118,7 @@ pub fn mean_abs_rel(
 /// What `prefilter.json` records under `"runtime"`.
 #[derive(Clone, Debug, Serialize)]
 pub struct RuntimeReport {
+    /// The engine whose lookup was evaluated.
     pub target: Target,
     /// The target's level ↔ roughness mapping as its shader computes the lod.
     pub lookup: &'static str,
@@ -122,6 +128,7 @@ pub struct RuntimeReport {
     pub mean_abs_rel: Vec<f64>,
     /// Directions per roughness (low-discrepancy, between texel centres).
     pub directions: usize,
+    /// What the lookups were compared with.
     pub reference: &'static str,
     /// The pixel format the looked-up chain was decoded from (the engine samples the decoded
     /// texels; rgba32f is the float chain itself).

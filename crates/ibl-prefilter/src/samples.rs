@@ -8,27 +8,27 @@ use ibl_core::sampling::hammersley;
 
 /// Light direction l = reflect(−v, h) = 2(v·h)h − v for v = n = +z (Karis 2013, n = v = r).
 #[inline]
-pub fn reflect_view(h: Vec3) -> Vec3 {
+pub(crate) fn reflect_view(h: Vec3) -> Vec3 {
     Vec3::new(2.0 * h.z * h.x, 2.0 * h.z * h.y, 2.0 * h.z * h.z - 1.0)
 }
 
 /// Density of l = reflect(−v, h) when h ∝ D(h)(n·h), with n = v: D(h)(n·h)/(4 v·h) = D(h)/4
 /// (Walter et al. 2007, eq. 14 Jacobian of the reflection).
 #[inline]
-pub fn pdf_l_given_n_eq_v(n_dot_h: f32, alpha: f32) -> f32 {
+pub(crate) fn pdf_l_given_n_eq_v(n_dot_h: f32, alpha: f32) -> f32 {
     d_ggx(n_dot_h, alpha) * 0.25
 }
 
 /// Solid angle a sample stands for: Ω_s = 1/(N·pdf(l)) (Křivánek & Colbert 2008, eq. 13;
 /// Lagarde & de Rousiers 2014, listing 19).
 #[inline]
-pub fn sample_solid_angle(pdf_l: f32, count: u32) -> f32 {
+pub(crate) fn sample_solid_angle(pdf_l: f32, count: u32) -> f32 {
     1.0 / (count as f32 * pdf_l)
 }
 
 /// Mean texel solid angle of an n×n cube: Ω_p = 4π/(6n²).
 #[inline]
-pub fn mean_texel_solid_angle(n: usize) -> f32 {
+pub(crate) fn mean_texel_solid_angle(n: usize) -> f32 {
     4.0 * std::f32::consts::PI / (6.0 * (n * n) as f32)
 }
 
@@ -36,17 +36,13 @@ pub fn mean_texel_solid_angle(n: usize) -> f32 {
 /// (Křivánek & Colbert 2008, eq. 13: each mip level quadruples the texel solid angle, hence
 /// the 1/2 on log2; Lagarde & de Rousiers use bias = 1, we choose it from measurement).
 #[inline]
-pub fn source_lod(omega_s: f32, omega_p: f32, bias: f32) -> f32 {
+pub(crate) fn source_lod(omega_s: f32, omega_p: f32, bias: f32) -> f32 {
     0.5 * (omega_s / omega_p).log2() + bias
 }
 
 /// The samples of one level, in the tangent frame of the output texel (n = +z).
 #[derive(Clone, Debug)]
-pub struct SampleTable {
-    pub roughness: f32,
-    pub alpha: f32,
-    /// Hammersley points drawn (directions below the horizon are dropped from the table).
-    pub drawn: u32,
+pub(crate) struct SampleTable {
     /// Light directions l with n·l > 0.
     pub dirs: Vec<Vec3>,
     /// n·l / Σ n·l: the weights sum to one, so a constant environment stays constant.
@@ -97,9 +93,6 @@ impl SampleTable {
             .collect::<Vec<_>>();
         let fracs = lods.iter().zip(&mips).map(|(l, m)| l - *m as f32).collect();
         SampleTable {
-            roughness,
-            alpha,
-            drawn: count,
             dirs,
             weights,
             mips,
@@ -112,11 +105,8 @@ impl SampleTable {
         self.dirs.len()
     }
 
-    pub fn is_empty(&self) -> bool {
-        self.dirs.is_empty()
-    }
-
     /// The continuous lod of sample `k`.
+    #[cfg(test)]
     pub fn lod(&self, k: usize) -> f32 {
         self.mips[k] as f32 + self.fracs[k]
     }

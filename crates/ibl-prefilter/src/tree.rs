@@ -44,7 +44,7 @@ pub struct TreeParams {
 
 impl TreeParams {
     /// Diameter straddling cells are split to at roughness r.
-    pub fn horizon_at(&self, roughness: f32) -> f32 {
+    pub(crate) fn horizon_at(&self, roughness: f32) -> f32 {
         self.horizon / roughness.max(1e-3)
     }
 }
@@ -181,6 +181,7 @@ fn cone_radius(face: Face, centre: Vec3, s0: f32, s1: f32, t0: f32, t1: f32) -> 
 }
 
 impl CellTree {
+    /// The cell hierarchy of `cube`: per level, the texels' summed radiance × solid angle and their moments.
     pub fn new(cube: &Cubemap) -> Self {
         use rayon::prelude::*;
         let n = cube.size;
@@ -399,7 +400,7 @@ impl CellBlock {
 /// The cells summed for one tile: those wholly above the horizon of every texel of the tile,
 /// and those that may straddle it (summed with the kink-aware cell model).
 #[derive(Default)]
-pub struct CutList {
+pub(crate) struct CutList {
     smooth: CellBlock,
     horizon: CellBlock,
 }
@@ -568,10 +569,6 @@ impl CutList {
         self.smooth.cols[0].len() + self.horizon.cols[0].len()
     }
 
-    pub fn is_empty(&self) -> bool {
-        self.len() == 0
-    }
-
     /// Σ_cells W_num E / Σ_cells W_den Ω with each W the cell sum of the kernel (see
     /// [`CellLevel`]); the normalisation comes from the same cells, so a constant environment
     /// comes back exactly.
@@ -618,7 +615,7 @@ struct TileRow {
 
 /// What a level cost.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct TreeWork {
+pub(crate) struct TreeWork {
     /// Σ over output texels of the cells summed for it.
     pub cell_evaluations: u64,
     /// Cuts built (one per tile and tile row visit).
@@ -628,7 +625,7 @@ pub struct TreeWork {
 /// The exact kernel of roughness r > 0 summed hierarchically around one direction (a cut of
 /// radius 0): what [`tree_level`] computes for a texel, at any direction. `stack`, `cut` and
 /// `scratch` are reusable buffers.
-pub fn tree_convolve(
+pub(crate) fn tree_convolve(
     tree: &CellTree,
     d: Vec3,
     roughness: f32,
@@ -655,7 +652,7 @@ pub struct TreeBuffers {
 }
 
 /// One level of the chain by the hierarchical sum: an n×n cube at roughness r > 0.
-pub fn tree_level(
+pub(crate) fn tree_level(
     tree: &CellTree,
     n: usize,
     roughness: f32,

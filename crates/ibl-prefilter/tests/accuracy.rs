@@ -8,9 +8,7 @@ use ibl_prefilter::bake::{bake_chain, ErrorStats, Params, Quality};
 use std::path::PathBuf;
 
 fn fixture(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../fixtures/hdri")
-        .join(name)
+    ibl_testkit::fixture(&format!("hdri/{name}"))
 }
 
 const FIXTURES: [&str; 4] = [

@@ -10,17 +10,35 @@ use std::path::{Path, PathBuf};
 #[derive(Clone, Debug)]
 pub enum Asset {
     /// A single cube (equirect-to-cube's faces or container).
-    Environment { path: PathBuf, cube: Cubemap },
+    Environment {
+        /// The file or folder read.
+        path: PathBuf,
+        /// The cube.
+        cube: Cubemap,
+    },
     /// A mip chain and the roughness of each level (from `prefilter.json`, when present).
     Prefiltered {
+        /// The file or folder read.
         path: PathBuf,
+        /// The chain, mirror level first.
         mips: CubeMips,
+        /// Perceptual roughness per level, from `prefilter.json`.
         roughness: Option<Vec<f32>>,
     },
     /// The E/π irradiance cube.
-    Irradiance { path: PathBuf, cube: Cubemap },
+    Irradiance {
+        /// The file or folder read.
+        path: PathBuf,
+        /// The E/π cube.
+        cube: Cubemap,
+    },
     /// A 2D table (the DFG LUT: R = A, G = B), shown as stored.
-    Lut { path: PathBuf, image: Image },
+    Lut {
+        /// The file read.
+        path: PathBuf,
+        /// The table as stored.
+        image: Image,
+    },
 }
 
 impl Asset {

@@ -5,7 +5,7 @@ use ibl_core::{Cubemap, Face, Image};
 
 /// (face, column, row) of each face in a 4×3 horizontal cross: the layout
 /// `ibl_core::envmap::classify_layout` reads, so a cross written here reads back as the cube.
-pub const HCROSS: [(Face, usize, usize); 6] = [
+pub(crate) const HCROSS: [(Face, usize, usize); 6] = [
     (Face::Px, 2, 1),
     (Face::Nx, 0, 1),
     (Face::Py, 1, 0),
@@ -15,7 +15,7 @@ pub const HCROSS: [(Face, usize, usize); 6] = [
 ];
 
 /// The cube as a 4n×3n RGBA horizontal cross; the six empty cells have alpha 0.
-pub fn horizontal_cross(cube: &Cubemap) -> Image {
+pub(crate) fn horizontal_cross(cube: &Cubemap) -> Image {
     let n = cube.size;
     let mut img = Image::new(4 * n, 3 * n, 4);
     for (face, col, row) in HCROSS {
@@ -33,7 +33,7 @@ pub fn horizontal_cross(cube: &Cubemap) -> Image {
 /// Resamples `img` to `height` rows, keeping its aspect ratio: the box mean of each output
 /// pixel's footprint when shrinking, the nearest texel when enlarging (small mip levels keep
 /// their texels visible as blocks).
-pub fn fit_height(img: &Image, height: usize) -> Image {
+pub(crate) fn fit_height(img: &Image, height: usize) -> Image {
     let width = ((img.width * height) as f64 / img.height as f64)
         .round()
         .max(1.0) as usize;

@@ -4,8 +4,8 @@
 use ibl_core::Image;
 
 /// Glyph cell: 5 columns × 7 rows of ink, plus one column of spacing after each glyph.
-pub const GLYPH_W: usize = 5;
-pub const GLYPH_H: usize = 7;
+pub(crate) const GLYPH_W: usize = 5;
+pub(crate) const GLYPH_H: usize = 7;
 const ADVANCE: usize = GLYPH_W + 1;
 
 /// Each glyph is 7 rows, top first; bit 4 of a row is its leftmost column.
@@ -79,20 +79,27 @@ pub(crate) fn glyph(c: char) -> [u8; 7] {
 }
 
 /// Width in pixels of `text` drawn at `scale` (no trailing spacing column).
-pub fn text_width(text: &str, scale: usize) -> usize {
+pub(crate) fn text_width(text: &str, scale: usize) -> usize {
     let n = text.chars().count();
     (n * ADVANCE).saturating_sub(1) * scale
 }
 
 /// Height in pixels of a line drawn at `scale`.
-pub fn text_height(scale: usize) -> usize {
+pub(crate) fn text_height(scale: usize) -> usize {
     GLYPH_H * scale
 }
 
 /// Draws `text` into `img` (RGB or RGBA, alpha set to 1 where inked) with its top-left
 /// corner at (x, y), each font pixel a `scale`×`scale` block; ink outside the image is
 /// clipped.
-pub fn draw_text(img: &mut Image, x: usize, y: usize, text: &str, scale: usize, rgb: [f32; 3]) {
+pub(crate) fn draw_text(
+    img: &mut Image,
+    x: usize,
+    y: usize,
+    text: &str,
+    scale: usize,
+    rgb: [f32; 3],
+) {
     for (k, c) in text.chars().enumerate() {
         let rows = glyph(c);
         let x0 = x + k * ADVANCE * scale;

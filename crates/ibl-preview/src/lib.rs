@@ -2,6 +2,8 @@
 //! 8-bit sRGB, labels in a tiny embedded bitmap font, and the labelled contact sheet that
 //! `make demo` writes.
 
+#![warn(missing_docs)]
+
 pub mod assets;
 pub mod cross;
 pub mod font;

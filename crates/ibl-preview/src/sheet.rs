@@ -8,7 +8,7 @@ use crate::tonemap::{display, exposure_scale, log_average_luminance};
 use ibl_core::{Cubemap, Image};
 
 /// Labels are the 5×7 font upscaled ×2.
-pub const LABEL_SCALE: usize = 2;
+pub(crate) const LABEL_SCALE: usize = 2;
 const MARGIN: usize = 16;
 const GAP: usize = 20;
 const BACKGROUND: [f32; 3] = [0.13, 0.13, 0.14];
@@ -18,13 +18,17 @@ const TITLE: [f32; 3] = [1.0, 0.8, 0.35];
 /// A display-ready picture (RGBA, display values in [0, 1]; alpha 0 shows the background)
 /// and its caption.
 pub struct Tile {
+    /// Text drawn under the picture.
     pub caption: String,
+    /// The picture (RGBA, display values).
     pub image: Image,
 }
 
 /// A titled row of tiles.
 pub struct Row {
+    /// Text drawn left of the row.
     pub title: String,
+    /// The pictures, left to right.
     pub tiles: Vec<Tile>,
 }
 

@@ -6,7 +6,7 @@ use ibl_core::{luminance, Cubemap};
 
 /// Mid-grey the log-average luminance is mapped to (Reinhard et al. 2002, "Photographic Tone
 /// Reproduction for Digital Images", eq. 2, key a = 0.18).
-pub const KEY: f32 = 0.18;
+pub(crate) const KEY: f32 = 0.18;
 
 /// Luminance below which texels count as this floor in the log-average (the δ of Reinhard et
 /// al. 2002 eq. 1: keeps black texels from sending the mean to 0).
@@ -15,7 +15,7 @@ const LOG_FLOOR: f64 = 1e-4;
 /// Solid-angle-weighted log-average luminance of a cube (Reinhard et al. 2002 eq. 1 over the
 /// sphere). The geometric mean, not the arithmetic one: a sun of a few texels would otherwise
 /// set the exposure and leave the rest of the sky black.
-pub fn log_average_luminance(cube: &Cubemap) -> f32 {
+pub(crate) fn log_average_luminance(cube: &Cubemap) -> f32 {
     let n = cube.size;
     let (mut sum, mut weight) = (0.0f64, 0.0f64);
     for face in &cube.faces {
@@ -39,13 +39,13 @@ pub fn exposure_scale(mean: f32, ev: f32) -> f32 {
 
 /// Narkowicz's fit of the ACES filmic curve (K. Narkowicz 2015, "ACES Filmic Tone Mapping
 /// Curve"): x(2.51x + 0.03) / (x(2.43x + 0.59) + 0.14), clamped to [0, 1]; 0 → 0, increasing.
-pub fn aces(x: f32) -> f32 {
+pub(crate) fn aces(x: f32) -> f32 {
     let x = x.max(0.0);
     (x * (2.51 * x + 0.03) / (x * (2.43 * x + 0.59) + 0.14)).clamp(0.0, 1.0)
 }
 
 /// The sRGB encoding (IEC 61966-2-1) of a linear value in [0, 1].
-pub fn srgb_encode(c: f32) -> f32 {
+pub(crate) fn srgb_encode(c: f32) -> f32 {
     let c = c.clamp(0.0, 1.0);
     if c <= 0.003_130_8 {
         12.92 * c

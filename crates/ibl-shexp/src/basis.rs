@@ -22,7 +22,7 @@ pub const fn num_unknowns(p_order: usize, q_order: usize) -> usize {
 /// α is the GGX α = roughness² (the reading that reproduces the paper's behaviour; with
 /// κ = 1/roughness the damping is far too strong at low roughness).
 #[inline]
-pub fn vmf_band(l: usize, alpha: f32) -> f32 {
+pub(crate) fn vmf_band(l: usize, alpha: f32) -> f32 {
     (-((l * (l + 1)) as f32) * alpha * 0.5).exp()
 }
 
@@ -30,7 +30,7 @@ pub fn vmf_band(l: usize, alpha: f32) -> f32 {
 /// (`coeffs::AlphaKnots`, not in Silvennoinen et al. 2025): coefficients(α) = w₀·c[s] + w₁·c[s+1] with the
 /// segment s whose knots bracket α, α clamped to the knot range. Returns ((s, w₀), (s+1, w₁));
 /// one knot gives ((0, 1), (0, 0)). `knots` must be non-empty and strictly increasing.
-pub fn knot_weights(knots: &[f32], alpha: f32) -> ((usize, f32), (usize, f32)) {
+pub(crate) fn knot_weights(knots: &[f32], alpha: f32) -> ((usize, f32), (usize, f32)) {
     let k = knots.len();
     if k < 2 {
         return ((0, 1.0), (0, 0.0));
@@ -43,14 +43,14 @@ pub fn knot_weights(knots: &[f32], alpha: f32) -> ((usize, f32), (usize, f32)) {
 
 /// Band l of SH index i = l(l+1)+m.
 #[inline]
-pub fn band_of(i: usize) -> usize {
+pub(crate) fn band_of(i: usize) -> usize {
     (i as f64).sqrt() as usize
 }
 
 /// The reflection r of `v` about `n` and the half-reflection vector h_r = normalize(n + r)
 /// (Silvennoinen et al. 2025 eq. 10). For r = −n (only when v = −n) h_r falls back to n.
 #[inline]
-pub fn reflection_pair(n: Vec3, v: Vec3) -> (Vec3, Vec3) {
+pub(crate) fn reflection_pair(n: Vec3, v: Vec3) -> (Vec3, Vec3) {
     let r = (2.0 * n.dot(v) * n - v).normalize_or(n);
     let hr = (n + r).normalize_or(n);
     (r, hr)
@@ -60,11 +60,14 @@ pub fn reflection_pair(n: Vec3, v: Vec3) -> (Vec3, Vec3) {
 /// Y(r) for P (bands 0..=p_order) and Y(h_r) for Q (bands 0..=q_order; index 0 is unused).
 #[derive(Clone, Debug)]
 pub struct Features {
+    /// Y_lm(r), (p_order+1)² values in SH order.
     pub y_r: Vec<f32>,
+    /// Y_lm(h_r), (q_order+1)² values (index 0 unused).
     pub y_hr: Vec<f32>,
 }
 
 impl Features {
+    /// Zeroed features for the given orders.
     pub fn new(p_order: usize, q_order: usize) -> Self {
         Features {
             y_r: vec![0.0; coeffs_of_order(p_order)],
@@ -131,7 +134,7 @@ pub fn tangent_frame(n: Vec3, turn: f32) -> (Vec3, Vec3) {
 
 /// The per-normal azimuth turn used with [`tangent_frame`]: a second golden-ratio sequence.
 #[inline]
-pub fn normal_turn(i: usize) -> f32 {
+pub(crate) fn normal_turn(i: usize) -> f32 {
     ((i as f64 * 0.754_877_666_246_692_8).fract()) as f32
 }
 

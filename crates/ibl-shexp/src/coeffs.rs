@@ -15,11 +15,15 @@ use std::path::Path;
 /// h_r = normalize(n + r)). Band l of both is damped by exp(−l(l+1)·α/2), α the GGX α = r².
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Coeffs {
+    /// Highest SH band of P.
     pub p_order: usize,
+    /// Highest SH band of Q.
     pub q_order: usize,
     /// GGX α values the rows were fitted at.
     pub alphas: Vec<f32>,
+    /// Coefficients of P, RGB.
     pub p: Vec<[f32; 3]>,
+    /// Coefficients of Q, RGB (index 0, the DC, unused).
     pub q: Vec<[f32; 3]>,
     /// Log-space RMS residual of the fit over all rows and channels.
     pub residual: f64,
@@ -124,10 +128,10 @@ pub enum Objective {
 }
 
 /// Highest SH order (l_max) of P or Q.
-pub const MAX_ORDER: usize = 8;
+pub(crate) const MAX_ORDER: usize = 8;
 
 /// The convention string written into every probe.
-pub const CONVENTION: &str = "E0(v,n,alpha) = exp(sum_i vmf(l_i,alpha) Y_i(r) p_i + sum_{i>=1} vmf(l_i,alpha) Y_i(h_r) q_{i-1}); \
+pub(crate) const CONVENTION: &str = "E0(v,n,alpha) = exp(sum_i vmf(l_i,alpha) Y_i(r) p_i + sum_{i>=1} vmf(l_i,alpha) Y_i(h_r) q_{i-1}); \
 r = 2(n.v)n - v, h_r = normalize(n + r), Y = docs/CONVENTIONS.md real orthonormal SH (i = l(l+1)+m, no Condon-Shortley phase), \
 vmf(l,alpha) = exp(-l(l+1)*alpha/2), alpha = GGX alpha = roughness^2";
 
@@ -253,7 +257,7 @@ impl Coeffs {
     }
 
     /// The coefficients reconstruction uses at GGX α: p, q, or their knot interpolation.
-    pub fn coefficients_at(&self, alpha: f32) -> (Vec<[f32; 3]>, Vec<[f32; 3]>) {
+    pub(crate) fn coefficients_at(&self, alpha: f32) -> (Vec<[f32; 3]>, Vec<[f32; 3]>) {
         let Some(k) = &self.alpha_knots else {
             return (self.p.clone(), self.q.clone());
         };
@@ -286,7 +290,7 @@ impl Coeffs {
 }
 
 /// Most α knots a probe may carry.
-pub const MAX_KNOTS: usize = 8;
+pub(crate) const MAX_KNOTS: usize = 8;
 
 /// Silvennoinen et al. 2025 eq. 11 for explicit coefficient sets.
 fn e0_with(

@@ -30,8 +30,11 @@ pub enum FresnelTail {
 /// A tabulated DFG: `data[(j * width + i)] = (A, B)` at n·v = (i+0.5)/width, r = (j+0.5)/height.
 #[derive(Clone, Debug)]
 pub struct Dfg {
+    /// Columns (n·v axis).
     pub width: usize,
+    /// Rows (roughness axis).
     pub height: usize,
+    /// (A, B) per texel, row by row.
     pub data: Vec<[f32; 2]>,
 }
 
@@ -65,7 +68,7 @@ impl Dfg {
     }
 
     /// A table from an image in the docs/CONVENTIONS.md layout (R = A, G = B).
-    pub fn from_image(img: &ibl_core::Image) -> Self {
+    pub(crate) fn from_image(img: &ibl_core::Image) -> Self {
         let data = (0..img.width * img.height).map(|k| {
             let t = img.texel(k % img.width, k / img.width);
             [t[0], t.get(1).copied().unwrap_or(0.0)]

@@ -16,13 +16,16 @@ use ibl_core::sampling::hammersley;
 /// G2(v,l)/G1(v)/N and its lod before the environment's texel-size offset.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TableEntry {
+    /// Light direction l in the local frame (n = +z).
     pub l: [f32; 3],
+    /// G2(v,l)/G1(v)/N: the sample's weight in E0.
     pub weight: f32,
+    /// Source lod of the sample before the texel-size offset.
     pub lod: f32,
 }
 
 /// Samples of one (view, α): directions under the horizon are dropped (they carry zero weight).
-pub fn sample_table(v: Vec3, alpha: f32, samples: usize, lod_bias: f32) -> Vec<TableEntry> {
+pub(crate) fn sample_table(v: Vec3, alpha: f32, samples: usize, lod_bias: f32) -> Vec<TableEntry> {
     let n = samples.max(1);
     let mut out = Vec::with_capacity(n);
     let g1v = g1(v.z, alpha);
@@ -51,8 +54,11 @@ pub fn sample_table(v: Vec3, alpha: f32, samples: usize, lod_bias: f32) -> Vec<T
 /// Tables for a fixed set of local views and α values: `tables[a * views + k]`.
 #[derive(Clone, Debug)]
 pub struct Estimator {
+    /// Local view directions (n = +z).
     pub views: Vec<Vec3>,
+    /// GGX α values.
     pub alphas: Vec<f32>,
+    /// Samples drawn per table.
     pub samples: usize,
     tables: Vec<Vec<TableEntry>>,
 }
@@ -85,6 +91,7 @@ impl Estimator {
         }
     }
 
+    /// The table of α `alpha_index` and view `view_index`.
     pub fn table(&self, alpha_index: usize, view_index: usize) -> &[TableEntry] {
         &self.tables[alpha_index * self.views.len() + view_index]
     }
@@ -105,7 +112,7 @@ impl Estimator {
 
 /// Σ weight · L(frame · l) over a table, accumulated in f64.
 #[inline]
-pub fn estimate_with_table(
+pub(crate) fn estimate_with_table(
     env: &BorderedMips,
     frame: (Vec3, Vec3, Vec3),
     table: &[TableEntry],
@@ -121,28 +128,6 @@ pub fn estimate_with_table(
         acc[2] += (c[2] * e.weight) as f64;
     }
     acc
-}
-
-/// E0 for an arbitrary (n, v) (world space), building the table on the fly: for tests and
-/// spot checks, not for loops.
-pub fn e0_at(
-    env: &BorderedMips,
-    n: Vec3,
-    v: Vec3,
-    alpha: f32,
-    samples: usize,
-    lod_bias: f32,
-) -> [f64; 3] {
-    let (t, b) = crate::basis::tangent_frame(n, 0.0);
-    let vl = Vec3::new(v.dot(t), v.dot(b), v.dot(n));
-    if vl.z <= 0.0 {
-        return [0.0; 3];
-    }
-    estimate_with_table(
-        env,
-        (t, b, n),
-        &sample_table(vl.normalize(), alpha, samples, lod_bias),
-    )
 }
 
 #[cfg(test)]

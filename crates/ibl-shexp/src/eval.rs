@@ -69,6 +69,7 @@ impl Default for Params {
 }
 
 impl Params {
+    /// Checks the parameters before any input is read.
     pub fn validate(&self) -> crate::Result<()> {
         let bad = |m: String| Err(crate::Error::Core(ibl_core::Error::param(m)));
         if self.sphere_size < 4 || self.sphere_size > 1024 {
@@ -107,27 +108,36 @@ impl Params {
 /// One case: material × view × roughness.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct Case {
+    /// Material name (chrome, plastic, ...).
     pub material: String,
+    /// Fresnel reflectance at normal incidence F0.
     pub f0: f32,
+    /// View elevation in degrees.
     pub view_deg: f32,
+    /// Perceptual roughness r.
     pub roughness: f32,
+    /// GGX α = r².
     pub alpha: f32,
     /// Mean of GT² over the disc pixels and channels (to read MSEs relatively).
     pub gt_mean_square: f64,
+    /// MSE of the split sum against the truth.
     pub mse_split_sum: f64,
     /// SH-exp with the Fresnel tail the probe records.
     pub mse_shexp: f64,
     /// SH-exp with eq. 15 as printed and with B/(A+B) (equal for chrome).
     pub mse_shexp_printed: f64,
+    /// SH-exp with the Fresnel ratio B/(A+B).
     pub mse_shexp_ratio: f64,
     /// The floor eq. 15 puts under SH-exp: MSE of the exact E0 times the Fresnel factor (the
     /// error SH-exp would keep with a perfect fit; 0 for chrome).
     pub mse_exact_e0_fresnel: f64,
     /// MSE on display-referred values (Reinhard + sRGB, as the PNGs), a perceptual check.
     pub mse_display_split_sum: f64,
+    /// Same with SH-exp.
     pub mse_display_shexp: f64,
     /// mse_shexp / mse_split_sum.
     pub ratio: f64,
+    /// Whether SH-exp has the lower MSE.
     pub shexp_wins: bool,
     /// MSE of the truth cube against one of twice its size (subset of pixels), relative to
     /// the smaller of the two methods' MSE on the same pixels: < 0.01 means the truth's RMS
@@ -138,34 +148,47 @@ pub struct Case {
 /// Memory per probe of each representation.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct Memory {
+    /// Bytes of the SH-exp probe (f32 RGB).
     pub shexp_bytes: usize,
+    /// Face size of each level of the split-sum chain.
     pub split_sum_sizes: Vec<usize>,
+    /// Bytes of the chain as RGB32F.
     pub split_sum_bytes_rgb32f: usize,
+    /// Bytes of the chain as RGBA16F.
     pub split_sum_bytes_rgba16f: usize,
     /// split-sum (RGBA16F) / SH-exp (f32).
     pub ratio_rgba16f: f64,
+    /// split-sum (RGB32F) / SH-exp (f32).
     pub ratio_rgb32f: f64,
 }
 
 /// Everything measured on one environment.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct EnvReport {
+    /// Environment name.
     pub name: String,
     /// The SH-exp representation scored ([`Coeffs::describe`]).
     pub representation: String,
     /// When the probe carries α knots: the wins of its eq. 11 `p`, `q` alone, for comparison.
     pub wins_eq11: Option<usize>,
+    /// Face size of the environment cube.
     pub face_size: usize,
+    /// The Fresnel tail used for SH-exp.
     pub fresnel: FresnelTail,
+    /// Where the split-sum chain came from.
     pub split_sum_source: String,
+    /// Every case scored.
     pub cases: Vec<Case>,
+    /// Memory of each representation.
     pub memory: Memory,
+    /// Cases SH-exp wins on MSE.
     pub wins: usize,
     /// Wins on display-referred MSE.
     pub wins_display: usize,
     /// Timings stay out of the written reports (which are identical run to run).
     #[serde(skip)]
     pub seconds_truth: f64,
+    /// Seconds spent on the two methods.
     #[serde(skip)]
     pub seconds_methods: f64,
     /// Worst `truth_error_share` over the cases.
@@ -174,8 +197,11 @@ pub struct EnvReport {
 
 /// Rendered images of one case (RGB, sphere_size²), for the montage.
 pub struct CaseImages {
+    /// The ground truth.
     pub truth: Image,
+    /// The split sum.
     pub split_sum: Image,
+    /// SH-exp.
     pub shexp: Image,
 }
 
@@ -189,7 +215,7 @@ pub fn camera(view_deg: f32) -> (Vec3, Vec3, Vec3) {
 }
 
 /// Normal of pixel (i, j) of an s×s sphere image, or None outside the disc.
-pub fn pixel_normal(i: usize, j: usize, s: usize, cam: (Vec3, Vec3, Vec3)) -> Option<Vec3> {
+pub(crate) fn pixel_normal(i: usize, j: usize, s: usize, cam: (Vec3, Vec3, Vec3)) -> Option<Vec3> {
     let x = 2.0 * (i as f32 + 0.5) / s as f32 - 1.0;
     let y = 1.0 - 2.0 * (j as f32 + 0.5) / s as f32;
     let r2 = x * x + y * y;
@@ -203,9 +229,13 @@ pub fn pixel_normal(i: usize, j: usize, s: usize, cam: (Vec3, Vec3, Vec3)) -> Op
 /// One disc pixel of a view: its normal and the truth (E0, E1) per roughness, plus the same
 /// from the cube of twice the size on the checked subset.
 pub struct TruthPixel {
+    /// Pixel index (row-major) in the sphere image.
     pub idx: usize,
+    /// Unit surface normal of the pixel.
     pub n: Vec3,
+    /// (E0, E1) per roughness.
     pub gt: Vec<([f64; 3], [f64; 3])>,
+    /// The same from the cube of twice the size, on the checked subset.
     pub gt2: Option<Vec<([f64; 3], [f64; 3])>>,
 }
 
@@ -213,7 +243,9 @@ pub struct TruthPixel {
 pub struct Truth {
     /// Per view: the view direction and the disc pixels.
     pub views: Vec<(Vec3, Vec<TruthPixel>)>,
+    /// Seconds the truth took.
     pub seconds: f64,
+    /// Face size of the environment.
     pub face_size: usize,
 }
 
@@ -275,7 +307,7 @@ pub fn compute_truth(cube: &Cubemap, params: &Params, progress: &dyn Progress) -
 
 /// SH-exp reflected radiance E = F0·E0 + (1−F0)·E1 at one pixel: eq. 11 times the Fresnel
 /// factor of `tail` (for a probe fitted on E0/(A+B), times F0·A + B·(…) — see [`crate::coeffs::Target`]).
-pub fn shexp_radiance(
+pub(crate) fn shexp_radiance(
     coeffs: &Coeffs,
     dfg: &crate::dfg::Dfg,
     n: Vec3,

@@ -139,9 +139,10 @@ impl Default for Params {
 }
 
 /// Largest row count accepted (normals × views × α).
-pub const MAX_ROWS: usize = 1 << 22;
+pub(crate) const MAX_ROWS: usize = 1 << 22;
 
 impl Params {
+    /// Checks the parameters before any input is read.
     pub fn validate(&self) -> Result<()> {
         let bad = |m: String| Err(Error::Core(ibl_core::Error::param(m)));
         if self.p_order == 0 || self.p_order > MAX_ORDER {
@@ -256,6 +257,7 @@ impl Params {
         Ok(())
     }
 
+    /// Rows of the least-squares system: normals × views × α values (saturating).
     pub fn rows(&self) -> usize {
         self.normals
             .saturating_mul(self.views)
@@ -277,6 +279,7 @@ pub struct Timings {
 }
 
 impl Timings {
+    /// Seconds of all phases.
     pub fn total(&self) -> f64 {
         self.prepare + self.tables + self.estimate + self.solve
     }
@@ -285,15 +288,21 @@ impl Timings {
 /// The fitted probe with its diagnostics.
 #[derive(Clone, Debug)]
 pub struct Fitted {
+    /// The fitted coefficients.
     pub coeffs: Coeffs,
+    /// Seconds per phase.
     pub timings: Timings,
+    /// Face size of the environment fitted.
     pub face_size: usize,
 }
 
 /// E0 of every row and the features of every (normal, view) pair, before the solve.
 pub struct Rows {
+    /// Highest SH band of P.
     pub p_order: usize,
+    /// Highest SH band of Q.
     pub q_order: usize,
+    /// GGX α values.
     pub alphas: Vec<f32>,
     /// Y(r), Y(h_r) per (normal, view), normal-major.
     pub features: Vec<Features>,
@@ -301,7 +310,9 @@ pub struct Rows {
     pub n_dot_v: Vec<f32>,
     /// E0 per (normal, view, α), α fastest.
     pub e0: Vec<[f64; 3]>,
+    /// Normals sampled.
     pub normals: usize,
+    /// Views per normal.
     pub views: usize,
 }
 
@@ -328,26 +339,6 @@ impl Rows {
             features,
             n_dot_v: self.n_dot_v.clone(),
             e0: self.e0.clone(),
-            normals: self.normals,
-            views: self.views,
-        }
-    }
-
-    /// Keeps only the rows of the α values whose indices are listed (for α-range ablations).
-    pub fn select_alphas(&self, keep: &[usize]) -> Rows {
-        let na = self.alphas.len();
-        let e0 = self
-            .e0
-            .chunks(na)
-            .flat_map(|c| keep.iter().map(move |&a| c[a]))
-            .collect();
-        Rows {
-            p_order: self.p_order,
-            q_order: self.q_order,
-            alphas: keep.iter().map(|&a| self.alphas[a]).collect(),
-            features: self.features.clone(),
-            n_dot_v: self.n_dot_v.clone(),
-            e0,
             normals: self.normals,
             views: self.views,
         }
@@ -467,7 +458,7 @@ where
 
 /// Solve options beyond the rows themselves.
 #[derive(Clone, Copy, Debug)]
-pub struct SolveOptions {
+pub(crate) struct SolveOptions {
     /// Per-channel floor on E0.
     pub floor: [f64; 3],
     pub weight_power: f32,
@@ -479,13 +470,13 @@ pub struct SolveOptions {
 }
 
 /// p, q, the log-space RMS residual per channel and the condition number.
-pub type Solved = (Vec<[f32; 3]>, Vec<[f32; 3]>, [f64; 3], f64);
+pub(crate) type Solved = (Vec<[f32; 3]>, Vec<[f32; 3]>, [f64; 3], f64);
 
 /// Per knot p and q, the log-space RMS residual per channel and the condition number.
-pub type SolvedKnots = (Vec<Vec<[f32; 3]>>, Vec<Vec<[f32; 3]>>, [f64; 3], f64);
+pub(crate) type SolvedKnots = (Vec<Vec<[f32; 3]>>, Vec<Vec<[f32; 3]>>, [f64; 3], f64);
 
 /// Least squares of eq. 14 for each channel; returns (p, q, residual per channel, condition).
-pub fn solve_rows(rows: &Rows, opts: &SolveOptions) -> Result<Solved> {
+pub(crate) fn solve_rows(rows: &Rows, opts: &SolveOptions) -> Result<Solved> {
     let (mut p, mut q, residual, condition) = solve_rows_knots(rows, opts, &[])?;
     Ok((p.remove(0), q.remove(0), residual, condition))
 }
@@ -494,7 +485,11 @@ pub fn solve_rows(rows: &Rows, opts: &SolveOptions) -> Result<Solved> {
 /// and w₁·[eq. 14 row] in block s+1 (the hat weights of [`basis::knot_weights`]), so the
 /// coefficients are piecewise linear in α and the problem stays linear in log space. No knots
 /// is eq. 14 itself (one block).
-pub fn solve_rows_knots(rows: &Rows, opts: &SolveOptions, knots: &[f32]) -> Result<SolvedKnots> {
+pub(crate) fn solve_rows_knots(
+    rows: &Rows,
+    opts: &SolveOptions,
+    knots: &[f32],
+) -> Result<SolvedKnots> {
     let (p, q) = (rows.p_order, rows.q_order);
     let k1 = num_unknowns(p, q);
     let blocks = knots.len().max(1);
@@ -714,7 +709,9 @@ pub fn working_cube(env: &Environment, size: Option<usize>, progress: &dyn Progr
 
 /// What the bake produced, before anything is written.
 pub struct Baked {
+    /// Encoded files, ready for `ibl_core::io::write_many_atomic`.
     pub files: Vec<(PathBuf, Vec<u8>)>,
+    /// The fit and its diagnostics.
     pub fitted: Fitted,
 }
 
@@ -1264,20 +1261,9 @@ mod tests {
     fn fit_is_deterministic_across_thread_counts() {
         let cube = Cubemap::from_fn(16, |d| [1.0 + d.x.max(0.0) * 5.0, 1.0 + d.y, 1.0]);
         let params = small_params();
-        let one = rayon::ThreadPoolBuilder::new()
-            .num_threads(1)
-            .build()
-            .unwrap();
-        let two = rayon::ThreadPoolBuilder::new()
-            .num_threads(2)
-            .build()
-            .unwrap();
-        let a = one.install(|| fit_cube(&params, &cube, &NoProgress).unwrap().coeffs);
-        let b = two.install(|| fit_cube(&params, &cube, &NoProgress).unwrap().coeffs);
-        assert_eq!(
-            serde_json::to_string(&a).unwrap(),
-            serde_json::to_string(&b).unwrap()
-        );
+        ibl_testkit::thread_count_independent(&[1, 2, 3], || {
+            fit_cube(&params, &cube, &NoProgress).unwrap().coeffs
+        });
     }
 
     #[test]

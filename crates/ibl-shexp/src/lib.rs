@@ -24,6 +24,8 @@
 //!   (1024 samples, mips ≥ 32², the same score). SH-exp loses mostly at α ≤ 0.36, where order-4
 //!   SH cannot hold the lobe-scale detail (per-α oracle fits reach 73%, 79% at P order 8), and
 //!   for the dielectric, where eq. 15 alone (exact E0) loses 19 of 96 cases.
+
+#![warn(missing_docs)]
 pub mod basis;
 pub mod coeffs;
 pub mod dfg;
@@ -48,7 +50,12 @@ pub enum Error {
     Core(#[from] ibl_core::Error),
     /// The least-squares system has too few rows or is numerically rank deficient.
     #[error("least-squares system of {rows} rows and {unknowns} unknowns is rank deficient (condition number above 1e12): use more --normals, --views or --alphas, or lower --p-order/--q-order")]
-    RankDeficient { rows: usize, unknowns: usize },
+    RankDeficient {
+        /// Rows of the system.
+        rows: usize,
+        /// Unknowns of the system.
+        unknowns: usize,
+    },
 }
 
 impl Classify for Error {
@@ -60,4 +67,5 @@ impl Classify for Error {
     }
 }
 
+/// A result with the SH-exp [`Error`].
 pub type Result<T, E = Error> = std::result::Result<T, E>;

@@ -14,7 +14,9 @@ use crate::solve::{least_squares, solve_spd};
 pub struct RelativeProblem<'a> {
     /// Row-major m×k design matrix (eq. 14's rows).
     pub a: &'a [f64],
+    /// Rows m of the design matrix.
     pub m: usize,
+    /// Unknowns k.
     pub k: usize,
     /// Target E0 of every row (linear, ≥ 0).
     pub target: &'a [f64],
@@ -32,7 +34,9 @@ pub struct RelativeProblem<'a> {
 pub struct RefineReport {
     /// Objective at the start (the log-space solution) and at the end.
     pub start: f64,
+    /// Objective at the end.
     pub end: f64,
+    /// Gauss-Newton iterations run.
     pub iterations: usize,
 }
 

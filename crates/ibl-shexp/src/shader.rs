@@ -14,9 +14,13 @@ use std::fmt::Write;
 pub enum Expr {
     /// A variable (x, y, z or an earlier temporary).
     Var(String),
+    /// A constant.
     Const(f64),
+    /// a·b.
     Mul(Box<Expr>, Box<Expr>),
+    /// a − b.
     Sub(Box<Expr>, Box<Expr>),
+    /// a + b.
     Add(Box<Expr>, Box<Expr>),
 }
 
@@ -70,7 +74,7 @@ impl Expr {
 
 /// Straight-line statements computing `y[i]` (i < (order+1)²) from a unit direction (x, y, z):
 /// `(target, expression)` where a target is a temporary name or `y[i]`.
-pub fn sh_statements(order: usize) -> Vec<(String, Expr)> {
+pub(crate) fn sh_statements(order: usize) -> Vec<(String, Expr)> {
     let bands = order + 1;
     let mut st: Vec<(String, Expr)> = Vec::new();
     for m in 0..bands {

@@ -130,7 +130,7 @@ pub fn least_squares(a: &[f64], m: usize, k: usize, rhs: &[Vec<f64>]) -> Option<
 /// Why: a Gauss–Newton step needs JᵀJ and Jᵀr, which accumulate row by row in k² work per
 /// row without storing J; QR of J costs ~4× that and m×k memory. κ(JᵀJ) = κ(J)² is acceptable
 /// here because the steps are corrected by the line search and never define the answer alone.
-pub fn solve_spd(g: &[f64], b: &[f64], k: usize) -> Option<Vec<f64>> {
+pub(crate) fn solve_spd(g: &[f64], b: &[f64], k: usize) -> Option<Vec<f64>> {
     assert_eq!(g.len(), k * k);
     assert_eq!(b.len(), k);
     let d: Vec<f64> = (0..k).map(|i| g[i * k + i].sqrt()).collect();
@@ -175,7 +175,7 @@ pub fn solve_spd(g: &[f64], b: &[f64], k: usize) -> Option<Vec<f64>> {
 }
 
 /// Singular values of a small square matrix (row-major n×n) by one-sided Jacobi rotations.
-pub fn singular_values(a: &[f64], n: usize) -> Vec<f64> {
+pub(crate) fn singular_values(a: &[f64], n: usize) -> Vec<f64> {
     // Work on columns of U = A; rotate pairs until all are orthogonal.
     let mut u: Vec<f64> = a.to_vec();
     for _sweep in 0..60 {

@@ -19,12 +19,14 @@ use ibl_core::{CubeMips, Cubemap, Rgb};
 /// A prefiltered chain ready for lookups, with the DFG table.
 pub struct SplitSum {
     chain: BorderedMips,
+    /// The DFG table (A, B) of the split sum.
     pub dfg: Dfg,
     /// Where the chain came from (for reports).
     pub source: String,
 }
 
 impl SplitSum {
+    /// The chain with seamless bordered lookups, the DFG table and where the chain came from.
     pub fn new(chain: &CubeMips, dfg: Dfg, source: impl Into<String>) -> Self {
         SplitSum {
             chain: BorderedMips::new(chain),
@@ -33,10 +35,12 @@ impl SplitSum {
         }
     }
 
+    /// Levels in the chain.
     pub fn levels(&self) -> usize {
         self.chain.num_levels()
     }
 
+    /// Face size of every level.
     pub fn sizes(&self) -> Vec<usize> {
         self.chain.sizes()
     }
@@ -65,7 +69,7 @@ impl SplitSum {
 /// The shared prefiltered chain: `ibl-prefilter`'s bake at level-0 size `size` with its
 /// defaults (levels halving down to 8², r = l/(N−1), filtered importance sampling at its
 /// default quality), from the working cube.
-pub fn shared_chain(source: &Cubemap, size: usize) -> crate::Result<CubeMips> {
+pub(crate) fn shared_chain(source: &Cubemap, size: usize) -> crate::Result<CubeMips> {
     let params = ibl_prefilter::Params {
         size,
         ..Default::default()

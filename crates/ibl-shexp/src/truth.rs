@@ -11,6 +11,7 @@ use std::f32::consts::PI;
 /// Texel directions and radiance × solid angle, structure-of-arrays for the summation loop.
 #[derive(Clone, Debug)]
 pub struct TexelSet {
+    /// Face size of the source cube.
     pub size: usize,
     x: Vec<f32>,
     y: Vec<f32>,
@@ -20,6 +21,7 @@ pub struct TexelSet {
 }
 
 impl TexelSet {
+    /// Every texel of `cube` with its direction and radiance × solid angle.
     pub fn from_cube(cube: &Cubemap) -> Self {
         let n = cube.size;
         let mut s = TexelSet {
@@ -47,10 +49,12 @@ impl TexelSet {
         s
     }
 
+    /// Texels in the set.
     pub fn len(&self) -> usize {
         self.x.len()
     }
 
+    /// Whether the set has no texel.
     pub fn is_empty(&self) -> bool {
         self.x.is_empty()
     }

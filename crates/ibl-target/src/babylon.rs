@@ -19,15 +19,16 @@ pub const MAGIC: [u8; 8] = [0x86, 0x16, 0x87, 0x96, 0xf6, 0xd6, 0x96, 0x36];
 /// RGBD as Babylon's `toRGBD` encodes it (`Shaders/ShadersInclude/helperFunctions.fx`):
 /// D = saturate(floor(max(255/max(rgb), 1))/255), rgb·D gamma-encoded with exponent 1/2.2,
 /// alpha D. Decoded by `fromRGBD`: toLinearSpace(rgb)/a.
-pub fn rgbd(c: Rgb) -> [f32; 4] {
+pub(crate) fn rgbd(c: Rgb) -> [f32; 4] {
     let m = c[0].max(c[1]).max(c[2]).max(1e-6);
     let d = ((255.0 / m).max(1.0).floor() / 255.0).clamp(0.0, 1.0);
     let g = |v: f32| (v.max(0.0) * d).powf(1.0 / 2.2).clamp(0.0, 1.0);
     [g(c[0]), g(c[1]), g(c[2]), d]
 }
 
+#[cfg(test)]
 /// Babylon's `fromRGBD` of 8-bit samples.
-pub fn from_rgbd(p: [u8; 4]) -> Rgb {
+pub(crate) fn from_rgbd(p: [u8; 4]) -> Rgb {
     let a = p[3] as f32 / 255.0;
     let l = |v: u8| (v as f32 / 255.0).powf(2.2) / a.max(1e-6);
     [l(p[0]), l(p[1]), l(p[2])]

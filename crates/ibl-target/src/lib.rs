@@ -6,6 +6,7 @@
 //! [`lod`] holds the lookups' mappings, [`orient`] the exact cube re-orientations, [`sh`] the
 //! engines' SH forms, [`babylon`] the `.env` container.
 
+#![warn(missing_docs)]
 // Index loops read closer to the equations in the small numeric kernels.
 #![allow(clippy::needless_range_loop)]
 
@@ -50,8 +51,9 @@ pub enum Target {
     Unity,
 }
 
+#[cfg(test)]
 /// Every target, in help order.
-pub const ALL_TARGETS: [Target; 6] = [
+pub(crate) const ALL_TARGETS: [Target; 6] = [
     Target::Gltf,
     Target::Bevy,
     Target::Filament,
@@ -98,6 +100,7 @@ pub const NOTE_NAME: &str = "LOAD.txt";
 /// What one engine loads as-is.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct TargetSpec {
+    /// The target described.
     pub target: Target,
     /// Engine (and the part of it that reads the assets).
     pub engine: &'static str,
@@ -122,7 +125,9 @@ pub struct TargetSpec {
     /// Whether the engine's lookup fixes the level count: Unity reads mips 0–6 whatever the
     /// file holds, Babylon a full chain (prefilter refuses another), three none.
     pub levels_fixed: bool,
+    /// The diffuse (irradiance) form the engine reads.
     pub diffuse: DiffuseForm,
+    /// File names the engine expects.
     pub files: FileNames,
     /// How to load the outputs, written beside them as [`NOTE_NAME`].
     pub note: &'static str,
@@ -301,8 +306,9 @@ impl Target {
         }
     }
 
+    #[cfg(test)]
     /// Roughness the chain stores at each of its `levels` levels of base `size`.
-    pub fn level_roughnesses(self, levels: usize, size: usize) -> Vec<f32> {
+    pub(crate) fn level_roughnesses(self, levels: usize, size: usize) -> Vec<f32> {
         self.spec().lod.level_roughnesses(levels, size)
     }
 

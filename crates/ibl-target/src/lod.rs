@@ -30,16 +30,19 @@ pub enum LodMapping {
     /// texture's lodGenerationScale and offset); its own prefilter stores α = 2^(l/scale)/size
     /// at level l (`packages/dev/core/src/Materials/Textures/Filtering/hdrFiltering.ts`,
     /// scale 0.8, offset 0, level 0 the mirror).
-    Babylon { scale: f32 },
+    Babylon {
+        /// Babylon's `lodGenerationScale` (0.8 by default).
+        scale: f32,
+    },
     /// three.js filters the environment itself at load time (PMREMGenerator): no baked
     /// chain is read, so no level ↔ roughness mapping applies to what we ship.
     Pmrem,
 }
 
 /// Babylon's `lodGenerationScale` (hdrFiltering.ts, `_lodGenerationScale = 0.8`).
-pub const BABYLON_LOD_SCALE: f32 = 0.8;
+pub(crate) const BABYLON_LOD_SCALE: f32 = 0.8;
 /// UNITY_SPECCUBE_LOD_STEPS (ImageBasedLighting.hlsl: "the last mip index, we generate 7 mips").
-pub const UNITY_LOD_STEPS: f32 = 6.0;
+pub(crate) const UNITY_LOD_STEPS: f32 = 6.0;
 
 impl LodMapping {
     /// Short name written into `prefilter.json`.
@@ -60,7 +63,7 @@ impl LodMapping {
 
     /// The lod the engine samples for roughness `r` on a chain of `levels` levels whose base
     /// face is `size` texels, before the sampler clamps it to [0, levels − 1].
-    pub fn raw_lod(self, r: f32, levels: usize, size: usize) -> f32 {
+    pub(crate) fn raw_lod(self, r: f32, levels: usize, size: usize) -> f32 {
         let r = r.clamp(0.0, 1.0);
         let last = levels.saturating_sub(1) as f32;
         match self {
@@ -105,8 +108,9 @@ impl LodMapping {
         r.clamp(0.0, 1.0)
     }
 
+    #[cfg(test)]
     /// Roughness of every level of a chain.
-    pub fn level_roughnesses(self, levels: usize, size: usize) -> Vec<f32> {
+    pub(crate) fn level_roughnesses(self, levels: usize, size: usize) -> Vec<f32> {
         (0..levels)
             .map(|l| self.level_roughness(l, levels, size))
             .collect()

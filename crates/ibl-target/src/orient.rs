@@ -16,32 +16,32 @@ pub struct Orientation {
 
 impl Orientation {
     /// Our own frame (glTF viewers).
-    pub const IDENTITY: Orientation = Orientation {
+    pub(crate) const IDENTITY: Orientation = Orientation {
         ours_from_file: [[1, 0, 0], [0, 1, 0], [0, 0, 1]],
     };
     /// z negated: engines that sample cubes as left-handed (Bevy, Unity, Babylon's default
     /// left-handed scene).
-    pub const FLIP_Z: Orientation = Orientation {
+    pub(crate) const FLIP_Z: Orientation = Orientation {
         ours_from_file: [[1, 0, 0], [0, 1, 0], [0, 0, -1]],
     };
     /// x negated: three.js samples `CubeTexture`s at (flipEnvMap·x, y, z), flipEnvMap = −1.
-    pub const FLIP_X: Orientation = Orientation {
+    pub(crate) const FLIP_X: Orientation = Orientation {
         ours_from_file: [[-1, 0, 0], [0, 1, 0], [0, 0, 1]],
     };
     /// Our cube turned 90° about +Y: (x, y, z) ↦ (z, y, −x), what cmgen makes of the same
     /// panorama (its equirect longitude atan2(x, z) after its default x mirror).
-    pub const TURN_Y_90: Orientation = Orientation {
+    pub(crate) const TURN_Y_90: Orientation = Orientation {
         ours_from_file: [[0, 0, 1], [0, 1, 0], [-1, 0, 0]],
     };
 
     /// Whether A is the identity.
-    pub fn is_identity(&self) -> bool {
+    pub(crate) fn is_identity(&self) -> bool {
         *self == Self::IDENTITY
     }
 
     /// Our direction A·t for a direction t of the engine's file.
     #[inline]
-    pub fn ours_from_file(&self, t: Vec3) -> Vec3 {
+    pub(crate) fn ours_from_file(&self, t: Vec3) -> Vec3 {
         let r = |row: [i8; 3]| row[0] as f32 * t.x + row[1] as f32 * t.y + row[2] as f32 * t.z;
         Vec3::new(
             r(self.ours_from_file[0]),
@@ -50,9 +50,10 @@ impl Orientation {
         )
     }
 
+    #[cfg(test)]
     /// The file direction holding our direction d: Aᵀ·d (A is orthogonal).
     #[inline]
-    pub fn file_from_ours(&self, d: Vec3) -> Vec3 {
+    pub(crate) fn file_from_ours(&self, d: Vec3) -> Vec3 {
         let a = self.ours_from_file;
         let c = |k: usize| a[0][k] as f32 * d.x + a[1][k] as f32 * d.y + a[2][k] as f32 * d.z;
         Vec3::new(c(0), c(1), c(2))

@@ -9,7 +9,7 @@ use ibl_core::sh::{cosine_lobe_zonal, eval_basis3};
 
 /// Polynomials P_i of the pre-scaled form, in SH index order:
 /// 1, y, z, x, xy, yz, 3z²−1, xz, x²−y² (Y_i = K_i·P_i with K_i > 0).
-pub fn polynomial_basis(d: Vec3) -> [f64; 9] {
+pub(crate) fn polynomial_basis(d: Vec3) -> [f64; 9] {
     let (x, y, z) = (d.x as f64, d.y as f64, d.z as f64);
     [
         1.0,
@@ -59,8 +59,9 @@ pub fn prescaled_polynomial(irradiance: &[[f32; 3]], o: Orientation) -> [[f64; 3
     solve9(ata, atb)
 }
 
+#[cfg(test)]
 /// Evaluates Σ p_i P_i(t) (Filament's and Unity's shader form).
-pub fn eval_polynomial(p: &[[f64; 3]; 9], t: Vec3) -> [f64; 3] {
+pub(crate) fn eval_polynomial(p: &[[f64; 3]; 9], t: Vec3) -> [f64; 3] {
     let b = polynomial_basis(t);
     let mut out = [0.0; 3];
     for i in 0..9 {
@@ -169,7 +170,7 @@ pub fn unity_shader_constants(sh: &[[f64; 9]; 3]) -> [[f64; 4]; 7] {
 /// (L_lm = c_lm·π/Â_l): what three.js's `LightProbe.sh` holds (mrdoob/three.js
 /// `src/math/SphericalHarmonics3.js`: `getBasisAt` is docs/CONVENTIONS.md's basis; `getIrradianceAt`
 /// applies Â_l itself).
-pub fn three_radiance(irradiance: &[[f32; 3]]) -> [[f64; 3]; 9] {
+pub(crate) fn three_radiance(irradiance: &[[f32; 3]]) -> [[f64; 3]; 9] {
     let mut out = [[0.0; 3]; 9];
     for l in 0..3usize {
         let f = std::f64::consts::PI / cosine_lobe_zonal(l);

@@ -8,21 +8,14 @@ use ibl_core::cube::{texel_direction, Face};
 use ibl_core::equirect::{pixel_direction, row_solid_angle};
 use ibl_core::io::{self, ColorSpace, WriteOptions};
 use ibl_core::Image;
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use ibl_testkit::{fixture, Bin};
+use std::path::Path;
+use std::process::Output;
 
-fn bin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_irradiance"))
-}
-
-fn fixture(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../fixtures")
-        .join(rel)
-}
+const BIN: Bin = Bin::new(env!("CARGO_BIN_EXE_irradiance"), "irradiance");
 
 fn run(args: &[&str]) -> Output {
-    bin()
+    BIN.cmd()
         .args(args)
         .arg("--quiet")
         .output()
@@ -269,7 +262,8 @@ fn bad_parameters_and_inputs_fail_cleanly() {
         (vec!["--bands", "40"], 2, "--bands 40"),
         (vec!["--sh-file", "sh.txt"], 2, "sh.txt"),
     ] {
-        let o = bin()
+        let o = BIN
+            .cmd()
             .arg(&src)
             .arg("-o")
             .arg(&out)
@@ -288,7 +282,7 @@ fn bad_parameters_and_inputs_fail_cleanly() {
     img.data[0] = f32::NAN;
     let nan = dir.path().join("nan.exr");
     io::write_image(&nan, &img, &WriteOptions::default()).unwrap();
-    let o = bin().arg(&nan).arg("-o").arg(&out).output().unwrap();
+    let o = BIN.cmd().arg(&nan).arg("-o").arg(&out).output().unwrap();
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("1 NaN/Inf"));
     assert!(!out.exists());

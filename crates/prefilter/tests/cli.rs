@@ -3,39 +3,21 @@
 
 use ibl_core::image::Image;
 use ibl_core::io::{self, ColorSpace, WriteOptions};
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use ibl_testkit::{assert_one_line_error, files_in, fixture, Bin};
+use std::path::Path;
+use std::process::Output;
 
-fn bin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_prefilter"))
-}
-
-fn fixture(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../fixtures")
-        .join(name)
-}
+const BIN: Bin = Bin::new(env!("CARGO_BIN_EXE_prefilter"), "prefilter");
 
 fn run(args: &[&str]) -> Output {
-    bin().args(args).output().expect("binary runs")
+    BIN.run(args)
 }
 
 fn report(dir: &Path) -> serde_json::Value {
-    serde_json::from_slice(&std::fs::read(dir.join("prefilter.json")).unwrap()).unwrap()
+    ibl_testkit::read_json(&dir.join("prefilter.json"))
 }
 
 const FACES: [&str; 6] = ["px", "nx", "py", "ny", "pz", "nz"];
-
-fn files_in(dir: &Path) -> Vec<String> {
-    let mut v: Vec<String> = std::fs::read_dir(dir)
-        .map(|r| {
-            r.map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-                .collect()
-        })
-        .unwrap_or_default();
-    v.sort();
-    v
-}
 
 #[test]
 fn faces_layout_writes_every_level_and_the_report() {
@@ -285,13 +267,8 @@ fn same_input_gives_identical_bytes_for_any_thread_count() {
 
 /// A bad run: non-zero exit with `code`, one line on stderr naming the problem, nothing written.
 fn assert_fails_cleanly(args: &[&str], out: &Path, code: i32, needle: &str) {
-    let o = run(args);
-    let stderr = String::from_utf8_lossy(&o.stderr);
-    eprintln!("{args:?} → exit {:?}: {}", o.status.code(), stderr.trim());
-    assert_eq!(o.status.code(), Some(code), "{stderr}");
-    assert_eq!(stderr.trim().lines().count(), 1, "{stderr}");
-    assert!(stderr.contains(needle), "{stderr}");
-    assert!(!stderr.contains("panicked"));
+    let line = assert_one_line_error(&BIN.run(args), code, needle);
+    eprintln!("{args:?} -> {line}");
     assert!(files_in(out).is_empty(), "wrote {:?}", files_in(out));
 }
 

@@ -1,23 +1,18 @@
 //! End-to-end: the real `quat-map` binary on the fixtures and on generated material folders.
 
 use ibl_core::io::{read_image, ColorSpace};
+use ibl_testkit::{stderr, Bin};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
-const BIN: &str = env!("CARGO_BIN_EXE_quat-map");
+const BIN: Bin = Bin::new(env!("CARGO_BIN_EXE_quat-map"), "quat-map");
 
 fn fixture(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../fixtures/normals")
-        .join(name)
+    ibl_testkit::fixture(&format!("normals/{name}"))
 }
 
 fn run(args: &[&str]) -> Output {
-    Command::new(BIN).args(args).output().expect("binary runs")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
+    BIN.run(args)
 }
 
 fn png_bit_depth(p: &Path) -> u8 {
@@ -449,7 +444,8 @@ fn refuses_to_overwrite_its_input() {
     // The same file spelt differently: through "sub/..", and relative to the working folder.
     let dotted = dir.path().join("sub/../n.png");
     for out in [same.as_str(), dotted.to_str().unwrap(), "n.png"] {
-        let o = Command::new(BIN)
+        let o = BIN
+            .cmd()
             .current_dir(dir.path())
             .args([same.as_str(), "-o", out])
             .output()
@@ -546,7 +542,8 @@ fn json_failure_prints_an_error_object_and_a_closed_stdout_is_quiet() {
     let q = dir.path().join("q.png");
     let (reader, writer) = std::io::pipe().unwrap();
     drop(reader);
-    let o = Command::new(BIN)
+    let o = BIN
+        .cmd()
         .args([fixture("0008_128.png").to_str().unwrap(), "-o"])
         .arg(&q)
         .args(["--json", "--quiet"])

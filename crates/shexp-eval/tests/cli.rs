@@ -2,10 +2,11 @@
 
 use ibl_core::io::{write_image, WriteOptions};
 use ibl_core::Image;
+use ibl_testkit::Bin;
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 
-const BIN: &str = env!("CARGO_BIN_EXE_shexp-eval");
+const BIN: Bin = Bin::new(env!("CARGO_BIN_EXE_shexp-eval"), "shexp-eval");
 
 fn write_env(path: &Path) {
     let (w, h) = (64, 32);
@@ -28,7 +29,7 @@ fn write_env(path: &Path) {
 }
 
 fn run(args: &[&str]) -> Output {
-    Command::new(BIN).args(args).output().expect("binary runs")
+    BIN.run(args)
 }
 
 const SMALL: [&str; 12] = [

@@ -3,10 +3,11 @@
 use ibl_core::io::{write_image, WriteOptions};
 use ibl_core::Image;
 use ibl_shexp::Coeffs;
+use ibl_testkit::{stderr, Bin};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
-const BIN: &str = env!("CARGO_BIN_EXE_shexp-fit");
+const BIN: Bin = Bin::new(env!("CARGO_BIN_EXE_shexp-fit"), "shexp-fit");
 
 /// A 64×32 equirect: a sky gradient, a warm sun and a dark ground.
 fn write_env(path: &Path, nan: bool) {
@@ -29,7 +30,7 @@ fn write_env(path: &Path, nan: bool) {
 }
 
 fn run(args: &[&str]) -> Output {
-    Command::new(BIN).args(args).output().expect("binary runs")
+    BIN.run(args)
 }
 
 fn small() -> Vec<&'static str> {
@@ -42,10 +43,6 @@ fn small() -> Vec<&'static str> {
         "64",
         "--quiet",
     ]
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).to_string()
 }
 
 /// Fits `dir`/env.exr (written on first use) into `dir`/`name` with the small settings and

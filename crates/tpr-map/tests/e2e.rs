@@ -2,18 +2,15 @@
 
 use ibl_core::io::{read_image, write_image, ColorSpace, WriteOptions};
 use ibl_core::Image;
+use ibl_testkit::{stderr, Bin};
 use std::f64::consts::PI;
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 
-const BIN: &str = env!("CARGO_BIN_EXE_tpr-map");
+const BIN: Bin = Bin::new(env!("CARGO_BIN_EXE_tpr-map"), "tpr-map");
 
 fn run(args: &[&str]) -> Output {
-    Command::new(BIN).args(args).output().expect("binary runs")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
+    BIN.run(args)
 }
 
 fn tangent(img: &Image, i: usize, j: usize) -> [f64; 2] {
@@ -344,13 +341,14 @@ fn non_finite_maps_are_refused_unless_sanitized_and_inputs_are_not_overwritten()
         a.extend(extra.iter().map(|s| s.to_string()));
         a
     };
-    let o = Command::new(BIN).args(args(&[])).output().unwrap();
+    let o = BIN.cmd().args(args(&[])).output().unwrap();
     let e = stderr(&o);
     assert_eq!(o.status.code(), Some(2), "{e}");
     assert_eq!(e.trim().lines().count(), 1, "{e}");
     assert!(e.contains("angles.exr") && e.contains("1 NaN/Inf"), "{e}");
     assert!(!out.exists());
-    let o = Command::new(BIN)
+    let o = BIN
+        .cmd()
         .args(args(&["--sanitize", "--json"]))
         .output()
         .unwrap();

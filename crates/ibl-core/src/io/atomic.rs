@@ -99,7 +99,9 @@ pub fn write_many_atomic(files: &[(PathBuf, Vec<u8>)]) -> Result<()> {
 /// What `-o` names: a folder the bake writes its files into, or one output file.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum OutputKind {
+    /// `-o` is a folder the bake writes several files into.
     Folder,
+    /// `-o` is the one output file.
     File,
 }
 

@@ -8,14 +8,17 @@ use std::path::Path;
 /// A single-file GPU texture container.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Container {
+    /// KTX 2.0 (Khronos), optionally zstd supercompressed.
     Ktx2,
+    /// KTX 1.1 (Khronos).
     Ktx1,
+    /// DirectDraw Surface with the DX10 header.
     Dds,
 }
 
 impl Container {
     /// The container `bytes` start like, if any.
-    pub fn sniff(bytes: &[u8]) -> Option<Container> {
+    pub(crate) fn sniff(bytes: &[u8]) -> Option<Container> {
         if bytes.starts_with(&super::ktx2::IDENTIFIER) {
             Some(Container::Ktx2)
         } else if bytes.starts_with(&super::ktx1::IDENTIFIER) {
@@ -28,7 +31,7 @@ impl Container {
     }
 
     /// Whether a file name's extension names a container (`.ktx2`, `.ktx`, `.dds`).
-    pub fn from_extension(path: &Path) -> Option<Container> {
+    pub(crate) fn from_extension(path: &Path) -> Option<Container> {
         match super::extension(path).as_str() {
             "ktx2" => Some(Container::Ktx2),
             "ktx" => Some(Container::Ktx1),
@@ -41,7 +44,9 @@ impl Container {
 /// A texture read from a container.
 #[derive(Clone, Debug)]
 pub struct Texture {
+    /// The container the texture was read from.
     pub container: Container,
+    /// The encoded levels and their pixel format.
     pub payload: Payload,
     /// Key/value metadata (KTX1 and KTX2; empty for DDS).
     pub metadata: Vec<(String, Vec<u8>)>,

@@ -146,24 +146,24 @@ impl PixelFormat {
     }
 
     /// The format whose KTX2 vkFormat is `vk`.
-    pub fn from_vk(vk: u32) -> Option<Self> {
+    pub(crate) fn from_vk(vk: u32) -> Option<Self> {
         Self::ALL.into_iter().find(|f| f.codes().vk == vk)
     }
 
     /// The format whose DDS dxgiFormat is `dxgi`.
-    pub fn from_dxgi(dxgi: u32) -> Option<Self> {
+    pub(crate) fn from_dxgi(dxgi: u32) -> Option<Self> {
         Self::ALL.into_iter().find(|f| f.codes().dxgi == dxgi)
     }
 
     /// The format whose KTX1 glInternalFormat is `internal`.
-    pub fn from_gl_internal(internal: u32) -> Option<Self> {
+    pub(crate) fn from_gl_internal(internal: u32) -> Option<Self> {
         Self::ALL
             .into_iter()
             .find(|f| f.codes().gl_internal_format == internal)
     }
 
     /// Texels along each side of a block (4 for BC6H, 1 for the others).
-    pub fn block_dim(self) -> usize {
+    pub(crate) fn block_dim(self) -> usize {
         if self == PixelFormat::Bc6h {
             4
         } else {
@@ -172,7 +172,7 @@ impl PixelFormat {
     }
 
     /// Bytes of one block (of one texel for the uncompressed formats).
-    pub fn block_bytes(self) -> usize {
+    pub(crate) fn block_bytes(self) -> usize {
         match self {
             PixelFormat::Rgba32f | PixelFormat::Bc6h => 16,
             PixelFormat::Rgba16f => 8,
@@ -181,7 +181,7 @@ impl PixelFormat {
     }
 
     /// Bytes of a `width`×`height` image: whole blocks, so a 1×1 BC6H level is one block.
-    pub fn image_bytes(self, width: usize, height: usize) -> usize {
+    pub(crate) fn image_bytes(self, width: usize, height: usize) -> usize {
         let b = self.block_dim();
         width.div_ceil(b) * height.div_ceil(b) * self.block_bytes()
     }

@@ -10,7 +10,7 @@ use std::path::Path;
 
 /// sRGB transfer function, encoded value → linear.
 #[inline]
-pub fn srgb_to_linear(c: f32) -> f32 {
+pub(crate) fn srgb_to_linear(c: f32) -> f32 {
     if c <= 0.04045 {
         c / 12.92
     } else {
@@ -20,7 +20,7 @@ pub fn srgb_to_linear(c: f32) -> f32 {
 
 /// Linear → sRGB-encoded value.
 #[inline]
-pub fn linear_to_srgb(c: f32) -> f32 {
+pub(crate) fn linear_to_srgb(c: f32) -> f32 {
     if c <= 0.0031308 {
         c * 12.92
     } else {
@@ -223,7 +223,7 @@ fn tonemap(rgb: [f32; 3]) -> [f32; 3] {
     rgb.map(|c| (c / (1.0 + l)).clamp(0.0, 1.0))
 }
 
-pub fn encode_png(path: &Path, img: &Image, opts: &WriteOptions) -> Result<Vec<u8>> {
+pub(crate) fn encode_png(path: &Path, img: &Image, opts: &WriteOptions) -> Result<Vec<u8>> {
     let ch = img.channels;
     // Data maps are quantised as they are; colour goes through tone mapping and/or sRGB.
     let transform = opts.png_tonemap || opts.png_srgb;

@@ -25,28 +25,20 @@ use std::path::Path;
 /// angle maps) are stored linearly.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ColorSpace {
+    /// sRGB transfer function (colour images).
     Srgb,
+    /// Stored as is (data: normals, angles, tables).
     Linear,
 }
 
 /// Sample type of a float output.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum FloatDepth {
+    /// 32-bit floats.
     #[default]
     F32,
     /// Half floats, saturating at ±65504 (see [`f16_saturating`]).
     F16,
-}
-
-impl FloatDepth {
-    /// The depth a bake's `--half` flag selects.
-    pub fn from_half(half: bool) -> Self {
-        if half {
-            FloatDepth::F16
-        } else {
-            FloatDepth::F32
-        }
-    }
 }
 
 /// f32 → half that saturates at ±65504, the largest finite half, instead of rounding to ±Inf:
@@ -54,7 +46,7 @@ impl FloatDepth {
 /// file is still readable by every tool here, which refuse Inf. Energy above 65504 is lost:
 /// use float32 outputs for such environments.
 #[inline]
-pub fn f16_saturating(v: f32) -> half::f16 {
+pub(crate) fn f16_saturating(v: f32) -> half::f16 {
     half::f16::from_f32(v.clamp(-65504.0, 65504.0))
 }
 
@@ -104,17 +96,7 @@ pub fn decode_image(path: &Path, bytes: &[u8], color: ColorSpace) -> Result<Imag
         return Err(Error::invalid(path, "empty file"));
     }
     let ext = extension(path);
-    let by_magic = if bytes.starts_with(&[0x76, 0x2f, 0x31, 0x01]) {
-        "exr"
-    } else if bytes.starts_with(b"#?") {
-        "hdr"
-    } else if bytes.starts_with(&[0x89, b'P', b'N', b'G']) {
-        "png"
-    } else if bytes.starts_with(&[0xff, 0xd8]) {
-        "jpg"
-    } else {
-        ""
-    };
+    let by_magic = image_signature(bytes).unwrap_or("");
     // The content decides, whatever the name says: EXR data named `.png` reads as it does
     // named `.txt`. The extension only names a format whose signature is unknown.
     let kind = match (by_magic, ext.as_str()) {
@@ -130,6 +112,77 @@ pub fn decode_image(path: &Path, bytes: &[u8], color: ColorSpace) -> Result<Imag
             "not an EXR, HDR, PNG or JPEG image",
         )),
     }
+}
+
+/// The image format `bytes` start like ("exr", "hdr", "png" or "jpg"), if any.
+fn image_signature(bytes: &[u8]) -> Option<&'static str> {
+    if bytes.starts_with(&[0x76, 0x2f, 0x31, 0x01]) {
+        Some("exr")
+    } else if bytes.starts_with(b"#?") {
+        Some("hdr")
+    } else if bytes.starts_with(&[0x89, b'P', b'N', b'G']) {
+        Some("png")
+    } else if bytes.starts_with(&[0xff, 0xd8]) {
+        Some("jpg")
+    } else {
+        None
+    }
+}
+
+/// The format an extension names, in the terms of [`image_signature`] and
+/// [`container::Container`].
+fn format_of_extension(ext: &str) -> Option<&'static str> {
+    Some(match ext {
+        "exr" => "exr",
+        "hdr" | "pic" => "hdr",
+        "png" => "png",
+        "jpg" | "jpeg" => "jpg",
+        "ktx2" => "ktx2",
+        "ktx" => "ktx",
+        "dds" => "dds",
+        _ => return None,
+    })
+}
+
+/// What a format is called in messages.
+fn format_name(kind: &str) -> &'static str {
+    match kind {
+        "exr" => "OpenEXR",
+        "hdr" => "Radiance HDR",
+        "png" => "PNG",
+        "jpg" => "JPEG",
+        "ktx2" => "KTX2",
+        "ktx" => "KTX",
+        _ => "DDS",
+    }
+}
+
+/// The one-line warning for a file whose content and name disagree (EXR data named `.png`, a
+/// PNG named `.exr`, Radiance HDR named `.txt`, a KTX2 cube named `.exr`): the readers go by
+/// the content's signature, and the user learns how the file was read. `None` when the name
+/// agrees or the content has no signature we know (the extension decides then).
+pub fn content_mismatch(path: &Path, bytes: &[u8]) -> Option<String> {
+    let kind = image_signature(bytes).or_else(|| {
+        container::Container::sniff(bytes).map(|c| match c {
+            container::Container::Ktx2 => "ktx2",
+            container::Container::Ktx1 => "ktx",
+            container::Container::Dds => "dds",
+        })
+    })?;
+    let ext = extension(path);
+    if format_of_extension(&ext) == Some(kind) {
+        return None;
+    }
+    let named = if ext.is_empty() {
+        "has no extension".to_string()
+    } else {
+        format!("is named .{ext}")
+    };
+    let name = format_name(kind);
+    Some(format!(
+        "{}: holds {name} data but {named}; read as {name} (by its content)",
+        path.display()
+    ))
 }
 
 /// Runs a third-party decoder, turning a panic inside it into an invalid-input error: fuzzing

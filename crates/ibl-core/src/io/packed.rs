@@ -3,11 +3,11 @@
 
 /// Largest RGB9E5 value: (2⁹ − 1)/2⁹ · 2^(31 − 15) = 65408 (EXT_texture_shared_exponent,
 /// "sharedexp_max").
-pub const RGB9E5_MAX: f32 = 65408.0;
+pub(crate) const RGB9E5_MAX: f32 = 65408.0;
 /// Largest 11-bit unsigned float (5-bit exponent, 6-bit mantissa): (2 − 2⁻⁶)·2¹⁵ = 65024.
-pub const UF11_MAX: f32 = 65024.0;
+pub(crate) const UF11_MAX: f32 = 65024.0;
 /// Largest 10-bit unsigned float (5-bit exponent, 5-bit mantissa): (2 − 2⁻⁵)·2¹⁵ = 64512.
-pub const UF10_MAX: f32 = 64512.0;
+pub(crate) const UF10_MAX: f32 = 64512.0;
 
 const E5_BIAS: i32 = 15;
 const E5_MANTISSA: i32 = 9;
@@ -18,7 +18,7 @@ const E5_MANTISSA: i32 = 9;
 /// largest channel, raised by one when its mantissa would round up to 2⁹, and every mantissa
 /// rounded to nearest. The decoded value is then within half a mantissa step, 2⁻¹⁰ of the
 /// largest channel's power of two, of each clamped channel.
-pub fn rgb9e5_encode(rgb: [f32; 3]) -> u32 {
+pub(crate) fn rgb9e5_encode(rgb: [f32; 3]) -> u32 {
     let c = rgb.map(|v| if v > 0.0 { v.min(RGB9E5_MAX) } else { 0.0 });
     let max_c = c[0].max(c[1]).max(c[2]);
     // floor(log2(max_c)) exactly, from the float's exponent (max_c = 0 takes the minimum).
@@ -41,7 +41,7 @@ pub fn rgb9e5_encode(rgb: [f32; 3]) -> u32 {
 }
 
 /// Decodes E5B9G9R9_UFLOAT_PACK32: channel = mantissa · 2^(exponent − 15 − 9).
-pub fn rgb9e5_decode(v: u32) -> [f32; 3] {
+pub(crate) fn rgb9e5_decode(v: u32) -> [f32; 3] {
     let e = (v >> 27) as i32;
     let s = exp2i(e - E5_BIAS - E5_MANTISSA);
     [v & 511, (v >> 9) & 511, (v >> 18) & 511].map(|m| (m as f64 * s) as f32)
@@ -52,7 +52,7 @@ pub fn rgb9e5_decode(v: u32) -> [f32; 3] {
 /// OpenGL specifications require of conversions to these formats ("round to nearest" in
 /// Vulkan §"Floating-Point Computation"); negatives and NaN become 0, values above the largest
 /// finite value saturate to it (never Inf).
-pub fn uf_encode(v: f32, m: u32) -> u32 {
+pub(crate) fn uf_encode(v: f32, m: u32) -> u32 {
     let max_bits = (30 << m) | ((1 << m) - 1);
     // Negatives and NaN (for which every comparison is false) encode as 0.
     if v.is_nan() || v <= 0.0 {
@@ -78,7 +78,7 @@ pub fn uf_encode(v: f32, m: u32) -> u32 {
 }
 
 /// Decodes an unsigned float with a 5-bit exponent and `m` mantissa bits.
-pub fn uf_decode(bits: u32, m: u32) -> f32 {
+pub(crate) fn uf_decode(bits: u32, m: u32) -> f32 {
     let e = (bits >> m) as i32;
     let f = (bits & ((1 << m) - 1)) as f64;
     let v = if e == 0 {
@@ -91,12 +91,12 @@ pub fn uf_decode(bits: u32, m: u32) -> f32 {
 
 /// Encodes linear RGB as B10G11R11_UFLOAT_PACK32 (R 11 bits at 0, G 11 bits at 11, B 10 bits
 /// at 22), as Vulkan's, Direct3D's R11G11B10_FLOAT and OpenGL's R11F_G11F_B10F share it.
-pub fn b10g11r11_encode(rgb: [f32; 3]) -> u32 {
+pub(crate) fn b10g11r11_encode(rgb: [f32; 3]) -> u32 {
     uf_encode(rgb[0], 6) | (uf_encode(rgb[1], 6) << 11) | (uf_encode(rgb[2], 5) << 22)
 }
 
 /// Decodes B10G11R11_UFLOAT_PACK32.
-pub fn b10g11r11_decode(v: u32) -> [f32; 3] {
+pub(crate) fn b10g11r11_decode(v: u32) -> [f32; 3] {
     [
         uf_decode(v & 0x7ff, 6),
         uf_decode((v >> 11) & 0x7ff, 6),

@@ -14,6 +14,7 @@ use std::time::Instant;
 /// Encoded images of a texture: a cube (6 faces) or a 2D image (1), every level.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Payload {
+    /// How every texel is encoded.
     pub format: PixelFormat,
     /// Width of level 0 (faces are square for cubes).
     pub width: usize,
@@ -27,12 +28,12 @@ pub struct Payload {
 
 impl Payload {
     /// Width and height of level `l` (halved per level, at least 1).
-    pub fn level_dims(&self, l: usize) -> (usize, usize) {
+    pub(crate) fn level_dims(&self, l: usize) -> (usize, usize) {
         ((self.width >> l).max(1), (self.height >> l).max(1))
     }
 
     /// Bytes of one face of level `l`.
-    pub fn face_bytes(&self, l: usize) -> usize {
+    pub(crate) fn face_bytes(&self, l: usize) -> usize {
         let (w, h) = self.level_dims(l);
         self.format.image_bytes(w, h)
     }
@@ -97,7 +98,9 @@ pub(crate) fn check_shape(
 /// What encoding one level cost, against the float texels it came from.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct LevelEncoding {
+    /// Mip level (0 the largest).
     pub level: usize,
+    /// Face size of that level in texels.
     pub size: usize,
     /// Mean over texels and channels of |decoded − float| / max(m, ε), m the texel's
     /// largest float channel and ε = 10⁻³ × the level's mean m (see [`relative_errors`]).
