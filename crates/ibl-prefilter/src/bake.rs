@@ -132,7 +132,7 @@ pub struct Params {
     /// Face size of level 0 in texels; level l is size/2^l.
     #[arg(long, value_name = "N", default_value_t = 256)]
     pub size: usize,
-    /// Number of levels N (default: down to 8×8 faces, or the target's default); level l has
+    /// Number of levels N (default: down to 4×4 faces, or the target's default); level l has
     /// the roughness the target's lookup reads there (l/(N−1) for gltf and bevy).
     #[arg(long, value_name = "N")]
     pub levels: Option<usize>,
@@ -182,6 +182,13 @@ pub const MAX_SAMPLES: u32 = 1 << 16;
 /// would change the levels by far less than their error while the tree's memory grows 4× per
 /// step (about 200 MB for a 512² source).
 pub const MAX_SOURCE_FACTOR: usize = 2;
+
+/// Smallest face of gltf's default chain. The linear lookup lod = r(N−1) reads between levels
+/// everywhere: down to 4×4 (7 levels on 256²) its worst error over r ∈ [0.25, 1] is 4.0 / 2.5 /
+/// 5.9 / 26.6% on the city / sunset / interior / studio fixtures against 4.5 / 2.2 / 6.5 / 30.5%
+/// down to 8×8, and over r ∈ [0.1, 0.25) 6–37% against 10–78%; 2×2 faces cost 13% at r ≈ 1
+/// (bench/runtime.md).
+pub const GLTF_SMALLEST_FACE: usize = 4;
 
 /// Levels a chain from `size` can hold (halving down to 1×1).
 pub fn max_levels(size: usize) -> usize {
@@ -252,12 +259,13 @@ impl Params {
         self.target.spec().files.specular
     }
 
-    /// Levels of the full chain N: --levels, else down to 8×8 faces (gltf) or the target's
-    /// default (a full chain to 1×1 for Babylon, whose lookup depends on the size alone).
+    /// Levels of the full chain N: --levels, else down to 4×4 faces (gltf: 7 levels on 256²,
+    /// the runtime-error / bytes choice of bench/runtime.md, kept relative to the size) or the
+    /// target's default (a full chain to 1×1 for Babylon, whose lookup depends on the size alone).
     pub fn chain_levels(&self) -> usize {
         let m = max_levels(self.size);
         self.levels.unwrap_or_else(|| match self.target {
-            Target::Gltf => mip_sizes(self.size, 8).len(),
+            Target::Gltf => mip_sizes(self.size, GLTF_SMALLEST_FACE).len(),
             Target::Babylon => m,
             t => t.spec().levels.min(m),
         })
@@ -811,7 +819,11 @@ mod tests {
         assert_eq!(from_ron, Params::default());
         assert_eq!(Params::default().size, 256);
         assert_eq!(Params::default().quality, Quality::Default);
-        assert_eq!(Params::default().chain_levels(), 6);
+        // gltf's default chain is its TargetSpec row: 7 levels on 256², down to 4×4.
+        let gltf = Target::Gltf.spec();
+        assert_eq!((gltf.size, gltf.levels), (256, 7));
+        assert_eq!(Params::default().chain_levels(), gltf.levels);
+        assert_eq!(mip_sizes(256, GLTF_SMALLEST_FACE).last(), Some(&4));
         let p: Params =
             ron::from_str("(size: 64, levels: Some(4), quality: high, layout: Some(ktx2))")
                 .unwrap();
