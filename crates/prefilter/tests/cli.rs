@@ -67,6 +67,15 @@ fn faces_layout_writes_every_level_and_the_report() {
     assert_eq!(r["method"], "tree");
     assert_eq!(r["quality"], "default");
     let levels = r["level"].as_array().unwrap();
+    // gltf fits its inner levels to the lookup by default and says how far each moved; the
+    // mirror and the last level stay exact.
+    assert_eq!(r["fit_lookup"], true);
+    let moved: Vec<bool> = levels.iter().map(|l| !l["fit"].is_null()).collect();
+    assert_eq!(moved, [false, true, true, false]);
+    for l in &levels[1..3] {
+        let m = l["fit"]["mean_abs_rel_from_exact"].as_f64().unwrap();
+        assert!(m > 0.0 && m < 0.5, "{l}");
+    }
     let rough: Vec<f64> = levels
         .iter()
         .map(|l| l["roughness"].as_f64().unwrap())
@@ -254,6 +263,8 @@ fn half_json_reference_and_folder_input() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let r = report(&again);
     assert_eq!(r["method"], "reference");
+    // The brute-force reference is the exact kernel at every level: never fitted.
+    assert_eq!(r["fit_lookup"], false);
     assert_eq!(r["source_size"], 8);
 }
 
