@@ -301,7 +301,7 @@ fn the_scene_decides_what_is_baked_and_plan_says_why() {
     );
     let out = w.path("out/anisotropic-scene");
     assert!(!out.join("sky/prefilter").exists());
-    // 32² chain with levels at r = 0, 0.5, 1: max roughness 0.5 keeps two.
+    // 32² chain down to 4×4, levels at r = 0, 1/3, 2/3, 1: max roughness 0.5 keeps two.
     let chain: Vec<String> = files_under(&out.join("lobby/prefilter"))
         .into_iter()
         .filter(|f| f.ends_with("_px.exr"))

@@ -3,6 +3,7 @@
 
 use crate::error::{Error, Result};
 use crate::filter::filter_level;
+use crate::fit;
 use crate::kernel::{reference_level, SourceTexels};
 use crate::runtime::{self, Reference, RuntimeReport};
 use crate::samples::SampleTable;
@@ -134,7 +135,7 @@ pub struct Params {
     /// Face size of level 0 in texels; level l is size/2^l.
     #[arg(long, value_name = "N", default_value_t = 256)]
     pub size: usize,
-    /// Number of levels N (default: down to 8×8 faces, or the target's default); level l has
+    /// Number of levels N (default: down to 4×4 faces, or the target's default); level l has
     /// the roughness the target's lookup reads there (l/(N−1) for gltf and bevy).
     #[arg(long, value_name = "N")]
     pub levels: Option<usize>,
@@ -167,6 +168,13 @@ pub struct Params {
     /// Set NaN/Inf input texels to 0 instead of refusing the input.
     #[arg(long)]
     pub sanitize: bool,
+    /// Fit the inner levels to the target's lookup (true/false; default true for gltf, false
+    /// otherwise and with --reference): each stores what makes the engine's blend between
+    /// levels closest to the exact kernel at every roughness (the worst relative error
+    /// minimised), no longer the exact kernel at its own roughness; prefilter.json says by how
+    /// much, per level. Costs about 2.5–3× the bake time (bench/runtime.md).
+    #[arg(long, value_name = "BOOL")]
+    pub fit_lookup: Option<bool>,
 }
 }
 
@@ -184,6 +192,22 @@ pub const MAX_SAMPLES: u32 = 1 << 16;
 /// would change the levels by far less than their error while the tree's memory grows 4× per
 /// step (about 200 MB for a 512² source).
 pub(crate) const MAX_SOURCE_FACTOR: usize = 2;
+
+/// Smallest face of gltf's default chain. The linear lookup lod = r(N−1) reads between levels
+/// everywhere: down to 4×4 (7 levels on 256²) its worst error over r ∈ [0.25, 1] is 4.0 / 2.5 /
+/// 5.9 / 26.6% on the city / sunset / interior / studio fixtures against 4.5 / 2.2 / 6.5 / 30.5%
+/// down to 8×8, and over r ∈ [0.1, 0.25) 6–37% against 10–78%; 2×2 faces cost 13% at r ≈ 1
+/// (bench/runtime.md).
+pub const GLTF_SMALLEST_FACE: usize = 4;
+
+/// Targets whose levels are fitted to the lookup unless --fit-lookup says otherwise: gltf, whose
+/// default 256² × 7 chain measured 3.6 / 2.5 / 3.9 / 10.1% worst over r ∈ [0.25, 1] fitted
+/// against 4.0 / 2.5 / 5.9 / 26.6% exact (city / sunset / interior / studio, bench/runtime.md).
+/// The others keep their exact levels (Filament's 6 levels gain as much, 4.5 / 3.0 / 4.8 / 9.1%
+/// against 5.0 / 3.3 / 5.4 / 17.8%, with `--fit-lookup true`).
+fn fit_by_default(target: Target) -> bool {
+    target == Target::Gltf
+}
 
 /// Levels a chain from `size` can hold (halving down to 1×1).
 pub fn max_levels(size: usize) -> usize {
@@ -255,12 +279,13 @@ impl Params {
         self.target.spec().files.specular
     }
 
-    /// Levels of the full chain N: --levels, else down to 8×8 faces (gltf) or the target's
-    /// default (a full chain to 1×1 for Babylon, whose lookup depends on the size alone).
+    /// Levels of the full chain N: --levels, else down to 4×4 faces (gltf: 7 levels on 256²,
+    /// the runtime-error / bytes choice of bench/runtime.md, kept relative to the size) or the
+    /// target's default (a full chain to 1×1 for Babylon, whose lookup depends on the size alone).
     pub fn chain_levels(&self) -> usize {
         let m = max_levels(self.size);
         self.levels.unwrap_or_else(|| match self.target {
-            Target::Gltf => mip_sizes(self.size, 8).len(),
+            Target::Gltf => mip_sizes(self.size, GLTF_SMALLEST_FACE).len(),
             Target::Babylon => m,
             t => t.spec().levels.min(m),
         })
@@ -284,6 +309,14 @@ impl Params {
                 .max(1),
             _ => n,
         }
+    }
+
+    /// Whether levels are fitted to the lookup ([`crate::fit`]): --fit-lookup, else on where it
+    /// lowered the worst runtime error over r ∈ [0.25, 1] on every fixture (bench/runtime.md),
+    /// never for the brute-force --reference, whose levels are the exact kernel by definition.
+    pub fn fits_lookup(&self) -> bool {
+        self.fit_lookup
+            .unwrap_or(!self.reference && fit_by_default(self.target))
     }
 
     /// Hammersley points per texel with --method fis.
@@ -382,6 +415,9 @@ pub struct Report {
     pub lookup: &'static str,
     /// Roughness of every level written.
     pub level_roughness: Vec<f32>,
+    /// Whether levels 1… are fitted to the lookup (`--fit-lookup`): each level's `fit` says
+    /// how far it is from the exact kernel at its roughness.
+    pub fit_lookup: bool,
     /// "tree", "filtered-importance-sampling" or "reference" (brute force over every source
     /// texel).
     pub method: &'static str,
@@ -431,8 +467,12 @@ pub struct LevelReport {
     pub evaluations_per_texel: f64,
     /// Error of this level's luminance against the exact kernel summed by brute force over
     /// every source texel, at a fixed set of probe texels (none for the mirror level and for
-    /// --reference, which is that brute force everywhere).
+    /// --reference, which is that brute force everywhere). With `fit`, of the exact kernel the
+    /// fit started from.
     pub estimated_error: Option<EstimatedError>,
+    /// With --fit-lookup: the level stores the lookup's best fit, not the exact kernel at its
+    /// roughness (see [`crate::fit`]), and this is how far it moved.
+    pub fit: Option<fit::LevelFit>,
 }
 
 /// The error of one level measured against the brute-force kernel on probe texels.
@@ -467,6 +507,8 @@ pub struct Chain {
     pub estimate_seconds: f64,
     /// Seconds spent on the runtime-lookup error.
     pub runtime_seconds: f64,
+    /// Seconds spent fitting levels to the lookup (the extra kernel levels it evaluates).
+    pub fit_seconds: f64,
     /// Things the user should know (e.g. level 0 upsampled from a smaller input).
     pub warnings: Vec<String>,
 }
@@ -612,9 +654,12 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
         footprint_samples: 1,
         evaluations_per_texel: 0.0,
         estimated_error: None,
+        fit: None,
     }];
     let (mut level_seconds, mut level_work) = (vec![0.0], vec![0u64]);
     let mut estimate_seconds = 0.0;
+    let mut fit_seconds = 0.0;
+    let lookup = params.target.spec().lod;
     for l in 1..n_baked {
         let t = Instant::now();
         let n = (size >> l).max(1);
@@ -623,35 +668,35 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
         // their footprint: the level is computed k× finer and box-reduced (exact means of the
         // fine texels, solid-angle weighted).
         let k = footprint_factor(n, r);
-        let fine = n * k;
-        let (fine_cube, work) = match &engine {
-            Engine::Reference => (
-                reference_level(&source, &texels, fine, r, progress),
-                (6 * fine * fine * texels.len()) as u64,
-            ),
-            Engine::Tree(tree, p) => {
-                let (cube, w) = tree_level(tree, fine, r, p, progress);
-                (cube, w.cell_evaluations)
-            }
-            Engine::Fis(pyr, count) => {
-                let table = SampleTable::build(r, *count, pyr.size(), LOD_BIAS, pyr.max_lod());
-                (
-                    filter_level(pyr, &table, fine, progress),
-                    (6 * fine * fine * table.len()) as u64,
-                )
-            }
-        };
+        let (fine_cube, work) = convolve_level(&engine, &source, &texels, n, r, progress);
         level_seconds.push(t.elapsed().as_secs_f64());
-        level_work.push(work);
         let te = Instant::now();
         // The estimate compares the computed texels (the fine ones when a footprint is
         // averaged: the reduction itself is exact) with the brute force.
         let estimated_error = (!params.reference).then(|| estimate_error(&fine_cube, &texels, r));
         estimate_seconds += te.elapsed().as_secs_f64();
-        let mut cube = fine_cube;
-        while cube.size > n {
-            cube = cube.downsample();
+        let mut cube = reduce_to(fine_cube, n);
+        let tf = Instant::now();
+        let mut fit = None;
+        let mut fit_work = 0;
+        // The last level stays exact: at r = 1 the lookup reads it alone (see crate::fit).
+        if params.fits_lookup() && l + 1 < n_chain {
+            let plan = fit::plan(lookup, l, n_chain, size, fit::FIT_NODES);
+            let mut exact_at = |r: f32| {
+                let (c, w) = convolve_level(&engine, &source, &texels, n, r, progress);
+                fit_work += w;
+                reduce_to(c, n)
+            };
+            let hi = plan.hi.map(&mut exact_at);
+            let at_nodes: Vec<Cubemap> = plan.nodes.iter().map(|q| exact_at(q.roughness)).collect();
+            // The finer neighbour as stored (already fitted: the sweep goes fine to coarse).
+            let lo = reduce_to(levels[l - 1].clone(), n);
+            let fitted = fit::fit_level(&plan, &cube, &lo, hi.as_ref(), &at_nodes);
+            fit = Some(fit::LevelFit::new(&plan, &fitted, &cube));
+            cube = fitted;
         }
+        fit_seconds += tf.elapsed().as_secs_f64();
+        level_work.push(work + fit_work);
         reports.push(LevelReport {
             level: l,
             size: n,
@@ -660,6 +705,7 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
             footprint_samples: k * k,
             evaluations_per_texel: work as f64 / (6 * n * n) as f64,
             estimated_error,
+            fit,
         });
         levels.push(cube);
     }
@@ -692,6 +738,7 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
         target: params.target,
         lookup: params.target.spec().lod.name(),
         level_roughness: (0..n_baked).map(|l| params.level_roughness(l)).collect(),
+        fit_lookup: params.fits_lookup(),
         source_size: src_size,
         tree: matches!(engine, Engine::Tree(..)).then(|| params.quality.tree_params()),
         fis_samples: matches!(engine, Engine::Fis(..)).then(|| params.fis_samples()),
@@ -753,8 +800,48 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
         source_seconds,
         estimate_seconds,
         runtime_seconds,
+        fit_seconds,
         warnings,
     })
+}
+
+/// Level texels at roughness `r` by the chosen method: `n`×`n` faces, computed k× finer where
+/// the footprint is averaged ([`footprint_factor`]; [`reduce_to`] gives the level), and the
+/// kernel evaluations spent.
+fn convolve_level(
+    engine: &Engine,
+    source: &Cubemap,
+    texels: &SourceTexels,
+    n: usize,
+    r: f32,
+    progress: &dyn Progress,
+) -> (Cubemap, u64) {
+    let fine = n * footprint_factor(n, r);
+    match engine {
+        Engine::Reference => (
+            reference_level(source, texels, fine, r, progress),
+            (6 * fine * fine * texels.len()) as u64,
+        ),
+        Engine::Tree(tree, p) => {
+            let (cube, w) = tree_level(tree, fine, r, p, progress);
+            (cube, w.cell_evaluations)
+        }
+        Engine::Fis(pyr, count) => {
+            let table = SampleTable::build(r, *count, pyr.size(), LOD_BIAS, pyr.max_lod());
+            (
+                filter_level(pyr, &table, fine, progress),
+                (6 * fine * fine * table.len()) as u64,
+            )
+        }
+    }
+}
+
+/// Box-reduces `cube` to `n`×`n` faces (exact footprint means of its texels).
+fn reduce_to(mut cube: Cubemap, n: usize) -> Cubemap {
+    while cube.size > n {
+        cube = cube.downsample();
+    }
+    cube
 }
 
 /// A texel's edge must be at most this fraction of the lobe's width α (radians) to be stored
@@ -838,7 +925,11 @@ mod tests {
         assert_eq!(from_ron, Params::default());
         assert_eq!(Params::default().size, 256);
         assert_eq!(Params::default().quality, Quality::Default);
-        assert_eq!(Params::default().chain_levels(), 6);
+        // gltf's default chain is its TargetSpec row: 7 levels on 256², down to 4×4.
+        let gltf = Target::Gltf.spec();
+        assert_eq!((gltf.size, gltf.levels), (256, 7));
+        assert_eq!(Params::default().chain_levels(), gltf.levels);
+        assert_eq!(mip_sizes(256, GLTF_SMALLEST_FACE).last(), Some(&4));
         let p: Params =
             ron::from_str("(size: 64, levels: Some(4), quality: high, layout: Some(ktx2))")
                 .unwrap();
@@ -950,10 +1041,13 @@ mod tests {
         src.faces[Face::Py as usize].data[k..k + 3].copy_from_slice(&[5000.0, 4000.0, 3000.0]);
         let p0 = power(&src);
         for target in [Target::Gltf, Target::Filament, Target::Unity] {
+            // The exact levels: the lookup fit (on by default for gltf) moves levels 1… by
+            // design and with them their power (crate::fit).
             let params = Params {
                 size: 16,
                 levels: Some(5),
                 target,
+                fit_lookup: Some(false),
                 ..Default::default()
             };
             let chain = bake_chain(&params, &Environment::Cube(src.clone()), &NoProgress).unwrap();

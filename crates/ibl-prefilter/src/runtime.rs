@@ -265,6 +265,7 @@ mod tests {
         let params = Params {
             size: 32,
             levels: Some(3),
+            fit_lookup: Some(false),
             ..Default::default()
         };
         let chain = bake_chain(&params, &env, &NoProgress).unwrap();

@@ -497,7 +497,7 @@ pub fn score(
 }
 
 /// The split-sum baseline for a working cube: `ibl-prefilter`'s chain at level-0 size
-/// `ss_size` (its defaults: levels down to 8², r = l/(N−1)) and `ibl-lut`'s DFG table.
+/// `ss_size` (its defaults: levels down to 4², r = l/(N−1)) and `ibl-lut`'s DFG table.
 pub fn default_split_sum(cube: &Cubemap, ss_size: usize) -> crate::Result<SplitSum> {
     let chain = crate::splitsum::shared_chain(cube, ss_size)?;
     let levels = chain.levels.len();

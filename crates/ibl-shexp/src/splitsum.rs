@@ -67,11 +67,13 @@ impl SplitSum {
 }
 
 /// The shared prefiltered chain: `ibl-prefilter`'s bake at level-0 size `size` with its
-/// defaults (levels halving down to 8², r = l/(N−1), filtered importance sampling at its
-/// default quality), from the working cube.
+/// defaults (levels halving down to 4², r = l/(N−1), filtered importance sampling at its
+/// default quality), from the working cube; its levels the exact kernel (not fitted to the
+/// lookup), as the references they are compared with.
 pub(crate) fn shared_chain(source: &Cubemap, size: usize) -> crate::Result<CubeMips> {
     let params = ibl_prefilter::Params {
         size,
+        fit_lookup: Some(false),
         ..Default::default()
     };
     let env = ibl_core::envmap::Environment::Cube(source.clone());
@@ -170,11 +172,11 @@ mod tests {
             "shared",
         );
         let b = SplitSum::new(
-            &prefilter_chain(&cube, 32, 3, 1, 1024),
+            &prefilter_chain(&cube, 32, 4, 1, 1024),
             Dfg::baked(8, 64),
             "fallback",
         );
-        assert_eq!(a.levels(), 3);
+        assert_eq!(a.levels(), 4);
         for r in [0.5f32, 0.75, 1.0] {
             let (mut num, mut den) = (0.0f64, 0.0f64);
             for k in 0..500 {

@@ -108,9 +108,8 @@ impl LodMapping {
         r.clamp(0.0, 1.0)
     }
 
-    #[cfg(test)]
-    /// Roughness of every level of a chain.
-    pub(crate) fn level_roughnesses(self, levels: usize, size: usize) -> Vec<f32> {
+    /// Roughness of every level of a chain (the runtime bench's floor table reads it).
+    pub fn level_roughnesses(self, levels: usize, size: usize) -> Vec<f32> {
         (0..levels)
             .map(|l| self.level_roughness(l, levels, size))
             .collect()

@@ -32,8 +32,8 @@ fn faces_layout_writes_every_level_and_the_report() {
         "-q",
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    // Default levels: down to 8×8 faces → 32, 16, 8.
-    for (l, n) in [(0, 32usize), (1, 16), (2, 8)] {
+    // Default levels: down to 4×4 faces → 32, 16, 8, 4.
+    for (l, n) in [(0, 32usize), (1, 16), (2, 8), (3, 4)] {
         for f in FACES {
             let img =
                 io::read_image(&out.join(format!("m{l}_{f}.exr")), ColorSpace::Linear).unwrap();
@@ -41,19 +41,32 @@ fn faces_layout_writes_every_level_and_the_report() {
             assert!(img.data.iter().all(|v| v.is_finite() && *v >= 0.0));
         }
     }
-    assert_eq!(files_in(&out).len(), 3 * 6 + 1, "{:?}", files_in(&out));
+    assert_eq!(files_in(&out).len(), 4 * 6 + 1, "{:?}", files_in(&out));
     let r = report(&out);
     assert_eq!(r["size"], 32);
-    assert_eq!(r["levels"], 3);
-    assert_eq!(r["chain_levels"], 3);
+    assert_eq!(r["levels"], 4);
+    assert_eq!(r["chain_levels"], 4);
     assert_eq!(r["method"], "tree");
     assert_eq!(r["quality"], "default");
     let levels = r["level"].as_array().unwrap();
+    // gltf fits its inner levels to the lookup by default and says how far each moved; the
+    // mirror and the last level stay exact.
+    assert_eq!(r["fit_lookup"], true);
+    let moved: Vec<bool> = levels.iter().map(|l| !l["fit"].is_null()).collect();
+    assert_eq!(moved, [false, true, true, false]);
+    for l in &levels[1..3] {
+        let m = l["fit"]["mean_abs_rel_from_exact"].as_f64().unwrap();
+        assert!(m > 0.0 && m < 0.5, "{l}");
+    }
     let rough: Vec<f64> = levels
         .iter()
         .map(|l| l["roughness"].as_f64().unwrap())
         .collect();
-    assert_eq!(rough, vec![0.0, 0.5, 1.0]);
+    let want = [0.0, 1.0 / 3.0, 2.0 / 3.0, 1.0];
+    assert!(
+        rough.iter().zip(want).all(|(a, b)| (a - b).abs() < 1e-6) && rough.len() == 4,
+        "{rough:?}"
+    );
     assert!(levels[0]["estimated_error"].is_null());
     for l in &levels[1..] {
         let e = l["estimated_error"]["mean_abs_rel"].as_f64().unwrap();
@@ -232,6 +245,8 @@ fn half_json_reference_and_folder_input() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let r = report(&again);
     assert_eq!(r["method"], "reference");
+    // The brute-force reference is the exact kernel at every level: never fitted.
+    assert_eq!(r["fit_lookup"], false);
     assert_eq!(r["source_size"], 8);
 }
 
@@ -344,7 +359,7 @@ fn bad_inputs_fail_with_one_line_and_write_nothing() {
 fn every_container_and_format_reads_back_within_the_reported_error() {
     let tmp = tempfile::tempdir().unwrap();
     let input = fixture("hdri/interior_256.exr");
-    // 64² down to 8×8, the default chain's smallest face (BC6H is bounded there, see below).
+    // 64² down to 8×8 (BC6H is bounded there, see below; the default chain goes on to 4×4).
     let float_dir = tmp.path().join("float");
     quick_sized(&input, &float_dir, "64", "4", &["--layout", "ktx2"]);
     let float = ibl_core::envmap::read_cube_chain(&float_dir.join("prefilter.ktx2")).unwrap();
@@ -377,7 +392,7 @@ fn every_container_and_format_reads_back_within_the_reported_error() {
                     "{file:?} {l}"
                 );
                 assert!((reported["max_rel"].as_f64().unwrap() - max).abs() < 1e-12);
-                // BC6H: under 3% down to 8×8 faces (the default chain's smallest); below, one
+                // BC6H: under 3% down to 8×8 faces; below (the default chain's 4×4), one
                 // block spans a quarter face or more and its 16 steps cost a few percent.
                 let bound = match format {
                     "rgba16f" => 2f64.powi(-11),

@@ -1,0 +1,463 @@
+//! Levels fitted to the engine's lookup (`--fit-lookup`): what each level stores so that the
+//! blend an engine makes between levels matches the exact kernel at continuous roughness,
+//! instead of each level being the exact kernel at its own roughness only.
+//!
+//! An engine reads level j with weight w_j(r) = max(0, 1 − |lod(r) − j|), its lod mapping fixed
+//! (`ibl_target::LodMapping`). Between levels the blend of two GGX lobes is not the lobe at the
+//! roughness between them: near a small bright source the peak radiance goes as 1/α² = r⁻⁴,
+//! a convex function of r, so the blend of two exact levels overshoots there (and a level's
+//! tail undershoots). The mapping being fixed, the stored values are ours to choose.
+//!
+//! Per texel and channel, level l stores L_l = P(r_l) + δ_l, P(r) the exact kernel at r
+//! filtered at level l's resolution, with δ_l the minimax step: the one that minimises the
+//! largest relative error of the lookup, max over r of |Σ_j w_j(r) L_j − P(r)| / Y(P(r)) (Y the
+//! luminance, as the runtime report measures), over r_l and [`FIT_NODES`] nodes a side of it in
+//! [r_{l−1}, r_{l+1}]. The runtime report takes the worst roughness, so the worst is what is
+//! minimised: a least-squares fit measured worse, trading a large error at r_l itself for the
+//! middle of the interval (studio, 64² × 5 levels: 26% → 52% at r = r_1; minimax: 17%).
+//!
+//! The levels have different resolutions, so they are solved one at a time, fine to coarse (a
+//! Gauss–Seidel sweep): level l − 1 enters as stored (already fitted, box-reduced to level l's
+//! resolution; level 0, the mirror, stays exact), and the coarser level l + 1, not solved yet,
+//! is assumed to move by the same fraction of its value, δ_{l+1} = δ_l·P(r_{l+1})/P(r_l)
+//! (held at its exact value the fit over-corrects, l + 1 then moving the same way; moved by
+//! the same absolute δ a level whose values are 10× smaller would be off by 10× more). The
+//! lookup's error at a node is then affine in δ, |c_k + (w_l + w_{l+1}·P(r_{l+1})/P(r_l))·δ| /
+//! Y_k with c_k its error at δ = 0; the maximum of these is convex in δ and is minimised by a
+//! ternary search, δ ≥ −P(r_l) so that L ≥ 0.
+//!
+//! The last level stays exact (at r = 1 the lookup reads it alone), and level 1 is fitted over
+//! [r_1, r_2] only: between the mirror and level 1 no single value per texel can follow a small
+//! source (the exact blend is off by 100–250% there).
+
+use crate::bake::ErrorStats;
+use ibl_core::cube::Cubemap;
+use ibl_core::luminance;
+use ibl_target::LodMapping;
+use serde::Serialize;
+
+/// Nodes per side of a fitted level (midpoints of `FIT_NODES` equal steps in r).
+pub const FIT_NODES: usize = 2;
+
+/// A roughness at which the fit of level l compares the lookup with the exact kernel.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Node {
+    pub roughness: f32,
+    /// The engine's blend weights at this roughness of levels l − 1, l and l + 1.
+    pub w_lo: f64,
+    pub w_self: f64,
+    pub w_hi: f64,
+}
+
+/// What the fit of one level needs: the neighbours' roughness and the nodes.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Plan {
+    pub level: usize,
+    /// r_{l−1} (the mirror 0 for level 1).
+    pub lo: f32,
+    /// r_{l+1}, none for the chain's last level (or where the lookup never goes past l).
+    pub hi: Option<f32>,
+    pub nodes: Vec<Node>,
+}
+
+/// The engine's weight of level `j` at roughness `r`: its lod clamped to the chain, then linear
+/// between levels (a trilinear sampler).
+pub fn blend_weight(mapping: LodMapping, r: f32, levels: usize, size: usize, j: usize) -> f64 {
+    let lod = mapping.lod(r, levels, size) as f64;
+    (1.0 - (lod - j as f64).abs()).max(0.0)
+}
+
+/// The nodes of level `l` (≥ 1) of a chain of `levels` levels read through `mapping`:
+/// `per_side` midpoints of equal steps in r on [r_{l−1}, r_l] (not for level 1, next to the
+/// mirror) and on [r_l, r_{l+1}].
+pub fn plan(mapping: LodMapping, l: usize, levels: usize, size: usize, per_side: usize) -> Plan {
+    assert!(l >= 1 && l < levels, "level {l} of {levels} is not fitted");
+    let r_at = |j: usize| mapping.level_roughness(j, levels, size);
+    let (lo, rl) = (r_at(l - 1), r_at(l));
+    let hi = (l + 1 < levels).then(|| r_at(l + 1)).filter(|&h| h > rl);
+    let mut nodes = Vec::new();
+    let mut side = |a: f32, b: f32| {
+        let h = (b - a) as f64 / per_side as f64;
+        for i in 0..per_side {
+            let r = (a as f64 + (i as f64 + 0.5) * h) as f32;
+            let w = |j: usize| blend_weight(mapping, r, levels, size, j);
+            nodes.push(Node {
+                roughness: r,
+                w_lo: w(l - 1),
+                w_self: w(l),
+                w_hi: if l + 1 < levels { w(l + 1) } else { 0.0 },
+            });
+        }
+    };
+    // Not the interval next to the mirror: there the blend of a sharp image and a lobe is off
+    // by 100–250% at small sources whatever level 1 stores (measured, bench/runtime.md), and
+    // fitting it would pull level 1 far from its own roughness.
+    if rl > lo && l >= 2 {
+        side(lo, rl);
+    }
+    if let Some(h) = hi {
+        side(rl, h);
+    }
+    Plan {
+        level: l,
+        lo,
+        hi,
+        nodes,
+    }
+}
+
+/// The minimax step of one level (see the module doc): `exact` the kernel at r_l, `lo` the
+/// finer neighbour as stored (final), `hi` the coarser one's exact kernel, `at_nodes[k]` the
+/// kernel at `plan.nodes[k]`, all at the level's size. A texel whose weights vanish (black
+/// everywhere) keeps its exact value.
+pub fn fit_level(
+    plan: &Plan,
+    exact: &Cubemap,
+    lo: &Cubemap,
+    hi: Option<&Cubemap>,
+    at_nodes: &[Cubemap],
+) -> Cubemap {
+    assert_eq!(at_nodes.len(), plan.nodes.len());
+    let mut out = exact.clone();
+    let mut terms = Vec::with_capacity(plan.nodes.len() + 1);
+    for f in 0..6 {
+        let texels = exact.faces[f].data.len() / 3;
+        for t in 0..texels {
+            let px = |c: &Cubemap| {
+                let d = &c.faces[f].data[3 * t..3 * t + 3];
+                [d[0] as f64, d[1] as f64, d[2] as f64]
+            };
+            let (plo, phi, pl) = (px(lo), hi.map(px).unwrap_or([0.0; 3]), px(exact));
+            for c in 0..3 {
+                // The coarser level moves by the same fraction of its value.
+                let coarser_ratio = if pl[c] > 0.0 { phi[c] / pl[c] } else { 0.0 };
+                // The lookup's error at r_l and at each node, affine in the step δ.
+                terms.clear();
+                terms.push(Term::new(0.0, 1.0, luma(pl)));
+                for (node, cube) in plan.nodes.iter().zip(at_nodes) {
+                    let p = px(cube);
+                    let base = node.w_lo * plo[c] + node.w_self * pl[c] + node.w_hi * phi[c];
+                    let slope = node.w_self + node.w_hi * coarser_ratio;
+                    terms.push(Term::new(base - p[c], slope, luma(p)));
+                }
+                let delta = minimax_step(&terms, -pl[c]);
+                let v = (pl[c] + delta).max(0.0);
+                if v.is_finite() {
+                    out.faces[f].data[3 * t + c] = v as f32;
+                }
+            }
+        }
+    }
+    out
+}
+
+fn luma(p: [f64; 3]) -> f64 {
+    luminance([p[0] as f32, p[1] as f32, p[2] as f32]) as f64
+}
+
+/// One roughness of a texel's fit: the lookup's error there is (offset + slope·δ), relative
+/// to `scale` (the exact luminance).
+#[derive(Clone, Copy, Debug)]
+struct Term {
+    offset: f64,
+    slope: f64,
+    scale: f64,
+}
+
+impl Term {
+    fn new(offset: f64, slope: f64, scale: f64) -> Self {
+        Term {
+            offset,
+            slope,
+            scale,
+        }
+    }
+}
+
+/// argmin over δ ≥ `lowest` of max_k |offset_k + slope_k·δ| / scale_k (terms with a zero
+/// scale, black there, left out; 0 when none is left). The maximum of convex functions is
+/// convex: a ternary search on a bracket holding every term's root.
+fn minimax_step(terms: &[Term], lowest: f64) -> f64 {
+    let live: Vec<Term> = terms
+        .iter()
+        .copied()
+        .filter(|t| t.scale > 0.0 && t.scale.is_finite() && t.offset.is_finite())
+        .collect();
+    if live.is_empty() {
+        return 0.0;
+    }
+    let worst = |d: f64| {
+        live.iter()
+            .map(|t| (t.offset + t.slope * d).abs() / t.scale)
+            .fold(0.0, f64::max)
+    };
+    let reach = live
+        .iter()
+        .filter(|t| t.slope > 0.0)
+        .map(|t| t.offset.abs() / t.slope)
+        .fold(0.0, f64::max);
+    let (mut a, mut b) = (lowest.max(-reach), reach.max(lowest));
+    for _ in 0..60 {
+        let (m1, m2) = (a + (b - a) / 3.0, b - (b - a) / 3.0);
+        if worst(m1) <= worst(m2) {
+            b = m2;
+        } else {
+            a = m1;
+        }
+    }
+    0.5 * (a + b)
+}
+
+/// What `prefilter.json` says of a fitted level: it is no longer the exact kernel at its
+/// roughness, and by how much.
+#[derive(Clone, Debug, Serialize)]
+pub struct LevelFit {
+    /// Roughness values the lookup was fitted at besides the level's own (the nodes).
+    pub roughness: Vec<f32>,
+    /// r of the neighbours: the finer one as stored, the coarser one assumed to move alike.
+    pub neighbours: Vec<f32>,
+    /// The stored level against the exact kernel at the level's own roughness (luminance,
+    /// every texel).
+    pub mean_abs_rel_from_exact: f64,
+    pub max_abs_rel_from_exact: f64,
+}
+
+impl LevelFit {
+    pub fn new(plan: &Plan, fitted: &Cubemap, exact: &Cubemap) -> Self {
+        let s = ErrorStats::between(fitted, exact);
+        LevelFit {
+            roughness: plan.nodes.iter().map(|n| n.roughness).collect(),
+            neighbours: std::iter::once(plan.lo).chain(plan.hi).collect(),
+            mean_abs_rel_from_exact: s.mean_abs_rel,
+            max_abs_rel_from_exact: s.max_abs_rel,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bake::{bake_chain, Params};
+    use glam::Vec3;
+    use ibl_core::envmap::{load_environment, Environment};
+    use ibl_core::progress::NoProgress;
+    use ibl_target::Target;
+
+    fn constant(v: [f32; 6]) -> Cubemap {
+        let mut c = Cubemap::new(1);
+        for (f, face) in c.faces.iter_mut().enumerate() {
+            face.data.fill(v[f]);
+        }
+        c
+    }
+
+    /// A peaked 1-D toy per texel: P(r) = s·(r² + 0.01)⁻², a different scale s per face.
+    fn toy(r: f64, s: f64) -> f64 {
+        s * (r * r + 0.01).powi(-2)
+    }
+
+    /// Independent of the plan and of the search: the lookup's weights by hand (lod = 4r on
+    /// 5 levels, r_j = j/4), its worst relative error over a dense grid of r on the level's
+    /// range (level l moved by δ, the coarser level by the same fraction of its value),
+    /// minimised by a dense scan of δ
+    /// then refined. The fit with many nodes reaches the same worst error, below the exact
+    /// level's where the blend overshoots.
+    #[test]
+    fn minimax_step_matches_a_brute_force_scan() {
+        let scales = [1.0, 0.5, 3.0, 0.01, 7.0, 100.0];
+        for l in [1usize, 2, 3, 4] {
+            let plan = plan(LodMapping::Linear, l, 5, 64, 400);
+            let at = |r: f32| constant(scales.map(|s| toy(r as f64, s) as f32));
+            let nodes: Vec<Cubemap> = plan.nodes.iter().map(|q| at(q.roughness)).collect();
+            // A finer neighbour that is not its exact value (as after its own fit).
+            let lo_stored = |s: f64| 0.9 * toy((l - 1) as f64 / 4.0, s);
+            let lo = constant(scales.map(|s| lo_stored(s) as f32));
+            let hi = plan.hi.map(at);
+            let got = fit_level(&plan, &at(l as f32 / 4.0), &lo, hi.as_ref(), &nodes);
+            for (f, &s) in scales.iter().enumerate() {
+                let pj = |j: usize| toy(j as f64 / 4.0, s);
+                // Level 1 is fitted over [r_1, r_2] only (not next to the mirror).
+                let a = if l == 1 { 0.25 } else { (l - 1) as f64 / 4.0 };
+                let b = ((l + 1).min(4)) as f64 / 4.0;
+                let worst = |delta: f64| {
+                    let steps = 4000;
+                    (0..=steps)
+                        .map(|k| {
+                            let r = a + (b - a) * k as f64 / steps as f64;
+                            let lod = 4.0 * r;
+                            let w = |j: usize| (1.0 - (lod - j as f64).abs()).max(0.0);
+                            let mut v = w(l - 1) * lo_stored(s) + w(l) * (pj(l) + delta);
+                            if l < 4 {
+                                v += w(l + 1) * pj(l + 1) * (1.0 + delta / pj(l));
+                            }
+                            ((v - toy(r, s)) / toy(r, s)).abs()
+                        })
+                        .fold(0.0, f64::max)
+                };
+                let p0 = pj(l);
+                let grid = (0..=2000).map(|k| -p0 + 3.0 * p0 * k as f64 / 2000.0);
+                let mut best = grid.fold((f64::MAX, 0.0), |acc, d| {
+                    let e = worst(d);
+                    if e < acc.0 {
+                        (e, d)
+                    } else {
+                        acc
+                    }
+                });
+                let step = 3.0 * p0 / 2000.0;
+                for k in -100..=100 {
+                    let d = best.1 + step * k as f64 / 100.0;
+                    let e = worst(d);
+                    if e < best.0 {
+                        best = (e, d);
+                    }
+                }
+                let fitted = got.faces[f].data[0] as f64;
+                let reached = worst(fitted - p0);
+                assert!(
+                    (reached - best.0).abs() < 2e-3 * best.0 + 1e-6,
+                    "level {l} face {f}: fit {fitted} reaches {reached}, brute force {} at {}",
+                    best.0,
+                    p0 + best.1
+                );
+                assert!(
+                    reached <= worst(0.0) * (1.0 + 1e-3) + 1e-9,
+                    "level {l}: {reached} vs exact {}",
+                    worst(0.0)
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn minimax_step_handles_black_and_degenerate_terms() {
+        // Black everywhere: no step. One term: its root.
+        let t = |o, s, y| Term::new(o, s, y);
+        assert_eq!(
+            minimax_step(&[t(0.0, 1.0, 0.0), t(1.0, 0.5, 0.0)], -1.0),
+            0.0
+        );
+        assert!((minimax_step(&[t(-2.0, 0.5, 1.0)], -10.0) - 4.0).abs() < 1e-9);
+        // Two terms pulling apart: the step balances them, |d| / 1 = |2 + d| / 2 → d = −2/3.
+        let d = minimax_step(&[t(0.0, 1.0, 1.0), t(2.0, 1.0, 2.0)], -10.0);
+        assert!((d + 2.0 / 3.0).abs() < 1e-9, "{d}");
+        // Never below the floor that keeps the level non-negative.
+        assert!(minimax_step(&[t(5.0, 1.0, 1.0)], -1.0) >= -1.0);
+    }
+
+    fn worst_runtime(chain: &crate::bake::Chain, a: f32, b: f32) -> f64 {
+        let rt = chain.report.runtime.as_ref().unwrap();
+        rt.roughness
+            .iter()
+            .zip(&rt.mean_abs_rel)
+            .filter(|(r, _)| **r >= a && **r <= b)
+            .map(|(_, e)| *e)
+            .fold(0.0, f64::max)
+    }
+
+    #[test]
+    fn fitted_chain_has_a_lower_runtime_error_on_a_fixture() {
+        let path = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+            .join("../../fixtures/hdri/studio_256.exr");
+        let env = load_environment(&path, false).unwrap().env;
+        let base = Params {
+            size: 64,
+            levels: Some(5),
+            ..Default::default()
+        };
+        let bake = |fit| {
+            let p = Params {
+                fit_lookup: Some(fit),
+                ..base.clone()
+            };
+            bake_chain(&p, &env, &NoProgress).unwrap()
+        };
+        let (exact, fitted) = (bake(false), bake(true));
+        let (e, f) = (
+            worst_runtime(&exact, 0.25, 1.0),
+            worst_runtime(&fitted, 0.25, 1.0),
+        );
+        eprintln!("studio 64² × 5, worst over r ∈ [0.25, 1]: exact {e:.4}, fitted {f:.4}");
+        assert!(f < 0.8 * e, "fitted {f} vs exact {e}");
+        // The report says the fitted levels moved, the mirror and the last level did not.
+        assert!(fitted.report.fit_lookup && !exact.report.fit_lookup);
+        let lv = &fitted.report.level;
+        assert!(lv[0].fit.is_none() && lv[4].fit.is_none());
+        for lv in &lv[1..4] {
+            let fit = lv.fit.as_ref().unwrap();
+            assert!(fit.mean_abs_rel_from_exact > 0.0, "level {}", lv.level);
+            let sides = if lv.level == 1 { 1 } else { 2 };
+            assert_eq!(fit.roughness.len(), sides * FIT_NODES);
+        }
+        for (l, (a, b)) in fitted
+            .mips
+            .levels
+            .iter()
+            .zip(&exact.mips.levels)
+            .enumerate()
+        {
+            assert_eq!(a == b, l == 0 || l == 4, "level {l}");
+        }
+        assert!(exact.report.level.iter().all(|l| l.fit.is_none()));
+    }
+
+    #[test]
+    fn a_bright_sun_and_a_black_environment_stay_finite_and_non_negative() {
+        let sun = Cubemap::from_fn(32, |d| {
+            let d = d.normalize();
+            if d.dot(Vec3::new(0.3, 0.8, 0.52).normalize()) > 0.999 {
+                [1e5, 9e4, 7e4]
+            } else {
+                [0.01, 0.02, 0.03]
+            }
+        });
+        for (name, cube) in [("sun", sun), ("black", Cubemap::new(32))] {
+            let p = Params {
+                size: 16,
+                fit_lookup: Some(true),
+                ..Default::default()
+            };
+            let chain = bake_chain(&p, &Environment::Cube(cube), &NoProgress).unwrap();
+            for (l, level) in chain.mips.levels.iter().enumerate() {
+                for face in &level.faces {
+                    assert!(
+                        face.data.iter().all(|v| v.is_finite() && *v >= 0.0),
+                        "{name} level {l}"
+                    );
+                }
+            }
+            if name == "black" {
+                assert!(chain
+                    .mips
+                    .levels
+                    .iter()
+                    .all(|c| c.faces.iter().all(|f| f.data.iter().all(|v| *v == 0.0))));
+            }
+        }
+    }
+
+    #[test]
+    fn fitted_chain_is_identical_for_any_thread_count() {
+        let env = Environment::Cube(Cubemap::from_fn(32, |d| {
+            let d = d.normalize();
+            let spot = (d.dot(Vec3::new(-0.5, 0.6, 0.62).normalize()) - 0.95).max(0.0) * 500.0;
+            [0.3 + d.y.max(0.0) + spot, 0.2 + spot, 0.4 + 0.5 * spot]
+        }));
+        let p = Params {
+            size: 32,
+            levels: Some(5),
+            target: Target::Filament,
+            fit_lookup: Some(true),
+            ..Default::default()
+        };
+        let run = |threads: usize| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| bake_chain(&p, &env, &NoProgress).unwrap().mips)
+        };
+        let one = run(1);
+        assert!(one == run(2) && one == run(3));
+    }
+}
