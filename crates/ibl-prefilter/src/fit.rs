@@ -42,21 +42,26 @@ pub const FIT_NODES: usize = 2;
 /// A roughness at which the fit of level l compares the lookup with the exact kernel.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Node {
+    /// The node's roughness r.
     pub roughness: f32,
-    /// The engine's blend weights at this roughness of levels l − 1, l and l + 1.
+    /// The engine's blend weight at this roughness of level l − 1.
     pub w_lo: f64,
+    /// The engine's blend weight at this roughness of level l itself.
     pub w_self: f64,
+    /// The engine's blend weight at this roughness of level l + 1.
     pub w_hi: f64,
 }
 
 /// What the fit of one level needs: the neighbours' roughness and the nodes.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Plan {
+    /// The level l being fitted.
     pub level: usize,
     /// r_{l−1} (the mirror 0 for level 1).
     pub lo: f32,
     /// r_{l+1}, none for the chain's last level (or where the lookup never goes past l).
     pub hi: Option<f32>,
+    /// Where the lookup is compared with the exact kernel, `FIT_NODES` each side of r_l.
     pub nodes: Vec<Node>,
 }
 
@@ -219,10 +224,12 @@ pub struct LevelFit {
     /// The stored level against the exact kernel at the level's own roughness (luminance,
     /// every texel).
     pub mean_abs_rel_from_exact: f64,
+    /// The largest of those per-texel relative deviations.
     pub max_abs_rel_from_exact: f64,
 }
 
 impl LevelFit {
+    /// The report of level `plan.level`: the stored (`fitted`) level against the `exact` one.
     pub fn new(plan: &Plan, fitted: &Cubemap, exact: &Cubemap) -> Self {
         let s = ErrorStats::between(fitted, exact);
         LevelFit {
