@@ -9,6 +9,7 @@
 //! [`reference`] holds the independent quadratures the tests and the benchmark compare with.
 
 pub mod as_size_bias;
+mod bake_def;
 pub mod dfg;
 pub mod error;
 pub mod fresnel_tail;
@@ -16,5 +17,6 @@ pub mod hv;
 pub mod reference;
 pub mod table;
 
+pub use bake_def::{AsSizeBias, Dfg, FresnelTail, HvLut, AS_SIZE_BIAS, DFG, FRESNEL_TAIL, HV_LUT};
 pub use error::{Error, Result};
 pub use table::Baked;

@@ -8,6 +8,7 @@
 //! texel stores a vector v as v·0.5 + 0.5, texture coordinates are texel centres
 //! u = (i + 0.5)/W, v = (j + 0.5)/H with row j = 0 stored first.
 
+mod bake_def;
 pub mod batch;
 pub mod direction;
 pub mod error;
@@ -19,4 +20,5 @@ pub mod quat_map;
 pub mod quaternion;
 pub mod tpr_map;
 
+pub use bake_def::{QuatMap, TprMap, QUAT_MAP, TPR_MAP};
 pub use error::{MaterialError, Result};

@@ -13,6 +13,7 @@
 //! Every candidate is listed, needed or not, so `bake plan` shows each decision.
 
 use crate::error::Diagnostic;
+use crate::kinds::scene_kinds as K;
 use crate::kinds::{self, AnyParams};
 use crate::schema::{Input, Model, Pipeline, Scene, Serving};
 
@@ -40,18 +41,20 @@ pub struct Derived {
 pub type SceneInput = (String, Input, usize);
 
 /// The kinds the scene uses, with what the scene overrides in their parameters.
-pub const SCENE_KINDS: [&str; 10] = [
-    "equirect-to-cube",
-    "irradiance",
-    "prefilter",
-    "shexp-fit",
-    "dfg",
-    "fresnel-tail",
-    "hv-lut",
-    "as-size-bias",
-    "quat-map",
-    "tpr-map",
-];
+pub fn scene_kinds() -> [&'static str; 10] {
+    [
+        K::equirect_to_cube(),
+        K::irradiance(),
+        K::prefilter(),
+        K::shexp_fit(),
+        K::dfg(),
+        K::fresnel_tail(),
+        K::hv_lut(),
+        K::as_size_bias(),
+        K::quat_map(),
+        K::tpr_map(),
+    ]
+}
 
 struct Builder<'a> {
     pipeline: &'a Pipeline,
@@ -159,7 +162,7 @@ pub fn derive(
         let cube = format!("{}/cube", probe.id);
         b.stage(
             cube.clone(),
-            "equirect-to-cube",
+            K::equirect_to_cube(),
             vec![env],
             Needed(format!("environment of probe '{}'", probe.id)),
             &[],
@@ -167,7 +170,7 @@ pub fn derive(
         );
         b.stage(
             format!("{}/irradiance", probe.id),
-            "irradiance",
+            K::irradiance(),
             vec![cube.clone()],
             Needed(format!("diffuse lighting of probe '{}'", probe.id)),
             &[],
@@ -194,7 +197,7 @@ pub fn derive(
         };
         b.stage(
             format!("{}/prefilter", probe.id),
-            "prefilter",
+            K::prefilter(),
             vec![cube.clone()],
             pre,
             &[("max_roughness", serde_json::json!(probe.max_roughness))],
@@ -202,7 +205,7 @@ pub fn derive(
         );
         b.stage(
             format!("{}/shexp", probe.id),
-            "shexp-fit",
+            K::shexp_fit(),
             vec![cube],
             fit,
             &[],
@@ -226,7 +229,7 @@ pub fn derive(
             quoted(&split_sum)
         ))
     };
-    b.stage("dfg".into(), "dfg", vec![], dfg, &[], scene.offset);
+    b.stage(K::dfg().into(), K::dfg(), vec![], dfg, &[], scene.offset);
     let tail = if sh_exp.is_empty() {
         NotNeeded("not needed by the scene: no probe is served by SH-exp".into())
     } else {
@@ -236,8 +239,8 @@ pub fn derive(
         ))
     };
     b.stage(
-        "fresnel-tail".into(),
-        "fresnel-tail",
+        K::fresnel_tail().into(),
+        K::fresnel_tail(),
         vec![],
         tail,
         &[],
@@ -258,7 +261,7 @@ pub fn derive(
         }
     }
     if pairs.is_empty() {
-        for kind in ["hv-lut", "as-size-bias"] {
+        for kind in [K::hv_lut(), K::as_size_bias()] {
             b.stage(
                 kind.into(),
                 kind,
@@ -273,7 +276,7 @@ pub fn derive(
         // f64's Display is compact: 100 → "100", 0.5 → "0.5".
         let why = format!("anisotropic (n_u, n_v) = ({nu}, {nv}) of {}", quoted(users));
         let over = [("nu", serde_json::json!(nu)), ("nv", serde_json::json!(nv))];
-        for kind in ["hv-lut", "as-size-bias"] {
+        for kind in [K::hv_lut(), K::as_size_bias()] {
             b.stage(
                 format!("{kind}/{nu}x{nv}"),
                 kind,
@@ -303,7 +306,7 @@ pub fn derive(
         };
         b.stage(
             format!("{}/quat-map", m.id),
-            "quat-map",
+            K::quat_map(),
             vec![folder],
             quat,
             &[],
@@ -330,7 +333,7 @@ pub fn derive(
             .collect();
         b.stage(
             format!("{}/tpr-map", m.id),
-            "tpr-map",
+            K::tpr_map(),
             vec![],
             tpr,
             &over,

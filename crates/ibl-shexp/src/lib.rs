@@ -24,6 +24,7 @@
 //!   (1024 samples, mips ≥ 32², the same score). SH-exp loses mostly at α ≤ 0.36, where order-4
 //!   SH cannot hold the lobe-scale detail (per-α oracle fits reach 73%, 79% at P order 8), and
 //!   for the dielectric, where eq. 15 alone (exact E0) loses 19 of 96 cases.
+mod bake_def;
 pub mod basis;
 pub mod coeffs;
 pub mod dfg;
@@ -36,6 +37,7 @@ pub mod solve;
 pub mod splitsum;
 pub mod truth;
 
+pub use bake_def::{ShexpFit, SHEXP_FIT};
 pub use coeffs::Coeffs;
 
 use ibl_core::error::{Classify, ErrorClass};

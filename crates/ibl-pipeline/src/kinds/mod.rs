@@ -1,23 +1,15 @@
-//! The stage-kind registry: each kind is a small adapter from a kind name to a bake's `Params`
-//! type (the very struct its CLI parses), what it reads, where it writes, and a call to the
-//! bake library's pure `run`, whose encoded files the executor writes atomically.
+//! The stage-kind registry: every bake ([`ibl_bake::Bake`], defined once in its library and
+//! also the source of its command line) is a stage kind through one blanket adapter, which
+//! erases its `Params` type and runs it in-process; the executor writes the encoded files
+//! atomically.
 //!
-//! Adding a bake is one `static` [`Adapter`] in one of the submodules and one line in [`all`].
+//! Adding a bake is one line in [`all`].
 
 pub mod cli;
-mod env;
-#[cfg(feature = "lut")]
-mod lut;
-#[cfg(feature = "material")]
-mod material;
-#[cfg(feature = "prefilter")]
-mod prefilter;
-#[cfg(feature = "shexp")]
-mod shexp;
 
-use ibl_core::error::{Classify, ErrorClass};
+pub use ibl_bake::{ron_options, Arity, BakeError, BakeParams};
+use ibl_bake::{Bake, Job};
 use ibl_core::progress::Progress;
-use serde::{de::DeserializeOwned, Serialize};
 use std::any::Any;
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -26,21 +18,78 @@ use std::sync::Arc;
 /// Every stage kind this build of the runner knows, in the order `bake kinds` lists them.
 pub fn all() -> Vec<&'static dyn Kind> {
     #[allow(unused_mut)] // without the optional bakes nothing is pushed
-    let mut kinds: Vec<&'static dyn Kind> = vec![&env::EQUIRECT_TO_CUBE, &env::IRRADIANCE];
+    let mut kinds: Vec<&'static dyn Kind> = vec![&ibl_env::EQUIRECT_TO_CUBE, &ibl_env::IRRADIANCE];
     #[cfg(feature = "prefilter")]
-    kinds.push(&prefilter::PREFILTER);
+    kinds.push(&ibl_prefilter::PREFILTER);
     #[cfg(feature = "shexp")]
-    kinds.push(&shexp::SHEXP_FIT);
+    kinds.push(&ibl_shexp::SHEXP_FIT);
     #[cfg(feature = "lut")]
     kinds.extend([
-        &lut::DFG as &dyn Kind,
-        &lut::FRESNEL_TAIL,
-        &lut::HV_LUT,
-        &lut::AS_SIZE_BIAS,
+        &ibl_lut::DFG as &dyn Kind,
+        &ibl_lut::FRESNEL_TAIL,
+        &ibl_lut::HV_LUT,
+        &ibl_lut::AS_SIZE_BIAS,
     ]);
     #[cfg(feature = "material")]
-    kinds.extend([&material::QUAT_MAP as &dyn Kind, &material::TPR_MAP]);
+    kinds.extend([&ibl_material::QUAT_MAP as &dyn Kind, &ibl_material::TPR_MAP]);
     kinds
+}
+
+/// The name of a bake the scene derives, through the bake itself; a build without the bake's
+/// library (its feature off) still knows the name, to say the scene needs it.
+macro_rules! kind_name {
+    ($feature:literal, $bake:ty, $name:literal) => {{
+        #[cfg(feature = $feature)]
+        let name = <$bake as Bake>::NAME;
+        #[cfg(not(feature = $feature))]
+        let name = $name;
+        name
+    }};
+}
+
+/// The kinds a scene derives, named through their bakes.
+pub mod scene_kinds {
+    use super::Bake;
+    /// `equirect-to-cube`.
+    pub fn equirect_to_cube() -> &'static str {
+        ibl_env::EquirectToCube::NAME
+    }
+    /// `irradiance`.
+    pub fn irradiance() -> &'static str {
+        ibl_env::Irradiance::NAME
+    }
+    /// `prefilter`.
+    pub fn prefilter() -> &'static str {
+        kind_name!("prefilter", ibl_prefilter::Prefilter, "prefilter")
+    }
+    /// `shexp-fit`.
+    pub fn shexp_fit() -> &'static str {
+        kind_name!("shexp", ibl_shexp::ShexpFit, "shexp-fit")
+    }
+    /// `dfg`.
+    pub fn dfg() -> &'static str {
+        kind_name!("lut", ibl_lut::Dfg, "dfg")
+    }
+    /// `fresnel-tail`.
+    pub fn fresnel_tail() -> &'static str {
+        kind_name!("lut", ibl_lut::FresnelTail, "fresnel-tail")
+    }
+    /// `hv-lut`.
+    pub fn hv_lut() -> &'static str {
+        kind_name!("lut", ibl_lut::HvLut, "hv-lut")
+    }
+    /// `as-size-bias`.
+    pub fn as_size_bias() -> &'static str {
+        kind_name!("lut", ibl_lut::AsSizeBias, "as-size-bias")
+    }
+    /// `quat-map`.
+    pub fn quat_map() -> &'static str {
+        kind_name!("material", ibl_material::QuatMap, "quat-map")
+    }
+    /// `tpr-map`.
+    pub fn tpr_map() -> &'static str {
+        kind_name!("material", ibl_material::TprMap, "tpr-map")
+    }
 }
 
 /// The kind called `name`.
@@ -51,35 +100,6 @@ pub fn find(name: &str) -> Option<&'static dyn Kind> {
 /// Names of all kinds, for error messages.
 pub fn names() -> Vec<&'static str> {
     all().iter().map(|k| k.name()).collect()
-}
-
-/// What a `Params` struct must be to serve as a stage's parameters: the CLI's clap struct, the
-/// RON keys via serde, with clap's defaults as `Default`.
-pub trait BakeParams:
-    clap::Args
-    + clap::FromArgMatches
-    + Serialize
-    + DeserializeOwned
-    + Default
-    + Clone
-    + fmt::Debug
-    + Send
-    + Sync
-    + 'static
-{
-}
-impl<T> BakeParams for T where
-    T: clap::Args
-        + clap::FromArgMatches
-        + Serialize
-        + DeserializeOwned
-        + Default
-        + Clone
-        + fmt::Debug
-        + Send
-        + Sync
-        + 'static
-{
 }
 
 /// A stage's parameters with their type erased (the kind that parsed them knows it).
@@ -107,15 +127,6 @@ impl<P: BakeParams> ParamsObj for P {
     }
     fn cli_args(&self) -> Result<Vec<String>, String> {
         cli::to_args(self)
-    }
-}
-
-impl<P: BakeParams> Adapter<P> {
-    fn in_ron_terms(&self, e: BakeError) -> BakeError {
-        BakeError {
-            message: ron_terms(&e.message, &self.param_names()),
-            ..e
-        }
     }
 }
 
@@ -158,60 +169,6 @@ pub fn ron_terms(message: &str, names: &[String]) -> String {
 /// The canonical text of parameters hashed into cache keys.
 pub fn canonical_text(p: &AnyParams) -> String {
     serde_json::to_string(&p.canonical()).expect("JSON value prints")
-}
-
-/// How many sources a kind reads, and what they are.
-#[derive(Clone, Copy, Debug)]
-pub struct Arity {
-    pub min: usize,
-    pub max: usize,
-    /// What each source is, for messages ("an environment: equirect, cube folder or KTX2").
-    pub what: &'static str,
-}
-
-impl Arity {
-    pub const NONE: Arity = Arity {
-        min: 0,
-        max: 0,
-        what: "nothing",
-    };
-    pub const fn one(what: &'static str) -> Arity {
-        Arity {
-            min: 1,
-            max: 1,
-            what,
-        }
-    }
-    pub fn describe(&self) -> String {
-        match (self.min, self.max) {
-            (0, 0) => "reads nothing".to_string(),
-            (a, b) if a == b => format!("reads exactly {a} ({})", self.what),
-            (a, usize::MAX) => format!("reads at least {a} ({})", self.what),
-            (a, b) => format!("reads {a} to {b} ({})", self.what),
-        }
-    }
-}
-
-/// A bake's failure as the runner keeps it: its one-line message and exit-code class.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct BakeError {
-    pub message: String,
-    pub class: ErrorClass,
-}
-
-impl<E: Classify + 'static> From<E> for BakeError {
-    fn from(e: E) -> Self {
-        BakeError {
-            message: crate::error::error_chain(&e),
-            class: e.class(),
-        }
-    }
-}
-
-impl fmt::Display for BakeError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(&self.message)
-    }
 }
 
 /// What a bake produced: encoded files (not yet written) and warnings for the log.
@@ -276,44 +233,8 @@ pub trait Kind: Send + Sync {
     ) -> Result<Vec<Vec<String>>, String>;
     /// Checks that `p` survives `Params → CLI args → clap → Params` unchanged.
     fn cli_round_trip(&self, p: &AnyParams) -> Result<Vec<String>, String>;
-}
-
-/// Lists the files a run writes, given the resolved inputs and the `-o` path.
-pub type OutputsFn<P> = fn(&P, &[PathBuf], &Path) -> Result<Vec<PathBuf>, BakeError>;
-/// Runs the bake in-process, given the resolved inputs and the `-o` path.
-pub type RunFn<P> = fn(&P, &[PathBuf], &Path, &dyn Progress) -> Result<Baked, BakeError>;
-/// Writes the CLI commands of a stage: inputs, stage folder, how to write a path.
-pub type ArgvFn<P> =
-    fn(&P, &[PathBuf], &Path, &dyn Fn(&Path) -> PathBuf) -> Result<Vec<Vec<String>>, String>;
-
-/// The adapter behind every kind: plain functions over the bake's own `Params` type.
-pub struct Adapter<P> {
-    pub name: &'static str,
-    pub summary: &'static str,
-    pub command: &'static [&'static str],
-    pub package: &'static str,
-    /// The library crate whose `run` the bake is (see [`Kind::library`]).
-    pub library: &'static str,
-    pub reads: Arity,
-    /// The `-o` argument given the stage's folder (the folder itself, or a file in it).
-    pub out: fn(&P, &Path) -> PathBuf,
-    pub product: fn(&P, &Path) -> PathBuf,
-    /// Outputs of a run given the resolved inputs and the `-o` path.
-    pub outputs: OutputsFn<P>,
-    /// The in-process bake given the resolved inputs and the `-o` path.
-    pub run: RunFn<P>,
-    pub validate: fn(&P) -> Result<(), BakeError>,
-    pub example: fn() -> P,
-    /// The CLI commands (argv, binary first) doing the same work, given the inputs, the stage
-    /// folder, and how to write a path for the command line (relative to the ninja file);
-    /// `None`: one command,
-    /// `BIN [SUB] INPUTS... -o OUT FLAGS... --quiet`.
-    pub argv: Option<ArgvFn<P>>,
-}
-
-/// `-o DIR`: the CLI writes into the stage's folder.
-pub fn in_dir<P>(_: &P, dir: &Path) -> PathBuf {
-    dir.to_path_buf()
+    /// The command line of the same bake (without the flags every binary shares).
+    fn cli(&self) -> clap::Command;
 }
 
 /// The single command most CLIs take: `BIN [SUB] INPUTS... -o OUT FLAGS... --quiet`.
@@ -332,52 +253,55 @@ pub fn standard_argv(
     args
 }
 
-impl<P: BakeParams> Adapter<P> {
-    fn typed<'a>(&self, p: &'a AnyParams) -> &'a P {
-        p.as_any()
-            .downcast_ref::<P>()
-            .unwrap_or_else(|| panic!("parameters of another kind given to '{}'", self.name))
+/// `p` as the parameters of bake `B` (the kind that parsed them).
+fn typed<'a, B: Bake>(bake: &B, p: &'a AnyParams) -> &'a B::Params {
+    p.as_any()
+        .downcast_ref::<B::Params>()
+        .unwrap_or_else(|| panic!("parameters of another kind given to '{}'", bake.name()))
+}
+
+/// `e` in a pipeline's terms: RON keys where the bake's message names CLI flags.
+fn in_ron_terms<B: Bake>(bake: &B, e: BakeError) -> BakeError {
+    BakeError {
+        message: ron_terms(&e.message, &bake.param_names()),
+        ..e
     }
 }
 
-/// RON as pipelines are written: `size: 64` for an `Option` field, no `Some(...)` needed.
-pub fn ron_options() -> ron::Options {
-    ron::Options::default().with_default_extension(ron::extensions::Extensions::IMPLICIT_SOME)
-}
-
-impl<P: BakeParams> Kind for Adapter<P> {
+/// Every bake is a stage kind: plain calls of its one definition over its own `Params` type.
+impl<B: Bake> Kind for B {
     fn name(&self) -> &'static str {
-        self.name
+        Bake::name(self)
     }
     fn summary(&self) -> &'static str {
-        self.summary
+        B::SUMMARY
     }
     fn command(&self) -> &'static [&'static str] {
-        self.command
+        B::COMMAND
     }
     fn package(&self) -> &'static str {
-        self.package
+        Bake::package(self)
     }
     fn library(&self) -> &'static str {
-        self.library
+        B::LIBRARY
     }
     fn reads(&self) -> Arity {
-        self.reads
+        B::READS.arity
     }
     fn param_names(&self) -> Vec<String> {
-        cli::fields(&P::default())
+        cli::fields(&B::Params::default())
             .map(|f| f.into_iter().map(|(n, _)| n).collect())
             .unwrap_or_default()
     }
     fn parse(&self, ron: &str) -> Result<AnyParams, ron::error::SpannedError> {
-        let p: P = ron_options().from_str(ron)?;
+        let p: B::Params = ron_options().from_str(ron)?;
         Ok(Arc::new(p))
     }
     fn default_params(&self) -> AnyParams {
-        Arc::new(P::default())
+        Arc::new(B::Params::default())
     }
     fn example_params(&self) -> AnyParams {
-        Arc::new((self.example)())
+        Arc::new(self.example())
     }
     fn with(
         &self,
@@ -385,24 +309,27 @@ impl<P: BakeParams> Kind for Adapter<P> {
         key: &str,
         value: serde_json::Value,
     ) -> Result<AnyParams, String> {
-        let mut v = serde_json::to_value(self.typed(p)).map_err(|e| e.to_string())?;
+        let name = Bake::name(self);
+        let mut v = serde_json::to_value(typed(self, p)).map_err(|e| e.to_string())?;
         let obj = v.as_object_mut().ok_or("parameters are not a struct")?;
         if !obj.contains_key(key) {
-            return Err(format!("'{}' has no parameter '{key}'", self.name));
+            return Err(format!("'{name}' has no parameter '{key}'"));
         }
         obj.insert(key.to_string(), value);
-        let p: P = serde_json::from_value(v)
-            .map_err(|e| format!("'{}' parameter '{key}': {e}", self.name))?;
+        let p: B::Params =
+            serde_json::from_value(v).map_err(|e| format!("'{name}' parameter '{key}': {e}"))?;
         Ok(Arc::new(p))
     }
     fn validate(&self, p: &AnyParams) -> Result<(), BakeError> {
-        (self.validate)(self.typed(p)).map_err(|e| self.in_ron_terms(e))
+        self.validate_stage(typed(self, p))
+            .map_err(|e| in_ron_terms(self, e))
     }
     fn out_arg(&self, p: &AnyParams, dir: &Path) -> PathBuf {
-        (self.out)(self.typed(p), dir)
+        self.stage_out(typed(self, p), dir)
     }
     fn product(&self, p: &AnyParams, dir: &Path) -> PathBuf {
-        (self.product)(self.typed(p), &self.out_arg(p, dir))
+        let p = typed(self, p);
+        Bake::product(self, p, &self.stage_out(p, dir))
     }
     fn outputs(
         &self,
@@ -410,7 +337,11 @@ impl<P: BakeParams> Kind for Adapter<P> {
         inputs: &[PathBuf],
         dir: &Path,
     ) -> Result<Vec<PathBuf>, BakeError> {
-        (self.outputs)(self.typed(p), inputs, &self.out_arg(p, dir))
+        let mut outputs = Vec::new();
+        for j in self.jobs(typed(self, p), inputs, dir)? {
+            outputs.extend(Bake::outputs(self, &j.params, &j.inputs, &j.out)?);
+        }
+        Ok(outputs)
     }
     fn run(
         &self,
@@ -419,11 +350,23 @@ impl<P: BakeParams> Kind for Adapter<P> {
         dir: &Path,
         progress: &dyn Progress,
     ) -> Result<Baked, BakeError> {
-        let mut baked = (self.run)(self.typed(p), inputs, &self.out_arg(p, dir), progress)
-            .map_err(|e| self.in_ron_terms(e))?;
         let names = self.param_names();
-        for w in &mut baked.warnings {
-            *w = ron_terms(w, &names);
+        let mut baked = Baked::default();
+        let jobs = self
+            .jobs(typed(self, p), inputs, dir)
+            .map_err(|e| in_ron_terms(self, e))?;
+        for Job {
+            params,
+            inputs,
+            out,
+        } in jobs
+        {
+            let b = Bake::run(self, &params, &inputs, &out, progress)
+                .map_err(|e| in_ron_terms(self, e))?;
+            baked.files.extend(b.files);
+            baked
+                .warnings
+                .extend(b.warnings.iter().map(|w| ron_terms(w, &names)));
         }
         Ok(baked)
     }
@@ -434,23 +377,23 @@ impl<P: BakeParams> Kind for Adapter<P> {
         dir: &Path,
         rel: &dyn Fn(&Path) -> PathBuf,
     ) -> Result<Vec<Vec<String>>, String> {
-        match self.argv {
-            Some(f) => f(self.typed(p), inputs, dir, rel),
-            None => {
-                let inputs: Vec<PathBuf> = inputs.iter().map(|i| rel(i)).collect();
-                Ok(vec![standard_argv(
-                    self.command,
-                    &inputs,
-                    &rel(&self.out_arg(p, dir)),
-                    self.typed(p).cli_args()?,
-                )])
-            }
-        }
+        self.cli_jobs(typed(self, p), inputs, dir, rel)
+            .map_err(|e| e.message)?
+            .into_iter()
+            .map(|j| {
+                Ok(standard_argv(
+                    B::COMMAND,
+                    &j.inputs,
+                    &j.out,
+                    j.params.cli_args()?,
+                ))
+            })
+            .collect()
     }
     fn cli_round_trip(&self, p: &AnyParams) -> Result<Vec<String>, String> {
-        let p = self.typed(p);
+        let p = typed(self, p);
         let args = cli::to_args(p)?;
-        let back: P = cli::from_args(&args)?;
+        let back: B::Params = cli::from_args(&args)?;
         let (a, b) = (
             serde_json::to_value(p).unwrap(),
             serde_json::to_value(&back).unwrap(),
@@ -458,25 +401,13 @@ impl<P: BakeParams> Kind for Adapter<P> {
         if a != b {
             return Err(format!(
                 "'{}': {args:?} parse back to {b} instead of {a}",
-                self.name
+                Bake::name(self)
             ));
         }
         Ok(args)
     }
-}
-
-/// An adapter's example parameters from RON text (a typo fails the kinds' tests).
-pub(crate) fn example<P: BakeParams>(ron: &str) -> P {
-    ron_options()
-        .from_str(ron)
-        .unwrap_or_else(|e| panic!("example parameters {ron}: {e}"))
-}
-
-/// Errors of adapters themselves (wrong number of inputs reaching `run`).
-pub(crate) fn input_error(kind: &str, why: impl Into<String>) -> BakeError {
-    BakeError {
-        message: format!("{kind}: {}", why.into()),
-        class: ErrorClass::InvalidInput,
+    fn cli(&self) -> clap::Command {
+        ibl_bake::command(self)
     }
 }
 
@@ -503,6 +434,14 @@ mod tests {
         );
         // Flags of other tools stay as they are.
         assert_eq!(ron_terms("--other", &names), "--other");
+    }
+
+    #[test]
+    fn every_bakes_help_has_no_rustdoc_links_or_file_citations() {
+        for k in all() {
+            let problems = ibl_cli::help_problems(k.cli());
+            assert!(problems.is_empty(), "{}: {problems:#?}", k.name());
+        }
     }
 
     #[test]
