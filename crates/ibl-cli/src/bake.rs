@@ -17,13 +17,16 @@ pub fn command<B: Bake>(bake: &B) -> clap::Command {
     ibl_bake::with_about::<B>(CommonArgs::augment_args(ibl_bake::command(bake)))
 }
 
+/// What a run of a binary's body gives: the files written and the `--json` details.
+pub type Outcome = Result<(Vec<String>, serde_json::Value), BakeError>;
+
 /// Another way to run a bake's binary, chosen by a flag of its own (`quat-map --batch DIR`):
 /// the bake's positional input and `-o` are then neither required nor allowed.
 pub struct Alternative<P> {
     /// The flag; its id names the mode.
     pub arg: fn() -> clap::Arg,
     /// Runs the mode given the flag's value and the parsed parameters.
-    pub run: fn(&Path, &P, &Ctx) -> Result<(Vec<String>, serde_json::Value), BakeError>,
+    pub run: fn(&Path, &P, &Ctx) -> Outcome,
 }
 
 /// A bake as a binary's subcommand (`brdf-lut dfg`): every [`Bake`] is one.
@@ -130,7 +133,7 @@ fn bake_once<B: Bake>(
     inputs: &[PathBuf],
     out: &Path,
     ctx: &Ctx,
-) -> Result<(Vec<String>, serde_json::Value), BakeError> {
+) -> Outcome {
     bake.validate(params, out)?;
     check_output(out, bake.output_kind(params, out))?;
     let baked = bake.run(params, inputs, out, ctx.progress())?;

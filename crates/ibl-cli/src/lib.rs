@@ -7,7 +7,7 @@
 
 mod bake;
 
-pub use bake::{command, main, main_subcommands, main_with, Alternative, Subcommand};
+pub use bake::{command, main, main_subcommands, main_with, Alternative, Outcome, Subcommand};
 use ibl_bake::BakeError;
 use ibl_core::error::{Classify, ErrorClass};
 use ibl_core::progress::Progress;

@@ -2,7 +2,6 @@
 //! mode over a folder of materials (`ibl_material::batch`: skips what is up to date, converts
 //! the rest, reports per material).
 
-use ibl_bake::BakeError;
 use ibl_material::{batch, quat_map};
 use std::path::Path;
 
@@ -24,11 +23,7 @@ fn main() {
 
 /// `--batch DIR`: every material folder under `root`, each failure reported, the counts in
 /// the summary whether or not one failed.
-fn run_batch(
-    root: &Path,
-    params: &quat_map::Params,
-    ctx: &ibl_cli::Ctx,
-) -> Result<(Vec<String>, serde_json::Value), BakeError> {
+fn run_batch(root: &Path, params: &quat_map::Params, ctx: &ibl_cli::Ctx) -> ibl_cli::Outcome {
     let start = std::time::Instant::now();
     let report = batch::run(params, root, ctx.progress())?;
     let mut warnings = Vec::new();
