@@ -225,6 +225,9 @@ pub trait Bake: Send + Sync + 'static {
     const READS: Reads;
     /// What `-o` is.
     const WRITES: Writes;
+    /// Whether a stage's [`Bake::jobs`] are independent items the runner may key and re-bake
+    /// one by one (quat-map over a folder of materials: one changed normal map, one re-bake).
+    const ITEMIZED: bool = false;
 
     /// [`Bake::NAME`].
     fn name(&self) -> &'static str {

@@ -114,6 +114,7 @@ impl Bake for QuatMap {
         cli_input: Some("Input normal map (.png 8/16-bit, .jpg, .exr), read as linear data"),
     };
     const WRITES: Writes = Writes::file("Output quaternion map (.png or .exr)");
+    const ITEMIZED: bool = true;
     fn outputs(
         &self,
         _: &qm::Params,
