@@ -1082,3 +1082,38 @@ fn symlinked_material_folders_are_followed_and_loops_refused() {
     assert!(!o.status.success(), "{e}");
     assert!(e.contains("symbolic link loop"), "{e}");
 }
+
+#[test]
+fn a_prefilter_warning_shows_once_in_bake_run_and_once_in_the_cli() {
+    // Both front-ends come from the one `Bake` definition: the same warnings, each once
+    // (pipeline runs used to repeat the chain's warnings and report the report's note as one).
+    let w = Work::new();
+    std::fs::copy(root().join("fixtures/hdri/studio_256.exr"), w.path("a.exr")).unwrap();
+    w.write(
+        "up.ron",
+        r#"(output: "out", inputs: {"a": File("a.exr")}, stages: [
+            (id: "chain", kind: "prefilter", reads: ["a"], params: (size: 128, levels: 2, quality: draft)),
+        ])"#,
+    );
+    let upsampled = "level 0 is upsampled";
+    let out = w.bake(&["run", "up.ron"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let run = stderr(&out);
+    assert_eq!(run.matches(upsampled).count(), 1, "bake run:\n{run}");
+    assert!(run.contains("less than size 128"), "in RON terms:\n{run}");
+
+    let bin_dir = build_clis(&["prefilter"]).unwrap_or_else(|e| panic!("{e}"));
+    let out = Command::new(bin_dir.join("prefilter"))
+        .args(["a.exr", "-o", "cli", "--size", "128", "--levels", "2"])
+        .args(["--quality", "draft"])
+        .current_dir(w.path(""))
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
+    let cli = stderr(&out);
+    assert_eq!(cli.matches(upsampled).count(), 1, "prefilter:\n{cli}");
+    assert!(
+        cli.contains("less than --size 128"),
+        "in flag terms:\n{cli}"
+    );
+}

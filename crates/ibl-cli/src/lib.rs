@@ -1,6 +1,14 @@
 //! What every binary shares: the common flags, the thread pool, a terminal progress bar,
-//! warnings, the `--json` summary, and printing an error's whole chain with its exit code.
+//! warnings, the `--json` summary, and printing an error's whole chain with its exit code;
+//! and, from a bake's one definition ([`ibl_bake::Bake`]), each bake binary's whole `main`
+//! ([`main`], [`main_with`], [`main_subcommands`]).
 
+#![warn(missing_docs)]
+
+mod bake;
+
+pub use bake::{command, main, main_subcommands, main_with, Alternative, Outcome, Subcommand};
+use ibl_bake::BakeError;
 use ibl_core::error::{Classify, ErrorClass};
 use ibl_core::progress::Progress;
 use serde::Serialize;
@@ -34,10 +42,15 @@ pub fn exit_code(class: ErrorClass) -> i32 {
 /// A summary the binary prints: human lines on stderr, the JSON value with `--json`.
 #[derive(Debug, Default, Serialize)]
 pub struct Summary {
+    /// The binary's name.
     pub tool: String,
+    /// Its version.
     pub version: String,
+    /// The files written.
     pub outputs: Vec<String>,
+    /// Wall-clock time of the body.
     pub seconds: f64,
+    /// Every warning printed.
     pub warnings: Vec<String>,
     /// Bake-specific details (error estimates, sample counts, ...).
     pub details: serde_json::Value,
@@ -45,6 +58,7 @@ pub struct Summary {
 
 /// Context handed to a binary's body.
 pub struct Ctx {
+    /// The flags every binary takes.
     pub common: CommonArgs,
     progress: TerminalProgress,
     warnings: std::sync::Mutex<Vec<String>>,
@@ -52,6 +66,7 @@ pub struct Ctx {
 }
 
 impl Ctx {
+    /// The progress bar (silent unless stderr is a terminal).
     pub fn progress(&self) -> &dyn Progress {
         &self.progress
     }
@@ -125,21 +140,20 @@ pub fn write_cube_outputs(
     Ok(outputs)
 }
 
-/// The `encoding` details of a `--json` summary: the sidecar's numbers and each level's
-/// encode time.
-pub fn encoding_details(levels: &[ibl_core::io::texture::LevelEncoding]) -> serde_json::Value {
-    serde_json::json!({
-        "levels": levels,
-        "seconds": levels.iter().map(|l| l.seconds).collect::<Vec<f64>>(),
-    })
-}
-
 /// Runs a binary's body: builds the thread pool, times it, prints the summary or the error
 /// chain, and exits with the right code. Never returns.
 pub fn run<E, F>(tool: &str, common: CommonArgs, body: F) -> !
 where
-    E: Classify,
+    E: Classify + 'static,
     F: FnOnce(&Ctx) -> Result<(Vec<String>, serde_json::Value), E>,
+{
+    run_body(tool, common, |ctx| body(ctx).map_err(BakeError::from))
+}
+
+/// [`run`] with the error already one line and a class (a bake's [`BakeError`]).
+fn run_body<F>(tool: &str, common: CommonArgs, body: F) -> !
+where
+    F: FnOnce(&Ctx) -> Result<(Vec<String>, serde_json::Value), BakeError>,
 {
     if let Some(n) = common.threads {
         if n == 0 {
@@ -190,11 +204,11 @@ where
             std::process::exit(0)
         }
         Err(e) => {
-            let code = exit_code(e.class());
-            eprintln!("{tool}: error: {}", error_chain(&e));
+            let code = exit_code(e.class);
+            eprintln!("{tool}: error: {}", e.message);
             if ctx.common.json && !ctx.json_printed.into_inner() {
                 let warnings = ctx.warnings.into_inner().unwrap();
-                print_stdout(&json_error(tool, &error_chain(&e), code, &warnings));
+                print_stdout(&json_error(tool, &e.message, code, &warnings));
             }
             std::process::exit(code)
         }
@@ -260,6 +274,7 @@ pub struct TerminalProgress {
 }
 
 impl TerminalProgress {
+    /// A bar when `show`, otherwise silence.
     pub fn new(show: bool) -> Self {
         let bar = show.then(|| {
             let b = indicatif::ProgressBar::new(0);
@@ -302,22 +317,23 @@ impl Progress for TerminalProgress {
 /// (`--roughness -0.1,0.5`).
 pub fn parse<P: clap::Parser>(tool: &str) -> P {
     exit_quietly_on_closed_stdout();
-    match try_parse_from::<P, _, _>(std::env::args_os()) {
-        Ok(p) => p,
-        Err(e) => {
-            use clap::error::ErrorKind;
-            if matches!(
-                e.kind(),
-                ErrorKind::DisplayHelp
-                    | ErrorKind::DisplayVersion
-                    | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand
-            ) {
-                e.exit();
-            }
-            eprintln!("{tool}: {}", usage_error_line(&e.to_string()));
-            std::process::exit(2);
-        }
+    try_parse_from::<P, _, _>(std::env::args_os()).unwrap_or_else(|e| usage_exit(tool, e))
+}
+
+/// Ends the process for a clap error: `--help` and `--version` print as usual, a usage error
+/// is one line `tool: …` on stderr and exit code 2.
+fn usage_exit(tool: &str, e: clap::Error) -> ! {
+    use clap::error::ErrorKind;
+    if matches!(
+        e.kind(),
+        ErrorKind::DisplayHelp
+            | ErrorKind::DisplayVersion
+            | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand
+    ) {
+        e.exit();
     }
+    eprintln!("{tool}: {}", usage_error_line(&e.to_string()));
+    std::process::exit(2);
 }
 
 /// Parses `args` (program name first) with negative values allowed, as [`parse`] does.

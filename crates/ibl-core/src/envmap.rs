@@ -582,7 +582,7 @@ mod tests {
         use crate::io::format::PixelFormat;
         use crate::output::{cube_output_paths, encode_cube, Encoding};
         let mips = CubeMips::build(labelled_cube(8), 2);
-        for layout in Layout::ALL {
+        for &layout in Layout::all() {
             for format in PixelFormat::ALL {
                 if layout == Layout::Faces
                     && !matches!(format, PixelFormat::Rgba32f | PixelFormat::Rgba16f)

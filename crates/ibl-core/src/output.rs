@@ -2,7 +2,8 @@
 //! the flags every cube-writing bake shares (one struct, flattened into each bake's `Params`,
 //! so `--format bc6h` on the command line is `format: bc6h` in a pipeline), the check of their
 //! combination before any work, and the encoding itself. A new container is one module under
-//! `io/` and one arm here.
+//! `io/` implementing [`io::container::Codec`], registered here by its [`Layout`] variant and
+//! its arm in [`Layout::codec`].
 
 use crate::cube::{CubeMips, Face};
 use crate::error::{Error, Result};
@@ -38,17 +39,25 @@ pub enum Layout {
 }
 
 impl Layout {
-    /// Every layout.
-    pub const ALL: [Layout; 4] = [Layout::Faces, Layout::Ktx2, Layout::Dds, Layout::Ktx1];
+    /// Every layout, in declaration order (clap's list of `--layout` values).
+    pub fn all() -> &'static [Layout] {
+        <Layout as clap::ValueEnum>::value_variants()
+    }
+
+    /// The codec of a single-file container, `None` for face files: the one place a container
+    /// is registered.
+    pub fn codec(self) -> Option<&'static dyn io::container::Codec> {
+        match self {
+            Layout::Faces => None,
+            Layout::Ktx2 => Some(&io::ktx2::Ktx2),
+            Layout::Dds => Some(&io::dds::Dds),
+            Layout::Ktx1 => Some(&io::ktx1::Ktx1),
+        }
+    }
 
     /// File extension of a single-file container, `None` for face files.
     pub fn extension(self) -> Option<&'static str> {
-        match self {
-            Layout::Faces => None,
-            Layout::Ktx2 => Some("ktx2"),
-            Layout::Dds => Some("dds"),
-            Layout::Ktx1 => Some("ktx"),
-        }
+        self.codec().map(|c| c.extension())
     }
 
     /// `dir/<name>.<ext>` for a single-file container, `None` for face files.
@@ -58,12 +67,7 @@ impl Layout {
 
     /// The name flags and RON keys use.
     pub fn name(self) -> &'static str {
-        match self {
-            Layout::Faces => "faces",
-            Layout::Ktx2 => "ktx2",
-            Layout::Dds => "dds",
-            Layout::Ktx1 => "ktx1",
-        }
+        self.codec().map_or("faces", |c| c.name())
     }
 }
 
@@ -230,17 +234,9 @@ pub fn encode_cube(
     metadata: &[(String, Vec<u8>)],
 ) -> Result<EncodedCube> {
     let (payload, levels) = texture::encode_chain(mips, enc.format, enc.bc6h_quality);
-    let files = match enc.layout {
-        Layout::Faces => encode_faces(dir, mips, enc.format)?,
-        Layout::Ktx2 => vec![(
-            dir.join(format!("{name}.ktx2")),
-            io::ktx2::encode(&payload, enc.zstd, metadata)?,
-        )],
-        Layout::Dds => vec![(dir.join(format!("{name}.dds")), io::dds::encode(&payload))],
-        Layout::Ktx1 => vec![(
-            dir.join(format!("{name}.ktx")),
-            io::ktx1::encode(&payload, metadata),
-        )],
+    let files = match (enc.layout.codec(), enc.layout.container_path(dir, name)) {
+        (Some(codec), Some(path)) => vec![(path, codec.encode(&payload, enc.zstd, metadata)?)],
+        _ => encode_faces(dir, mips, enc.format)?,
     };
     let clamped: usize = levels.iter().map(|l| l.clamped).sum();
     let mut warnings = Vec::new();
@@ -324,7 +320,7 @@ pub fn cube_output_paths(dir: &Path, levels: usize, layout: Layout, name: &str) 
 /// of another layout or of levels beyond the new chain. A bake removes them after a successful
 /// write, so a folder holds exactly one result (a reader would otherwise mix two).
 pub fn stale_cube_files(dir: &Path, name: &str, written: &[PathBuf]) -> Vec<PathBuf> {
-    let mut out: Vec<PathBuf> = Layout::ALL
+    let mut out: Vec<PathBuf> = Layout::all()
         .iter()
         .filter_map(|l| l.container_path(dir, name))
         .chain([dir.join(format!("{name}.encoding.json"))])

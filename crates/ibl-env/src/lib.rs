@@ -3,5 +3,8 @@
 
 #![warn(missing_docs)]
 
+mod bake_def;
 pub mod equirect_to_cube;
 pub mod irradiance;
+
+pub use bake_def::{EquirectToCube, Irradiance, EQUIRECT_TO_CUBE, IRRADIANCE};

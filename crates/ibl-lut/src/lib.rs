@@ -11,6 +11,7 @@
 #![warn(missing_docs)]
 
 pub mod as_size_bias;
+mod bake_def;
 pub mod dfg;
 pub mod error;
 pub mod fresnel_tail;
@@ -18,5 +19,6 @@ pub mod hv;
 pub mod reference;
 pub mod table;
 
+pub use bake_def::{AsSizeBias, Dfg, FresnelTail, HvLut, AS_SIZE_BIAS, DFG, FRESNEL_TAIL, HV_LUT};
 pub use error::{Error, Result};
 pub use table::Baked;

@@ -10,6 +10,7 @@
 
 #![warn(missing_docs)]
 
+mod bake_def;
 pub mod batch;
 pub mod direction;
 pub mod error;
@@ -21,6 +22,5 @@ pub mod quat_map;
 pub mod quaternion;
 pub mod tpr_map;
 
-/// The former name of [`Error`], kept while the `quat-map` and `tpr-map` binaries still use it.
-pub use error::Error as MaterialError;
+pub use bake_def::{QuatMap, TprMap, QUAT_MAP, TPR_MAP};
 pub use error::{Error, Result};

@@ -13,6 +13,7 @@
 //! Every candidate is listed, needed or not, so `bake plan` shows each decision.
 
 use crate::error::Diagnostic;
+use crate::kinds::scene_kinds as K;
 use crate::kinds::{self, AnyParams};
 use crate::need::Need;
 use crate::schema::{Input, Model, Pipeline, Scene, Serving};
@@ -139,7 +140,7 @@ pub fn derive(
         let cube = format!("{}/cube", probe.id);
         b.stage(
             cube.clone(),
-            "equirect-to-cube",
+            K::equirect_to_cube(),
             vec![env],
             Needed(format!("environment of probe '{}'", probe.id)),
             &[],
@@ -147,7 +148,7 @@ pub fn derive(
         );
         b.stage(
             format!("{}/irradiance", probe.id),
-            "irradiance",
+            K::irradiance(),
             vec![cube.clone()],
             Needed(format!("diffuse lighting of probe '{}'", probe.id)),
             &[],
@@ -174,7 +175,7 @@ pub fn derive(
         };
         b.stage(
             format!("{}/prefilter", probe.id),
-            "prefilter",
+            K::prefilter(),
             vec![cube.clone()],
             pre,
             &[("max_roughness", serde_json::json!(probe.max_roughness))],
@@ -182,7 +183,7 @@ pub fn derive(
         );
         b.stage(
             format!("{}/shexp", probe.id),
-            "shexp-fit",
+            K::shexp_fit(),
             vec![cube],
             fit,
             &[],
@@ -206,7 +207,7 @@ pub fn derive(
             quoted(&split_sum)
         ))
     };
-    b.stage("dfg".into(), "dfg", vec![], dfg, &[], scene.offset);
+    b.stage(K::dfg().into(), K::dfg(), vec![], dfg, &[], scene.offset);
     let tail = if sh_exp.is_empty() {
         NotNeeded("not needed by the scene: no probe is served by SH-exp".into())
     } else {
@@ -216,8 +217,8 @@ pub fn derive(
         ))
     };
     b.stage(
-        "fresnel-tail".into(),
-        "fresnel-tail",
+        K::fresnel_tail().into(),
+        K::fresnel_tail(),
         vec![],
         tail,
         &[],
@@ -238,7 +239,7 @@ pub fn derive(
         }
     }
     if pairs.is_empty() {
-        for kind in ["hv-lut", "as-size-bias"] {
+        for kind in [K::hv_lut(), K::as_size_bias()] {
             b.stage(
                 kind.into(),
                 kind,
@@ -253,7 +254,7 @@ pub fn derive(
         // f64's Display is compact: 100 → "100", 0.5 → "0.5".
         let why = format!("anisotropic (n_u, n_v) = ({nu}, {nv}) of {}", quoted(users));
         let over = [("nu", serde_json::json!(nu)), ("nv", serde_json::json!(nv))];
-        for kind in ["hv-lut", "as-size-bias"] {
+        for kind in [K::hv_lut(), K::as_size_bias()] {
             b.stage(
                 format!("{kind}/{nu}x{nv}"),
                 kind,
@@ -283,7 +284,7 @@ pub fn derive(
         };
         b.stage(
             format!("{}/quat-map", m.id),
-            "quat-map",
+            K::quat_map(),
             vec![folder],
             quat,
             &[],
@@ -310,7 +311,7 @@ pub fn derive(
             .collect();
         b.stage(
             format!("{}/tpr-map", m.id),
-            "tpr-map",
+            K::tpr_map(),
             vec![],
             tpr,
             &over,

@@ -14,6 +14,7 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod bake;
+mod bake_def;
 pub mod error;
 pub mod filter;
 pub mod fit;
@@ -23,4 +24,5 @@ pub mod samples;
 pub mod tree;
 
 pub use bake::{run, Method, Params, Quality};
+pub use bake_def::{Prefilter, PREFILTER};
 pub use error::Error;

@@ -26,6 +26,8 @@
 //!   for the dielectric, where eq. 15 alone (exact E0) loses 19 of 96 cases.
 
 #![warn(missing_docs)]
+
+mod bake_def;
 pub mod basis;
 pub mod coeffs;
 pub mod dfg;
@@ -38,6 +40,7 @@ pub mod solve;
 pub mod splitsum;
 pub mod truth;
 
+pub use bake_def::{ShexpFit, SHEXP_FIT};
 pub use coeffs::Coeffs;
 
 use ibl_core::error::{Classify, ErrorClass};

@@ -192,6 +192,32 @@ pub fn decode(path: &Path, b: &[u8]) -> Result<Payload> {
     Ok(p)
 }
 
+/// DDS as a [`super::container::Codec`] (it has no key/value metadata: none is written or read).
+pub struct Dds;
+
+impl super::container::Codec for Dds {
+    fn name(&self) -> &'static str {
+        "dds"
+    }
+    fn extension(&self) -> &'static str {
+        "dds"
+    }
+    fn magic(&self) -> &'static [u8] {
+        MAGIC
+    }
+    fn encode(
+        &self,
+        p: &Payload,
+        _zstd: Option<i32>,
+        _metadata: &[(String, Vec<u8>)],
+    ) -> Result<Vec<u8>> {
+        Ok(encode(p))
+    }
+    fn decode(&self, path: &Path, bytes: &[u8]) -> Result<(Payload, super::ktx2::Metadata)> {
+        Ok((decode(path, bytes)?, Vec::new()))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -138,6 +138,32 @@ fn swap_elements(d: &[u8], size: u32) -> Vec<u8> {
     out
 }
 
+/// KTX 1.1 as a [`super::container::Codec`].
+pub struct Ktx1;
+
+impl super::container::Codec for Ktx1 {
+    fn name(&self) -> &'static str {
+        "ktx1"
+    }
+    fn extension(&self) -> &'static str {
+        "ktx"
+    }
+    fn magic(&self) -> &'static [u8] {
+        &IDENTIFIER
+    }
+    fn encode(
+        &self,
+        p: &Payload,
+        _zstd: Option<i32>,
+        metadata: &[(String, Vec<u8>)],
+    ) -> Result<Vec<u8>> {
+        Ok(encode(p, metadata))
+    }
+    fn decode(&self, path: &Path, bytes: &[u8]) -> Result<(Payload, super::ktx2::Metadata)> {
+        decode(path, bytes)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -386,6 +386,32 @@ pub fn decode_cube(path: &Path, b: &[u8]) -> Result<CubeMips> {
     texture::decode_cube(path, &payload)
 }
 
+/// KTX2 as a [`super::container::Codec`].
+pub struct Ktx2;
+
+impl super::container::Codec for Ktx2 {
+    fn name(&self) -> &'static str {
+        "ktx2"
+    }
+    fn extension(&self) -> &'static str {
+        "ktx2"
+    }
+    fn magic(&self) -> &'static [u8] {
+        &IDENTIFIER
+    }
+    fn encode(
+        &self,
+        p: &Payload,
+        zstd: Option<i32>,
+        metadata: &[(String, Vec<u8>)],
+    ) -> Result<Vec<u8>> {
+        encode(p, zstd, metadata)
+    }
+    fn decode(&self, path: &Path, bytes: &[u8]) -> Result<(Payload, Metadata)> {
+        decode(path, bytes)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

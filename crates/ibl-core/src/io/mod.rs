@@ -163,11 +163,9 @@ fn format_name(kind: &str) -> &'static str {
 /// agrees or the content has no signature we know (the extension decides then).
 pub fn content_mismatch(path: &Path, bytes: &[u8]) -> Option<String> {
     let kind = image_signature(bytes).or_else(|| {
-        container::Container::sniff(bytes).map(|c| match c {
-            container::Container::Ktx2 => "ktx2",
-            container::Container::Ktx1 => "ktx",
-            container::Container::Dds => "dds",
-        })
+        container::Container::sniff(bytes)
+            .and_then(|c| c.codec())
+            .map(|c| c.extension())
     })?;
     let ext = extension(path);
     if format_of_extension(&ext) == Some(kind) {

@@ -1,23 +1,15 @@
-//! The stage-kind registry: each kind is a small adapter from a kind name to a bake's `Params`
-//! type (the very struct its CLI parses), what it reads, where it writes, and a call to the
-//! bake library's pure `run`, whose encoded files the executor writes atomically.
+//! The stage-kind registry: every bake ([`ibl_bake::Bake`], defined once in its library and
+//! also the source of its command line) is a stage kind through one blanket adapter, which
+//! erases its `Params` type and runs it in-process; the executor writes the encoded files
+//! atomically.
 //!
-//! Adding a bake is one `static` [`Adapter`] in one of the submodules and one line in [`all`].
+//! Adding a bake is one line in [`all`].
 
 pub mod cli;
-mod env;
-#[cfg(feature = "lut")]
-mod lut;
-#[cfg(feature = "material")]
-mod material;
-#[cfg(feature = "prefilter")]
-mod prefilter;
-#[cfg(feature = "shexp")]
-mod shexp;
 
-use ibl_core::error::{Classify, ErrorClass};
+pub use ibl_bake::{ron_options, Arity, BakeError, BakeParams};
+use ibl_bake::{Bake, Job};
 use ibl_core::progress::Progress;
-use serde::{de::DeserializeOwned, Serialize};
 use std::any::Any;
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -26,21 +18,78 @@ use std::sync::Arc;
 /// Every stage kind this build of the runner knows, in the order `bake kinds` lists them.
 pub fn all() -> Vec<&'static dyn Kind> {
     #[allow(unused_mut)] // without the optional bakes nothing is pushed
-    let mut kinds: Vec<&'static dyn Kind> = vec![&env::EQUIRECT_TO_CUBE, &env::IRRADIANCE];
+    let mut kinds: Vec<&'static dyn Kind> = vec![&ibl_env::EQUIRECT_TO_CUBE, &ibl_env::IRRADIANCE];
     #[cfg(feature = "prefilter")]
-    kinds.push(&prefilter::PREFILTER);
+    kinds.push(&ibl_prefilter::PREFILTER);
     #[cfg(feature = "shexp")]
-    kinds.push(&shexp::SHEXP_FIT);
+    kinds.push(&ibl_shexp::SHEXP_FIT);
     #[cfg(feature = "lut")]
     kinds.extend([
-        &lut::DFG as &dyn Kind,
-        &lut::FRESNEL_TAIL,
-        &lut::HV_LUT,
-        &lut::AS_SIZE_BIAS,
+        &ibl_lut::DFG as &dyn Kind,
+        &ibl_lut::FRESNEL_TAIL,
+        &ibl_lut::HV_LUT,
+        &ibl_lut::AS_SIZE_BIAS,
     ]);
     #[cfg(feature = "material")]
-    kinds.extend([&material::QUAT_MAP as &dyn Kind, &material::TPR_MAP]);
+    kinds.extend([&ibl_material::QUAT_MAP as &dyn Kind, &ibl_material::TPR_MAP]);
     kinds
+}
+
+/// The name of a bake the scene derives, through the bake itself; a build without the bake's
+/// library (its feature off) still knows the name, to say the scene needs it.
+macro_rules! kind_name {
+    ($feature:literal, $bake:ty, $name:literal) => {{
+        #[cfg(feature = $feature)]
+        let name = <$bake as Bake>::NAME;
+        #[cfg(not(feature = $feature))]
+        let name = $name;
+        name
+    }};
+}
+
+/// The kinds a scene derives, named through their bakes.
+pub mod scene_kinds {
+    use super::Bake;
+    /// `equirect-to-cube`.
+    pub fn equirect_to_cube() -> &'static str {
+        ibl_env::EquirectToCube::NAME
+    }
+    /// `irradiance`.
+    pub fn irradiance() -> &'static str {
+        ibl_env::Irradiance::NAME
+    }
+    /// `prefilter`.
+    pub fn prefilter() -> &'static str {
+        kind_name!("prefilter", ibl_prefilter::Prefilter, "prefilter")
+    }
+    /// `shexp-fit`.
+    pub fn shexp_fit() -> &'static str {
+        kind_name!("shexp", ibl_shexp::ShexpFit, "shexp-fit")
+    }
+    /// `dfg`.
+    pub fn dfg() -> &'static str {
+        kind_name!("lut", ibl_lut::Dfg, "dfg")
+    }
+    /// `fresnel-tail`.
+    pub fn fresnel_tail() -> &'static str {
+        kind_name!("lut", ibl_lut::FresnelTail, "fresnel-tail")
+    }
+    /// `hv-lut`.
+    pub fn hv_lut() -> &'static str {
+        kind_name!("lut", ibl_lut::HvLut, "hv-lut")
+    }
+    /// `as-size-bias`.
+    pub fn as_size_bias() -> &'static str {
+        kind_name!("lut", ibl_lut::AsSizeBias, "as-size-bias")
+    }
+    /// `quat-map`.
+    pub fn quat_map() -> &'static str {
+        kind_name!("material", ibl_material::QuatMap, "quat-map")
+    }
+    /// `tpr-map`.
+    pub fn tpr_map() -> &'static str {
+        kind_name!("material", ibl_material::TprMap, "tpr-map")
+    }
 }
 
 /// The kind called `name`.
@@ -51,35 +100,6 @@ pub fn find(name: &str) -> Option<&'static dyn Kind> {
 /// Names of all kinds, for error messages.
 pub fn names() -> Vec<&'static str> {
     all().iter().map(|k| k.name()).collect()
-}
-
-/// What a `Params` struct must be to serve as a stage's parameters: the CLI's clap struct, the
-/// RON keys via serde, with clap's defaults as `Default`.
-pub trait BakeParams:
-    clap::Args
-    + clap::FromArgMatches
-    + Serialize
-    + DeserializeOwned
-    + Default
-    + Clone
-    + fmt::Debug
-    + Send
-    + Sync
-    + 'static
-{
-}
-impl<T> BakeParams for T where
-    T: clap::Args
-        + clap::FromArgMatches
-        + Serialize
-        + DeserializeOwned
-        + Default
-        + Clone
-        + fmt::Debug
-        + Send
-        + Sync
-        + 'static
-{
 }
 
 /// A stage's parameters with their type erased (the kind that parsed them knows it).
@@ -108,15 +128,6 @@ impl<P: BakeParams> ParamsObj for P {
     }
     fn cli_args(&self) -> Result<Vec<String>, String> {
         cli::to_args(self)
-    }
-}
-
-impl<P: BakeParams> Adapter<P> {
-    fn in_ron_terms(&self, e: BakeError) -> BakeError {
-        BakeError {
-            message: ron_terms(&e.message, &self.param_names()),
-            ..e
-        }
     }
 }
 
@@ -161,74 +172,24 @@ pub fn canonical_text(p: &AnyParams) -> String {
     serde_json::to_string(&p.canonical()).expect("JSON value prints")
 }
 
-/// How many sources a kind reads, and what they are.
-#[derive(Clone, Copy, Debug)]
-pub struct Arity {
-    /// The fewest sources.
-    pub min: usize,
-    /// The most sources (`usize::MAX`: no limit).
-    pub max: usize,
-    /// What each source is, for messages ("an environment: equirect, cube folder or KTX2").
-    pub what: &'static str,
-}
-
-impl Arity {
-    /// Reads nothing.
-    pub const NONE: Arity = Arity {
-        min: 0,
-        max: 0,
-        what: "nothing",
-    };
-    /// Exactly one source, of the kind `what` says.
-    pub const fn one(what: &'static str) -> Arity {
-        Arity {
-            min: 1,
-            max: 1,
-            what,
-        }
-    }
-    /// "reads exactly 1 (an environment ...)", for messages.
-    pub fn describe(&self) -> String {
-        match (self.min, self.max) {
-            (0, 0) => "reads nothing".to_string(),
-            (a, b) if a == b => format!("reads exactly {a} ({})", self.what),
-            (a, usize::MAX) => format!("reads at least {a} ({})", self.what),
-            (a, b) => format!("reads {a} to {b} ({})", self.what),
-        }
-    }
-}
-
-/// A bake's failure as the runner keeps it: its one-line message and exit-code class.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct BakeError {
-    /// One line, naming the file and the problem.
-    pub message: String,
-    /// Its exit-code class.
-    pub class: ErrorClass,
-}
-
-impl<E: Classify + 'static> From<E> for BakeError {
-    fn from(e: E) -> Self {
-        BakeError {
-            message: crate::error::error_chain(&e),
-            class: e.class(),
-        }
-    }
-}
-
-impl fmt::Display for BakeError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(&self.message)
-    }
-}
-
 /// What a bake produced: encoded files (not yet written) and warnings for the log.
 #[derive(Default)]
 pub struct Baked {
-    /// (path, bytes) of every file, under the stage's folder.
+    /// Each output path with its encoded bytes.
     pub files: Vec<(PathBuf, Vec<u8>)>,
-    /// Warnings for the log.
+    /// Warnings for the stage's log, in RON terms.
     pub warnings: Vec<String>,
+}
+
+/// One independent piece of a stage's work (one material of a folder of materials): the
+/// runner gives it its own cache key, so one changed file re-bakes one item. Running the
+/// kind on `inputs` into `dir` bakes exactly this item's outputs.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Item {
+    /// The files it reads (its key hashes them), given to the bake as its inputs.
+    pub inputs: Vec<PathBuf>,
+    /// The folder its run writes into, inside the stage's folder.
+    pub dir: PathBuf,
 }
 
 /// A stage kind, type-erased: everything the planner, executor and ninja emitter ask of it.
@@ -250,7 +211,7 @@ pub trait Kind: Send + Sync {
     fn param_names(&self) -> Vec<String>;
     /// Parses the RON text of `params: (...)` (missing keys take their defaults).
     fn parse(&self, ron: &str) -> Result<AnyParams, ron::error::SpannedError>;
-    /// Its parameters at their defaults (clap's).
+    /// The parameters every key left out takes.
     fn default_params(&self) -> AnyParams;
     /// Non-default parameters exercising every kind of field (tests round-trip them).
     fn example_params(&self) -> AnyParams;
@@ -289,6 +250,8 @@ pub trait Kind: Send + Sync {
     ) -> Result<Vec<Vec<String>>, String>;
     /// Checks that `p` survives `Params → CLI args → clap → Params` unchanged.
     fn cli_round_trip(&self, p: &AnyParams) -> Result<Vec<String>, String>;
+    /// The command line of the same bake (without the flags every binary shares).
+    fn cli(&self) -> clap::Command;
     /// The stage's work split into independent items, each baked by `run(p, &item.inputs,
     /// &item.dir)`; `None` when the kind bakes its inputs as one piece.
     fn items(
@@ -297,68 +260,6 @@ pub trait Kind: Send + Sync {
         inputs: &[PathBuf],
         dir: &Path,
     ) -> Option<Result<Vec<Item>, BakeError>>;
-}
-
-/// Lists the files a run writes, given the resolved inputs and the `-o` path.
-pub type OutputsFn<P> = fn(&P, &[PathBuf], &Path) -> Result<Vec<PathBuf>, BakeError>;
-/// Runs the bake in-process, given the resolved inputs and the `-o` path.
-pub type RunFn<P> = fn(&P, &[PathBuf], &Path, &dyn Progress) -> Result<Baked, BakeError>;
-/// Writes the CLI commands of a stage: inputs, stage folder, how to write a path.
-pub type ArgvFn<P> =
-    fn(&P, &[PathBuf], &Path, &dyn Fn(&Path) -> PathBuf) -> Result<Vec<Vec<String>>, String>;
-
-/// Splits a stage's work into items, given the resolved inputs and the stage folder.
-pub type ItemsFn<P> = fn(&P, &[PathBuf], &Path) -> Result<Vec<Item>, BakeError>;
-
-/// One independent piece of a stage's work (one material of a folder of materials): the
-/// runner gives it its own cache key, so one changed file re-bakes one item. Running the
-/// kind on `inputs` into `dir` bakes exactly this item's outputs.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct Item {
-    /// The files it reads (its key hashes them), given to the bake as its inputs.
-    pub inputs: Vec<PathBuf>,
-    /// The folder its run writes into, inside the stage's folder.
-    pub dir: PathBuf,
-}
-
-/// The adapter behind every kind: plain functions over the bake's own `Params` type.
-pub struct Adapter<P> {
-    /// The kind's name in pipelines.
-    pub name: &'static str,
-    /// One line for `bake kinds`.
-    pub summary: &'static str,
-    /// The CLI running the same bake: binary, then subcommand if any.
-    pub command: &'static [&'static str],
-    /// The cargo package building that binary.
-    pub package: &'static str,
-    /// The library crate whose `run` the bake is (see [`Kind::library`]).
-    pub library: &'static str,
-    /// How many sources it reads.
-    pub reads: Arity,
-    /// The `-o` argument given the stage's folder (the folder itself, or a file in it).
-    pub out: fn(&P, &Path) -> PathBuf,
-    /// What a downstream stage reads, given the `-o` path.
-    pub product: fn(&P, &Path) -> PathBuf,
-    /// Outputs of a run given the resolved inputs and the `-o` path.
-    pub outputs: OutputsFn<P>,
-    /// The in-process bake given the resolved inputs and the `-o` path.
-    pub run: RunFn<P>,
-    /// The bake's validation of its parameters.
-    pub validate: fn(&P) -> Result<(), BakeError>,
-    /// Non-default example parameters (for tests).
-    pub example: fn() -> P,
-    /// The CLI commands (argv, binary first) doing the same work, given the inputs, the stage
-    /// folder, and how to write a path for the command line (relative to the ninja file);
-    /// `None`: one command,
-    /// `BIN [SUB] INPUTS... -o OUT FLAGS... --quiet`.
-    pub argv: Option<ArgvFn<P>>,
-    /// The stage's work as independent items (see [`Kind::items`]); `None`: one piece.
-    pub items: Option<ItemsFn<P>>,
-}
-
-/// `-o DIR`: the CLI writes into the stage's folder.
-pub fn in_dir<P>(_: &P, dir: &Path) -> PathBuf {
-    dir.to_path_buf()
 }
 
 /// The single command most CLIs take: `BIN [SUB] INPUTS... -o OUT FLAGS... --quiet`.
@@ -377,52 +278,55 @@ pub fn standard_argv(
     args
 }
 
-impl<P: BakeParams> Adapter<P> {
-    fn typed<'a>(&self, p: &'a AnyParams) -> &'a P {
-        p.as_any()
-            .downcast_ref::<P>()
-            .unwrap_or_else(|| panic!("parameters of another kind given to '{}'", self.name))
+/// `p` as the parameters of bake `B` (the kind that parsed them).
+fn typed<'a, B: Bake>(bake: &B, p: &'a AnyParams) -> &'a B::Params {
+    p.as_any()
+        .downcast_ref::<B::Params>()
+        .unwrap_or_else(|| panic!("parameters of another kind given to '{}'", bake.name()))
+}
+
+/// `e` in a pipeline's terms: RON keys where the bake's message names CLI flags.
+fn in_ron_terms<B: Bake>(bake: &B, e: BakeError) -> BakeError {
+    BakeError {
+        message: ron_terms(&e.message, &bake.param_names()),
+        ..e
     }
 }
 
-/// RON as pipelines are written: `size: 64` for an `Option` field, no `Some(...)` needed.
-pub fn ron_options() -> ron::Options {
-    ron::Options::default().with_default_extension(ron::extensions::Extensions::IMPLICIT_SOME)
-}
-
-impl<P: BakeParams> Kind for Adapter<P> {
+/// Every bake is a stage kind: plain calls of its one definition over its own `Params` type.
+impl<B: Bake> Kind for B {
     fn name(&self) -> &'static str {
-        self.name
+        Bake::name(self)
     }
     fn summary(&self) -> &'static str {
-        self.summary
+        B::SUMMARY
     }
     fn command(&self) -> &'static [&'static str] {
-        self.command
+        B::COMMAND
     }
     fn package(&self) -> &'static str {
-        self.package
+        Bake::package(self)
     }
     fn library(&self) -> &'static str {
-        self.library
+        B::LIBRARY
     }
     fn reads(&self) -> Arity {
-        self.reads
+        B::READS.arity
     }
     fn param_names(&self) -> Vec<String> {
-        cli::fields(&P::default())
+        cli::fields(&B::Params::default())
             .map(|f| f.into_iter().map(|(n, _)| n).collect())
             .unwrap_or_default()
     }
     fn parse(&self, ron: &str) -> Result<AnyParams, ron::error::SpannedError> {
-        let p: P = ron_options().from_str(ron)?;
+        let p: B::Params = ron_options().from_str(ron)?;
         Ok(Arc::new(p))
     }
     fn default_params(&self) -> AnyParams {
-        Arc::new(P::default())
+        Arc::new(B::Params::default())
     }
     fn example_params(&self) -> AnyParams {
-        Arc::new((self.example)())
+        Arc::new(self.example())
     }
     fn with(
         &self,
@@ -430,24 +334,27 @@ impl<P: BakeParams> Kind for Adapter<P> {
         key: &str,
         value: serde_json::Value,
     ) -> Result<AnyParams, String> {
-        let mut v = serde_json::to_value(self.typed(p)).map_err(|e| e.to_string())?;
+        let name = Bake::name(self);
+        let mut v = serde_json::to_value(typed(self, p)).map_err(|e| e.to_string())?;
         let obj = v.as_object_mut().ok_or("parameters are not a struct")?;
         if !obj.contains_key(key) {
-            return Err(format!("'{}' has no parameter '{key}'", self.name));
+            return Err(format!("'{name}' has no parameter '{key}'"));
         }
         obj.insert(key.to_string(), value);
-        let p: P = serde_json::from_value(v)
-            .map_err(|e| format!("'{}' parameter '{key}': {e}", self.name))?;
+        let p: B::Params =
+            serde_json::from_value(v).map_err(|e| format!("'{name}' parameter '{key}': {e}"))?;
         Ok(Arc::new(p))
     }
     fn validate(&self, p: &AnyParams) -> Result<(), BakeError> {
-        (self.validate)(self.typed(p)).map_err(|e| self.in_ron_terms(e))
+        self.validate_stage(typed(self, p))
+            .map_err(|e| in_ron_terms(self, e))
     }
     fn out_arg(&self, p: &AnyParams, dir: &Path) -> PathBuf {
-        (self.out)(self.typed(p), dir)
+        self.stage_out(typed(self, p), dir)
     }
     fn product(&self, p: &AnyParams, dir: &Path) -> PathBuf {
-        (self.product)(self.typed(p), &self.out_arg(p, dir))
+        let p = typed(self, p);
+        Bake::product(self, p, &self.stage_out(p, dir))
     }
     fn outputs(
         &self,
@@ -455,7 +362,11 @@ impl<P: BakeParams> Kind for Adapter<P> {
         inputs: &[PathBuf],
         dir: &Path,
     ) -> Result<Vec<PathBuf>, BakeError> {
-        (self.outputs)(self.typed(p), inputs, &self.out_arg(p, dir))
+        let mut outputs = Vec::new();
+        for j in self.jobs(typed(self, p), inputs, dir)? {
+            outputs.extend(Bake::outputs(self, &j.params, &j.inputs, &j.out)?);
+        }
+        Ok(outputs)
     }
     fn run(
         &self,
@@ -464,11 +375,23 @@ impl<P: BakeParams> Kind for Adapter<P> {
         dir: &Path,
         progress: &dyn Progress,
     ) -> Result<Baked, BakeError> {
-        let mut baked = (self.run)(self.typed(p), inputs, &self.out_arg(p, dir), progress)
-            .map_err(|e| self.in_ron_terms(e))?;
         let names = self.param_names();
-        for w in &mut baked.warnings {
-            *w = ron_terms(w, &names);
+        let mut baked = Baked::default();
+        let jobs = self
+            .jobs(typed(self, p), inputs, dir)
+            .map_err(|e| in_ron_terms(self, e))?;
+        for Job {
+            params,
+            inputs,
+            out,
+        } in jobs
+        {
+            let b = Bake::run(self, &params, &inputs, &out, progress)
+                .map_err(|e| in_ron_terms(self, e))?;
+            baked.files.extend(b.files);
+            baked
+                .warnings
+                .extend(b.warnings.iter().map(|w| ron_terms(w, &names)));
         }
         Ok(baked)
     }
@@ -479,32 +402,23 @@ impl<P: BakeParams> Kind for Adapter<P> {
         dir: &Path,
         rel: &dyn Fn(&Path) -> PathBuf,
     ) -> Result<Vec<Vec<String>>, String> {
-        match self.argv {
-            Some(f) => f(self.typed(p), inputs, dir, rel),
-            None => {
-                let inputs: Vec<PathBuf> = inputs.iter().map(|i| rel(i)).collect();
-                Ok(vec![standard_argv(
-                    self.command,
-                    &inputs,
-                    &rel(&self.out_arg(p, dir)),
-                    self.typed(p).cli_args()?,
-                )])
-            }
-        }
-    }
-    fn items(
-        &self,
-        p: &AnyParams,
-        inputs: &[PathBuf],
-        dir: &Path,
-    ) -> Option<Result<Vec<Item>, BakeError>> {
-        let items = self.items?;
-        Some(items(self.typed(p), inputs, &self.out_arg(p, dir)))
+        self.cli_jobs(typed(self, p), inputs, dir, rel)
+            .map_err(|e| e.message)?
+            .into_iter()
+            .map(|j| {
+                Ok(standard_argv(
+                    B::COMMAND,
+                    &j.inputs,
+                    &j.out,
+                    j.params.cli_args()?,
+                ))
+            })
+            .collect()
     }
     fn cli_round_trip(&self, p: &AnyParams) -> Result<Vec<String>, String> {
-        let p = self.typed(p);
+        let p = typed(self, p);
         let args = cli::to_args(p)?;
-        let back: P = cli::from_args(&args)?;
+        let back: B::Params = cli::from_args(&args)?;
         let (a, b) = (
             serde_json::to_value(p).unwrap(),
             serde_json::to_value(&back).unwrap(),
@@ -512,25 +426,32 @@ impl<P: BakeParams> Kind for Adapter<P> {
         if a != b {
             return Err(format!(
                 "'{}': {args:?} parse back to {b} instead of {a}",
-                self.name
+                Bake::name(self)
             ));
         }
         Ok(args)
     }
-}
-
-/// An adapter's example parameters from RON text (a typo fails the kinds' tests).
-pub(crate) fn example<P: BakeParams>(ron: &str) -> P {
-    ron_options()
-        .from_str(ron)
-        .unwrap_or_else(|e| panic!("example parameters {ron}: {e}"))
-}
-
-/// Errors of adapters themselves (wrong number of inputs reaching `run`).
-pub(crate) fn input_error(kind: &str, why: impl Into<String>) -> BakeError {
-    BakeError {
-        message: format!("{kind}: {}", why.into()),
-        class: ErrorClass::InvalidInput,
+    fn cli(&self) -> clap::Command {
+        ibl_bake::command(self)
+    }
+    fn items(
+        &self,
+        p: &AnyParams,
+        inputs: &[PathBuf],
+        dir: &Path,
+    ) -> Option<Result<Vec<Item>, BakeError>> {
+        if !B::ITEMIZED {
+            return None;
+        }
+        // Each of the bake's runs is an item: its inputs, and the folder its `-o` writes in.
+        Some(self.jobs(typed(self, p), inputs, dir).map(|jobs| {
+            jobs.into_iter()
+                .map(|j| Item {
+                    dir: j.out.parent().unwrap_or(dir).to_path_buf(),
+                    inputs: j.inputs,
+                })
+                .collect()
+        }))
     }
 }
 
@@ -557,6 +478,14 @@ mod tests {
         );
         // Flags of other tools stay as they are.
         assert_eq!(ron_terms("--other", &names), "--other");
+    }
+
+    #[test]
+    fn every_bakes_help_has_no_rustdoc_links_or_file_citations() {
+        for k in all() {
+            let problems = ibl_cli::help_problems(k.cli());
+            assert!(problems.is_empty(), "{}: {problems:#?}", k.name());
+        }
     }
 
     #[test]
