@@ -16,8 +16,6 @@ pub mod equirect;
 pub mod error;
 pub mod image;
 pub mod io;
-// Moving to ibl-cli with the other CLI helpers (issue 16 item 4); documented there.
-#[allow(missing_docs)]
 pub mod output;
 pub mod params;
 pub mod progress;

@@ -75,10 +75,15 @@ impl Layout {
 /// adds them to its `Params`.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct CubeOutput {
+    /// `--layout`: the container, `None` for the target's.
     pub layout: Option<Layout>,
+    /// `--format`: the pixel format, `None` for the target's.
     pub format: Option<PixelFormat>,
+    /// `--half`: the same as `--format rgba16f`.
     pub half: bool,
+    /// `--zstd`: KTX2 supercompression level (1–22).
     pub zstd: Option<i32>,
+    /// `--bc6h-quality`: the BC6H encoder's effort.
     pub bc6h_quality: Option<Bc6hQuality>,
 }
 
@@ -132,9 +137,13 @@ macro_rules! cube_output_params {
 /// A checked, complete output encoding.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 pub struct Encoding {
+    /// Face files or one container file.
     pub layout: Layout,
+    /// Pixel format of every level.
     pub format: PixelFormat,
+    /// KTX2 zstd supercompression level, if any.
     pub zstd: Option<i32>,
+    /// BC6H encoder effort (read only for `PixelFormat::Bc6h`).
     pub bc6h_quality: Bc6hQuality,
 }
 
