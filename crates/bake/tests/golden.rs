@@ -47,6 +47,22 @@ fn parse_manifest(text: &str) -> BTreeMap<String, String> {
         .collect()
 }
 
+/// Every file whose hash differs between the manifest (`want`) and a run (`got`), one line each.
+fn differences(want: &BTreeMap<String, String>, got: &BTreeMap<String, String>) -> Vec<String> {
+    let mut problems = Vec::new();
+    for (path, hash) in want {
+        match got.get(path) {
+            None => problems.push(format!("{path}: no longer written")),
+            Some(h) if h != hash => problems.push(format!("{path}: bytes changed")),
+            Some(_) => {}
+        }
+    }
+    for path in got.keys().filter(|p| !want.contains_key(*p)) {
+        problems.push(format!("{path}: newly written"));
+    }
+    problems
+}
+
 /// Runs `pipelines/<name>.ron` in a copy of the workspace and checks (or, with
 /// `GOLDEN_UPDATE=1`, rewrites) `tests/golden/<name>.b3`.
 fn check(name: &str, output: &str) {
@@ -82,17 +98,7 @@ fn check(name: &str, output: &str) {
             manifest.display()
         )
     }));
-    let mut problems = Vec::new();
-    for (path, hash) in &want {
-        match got.get(path) {
-            None => problems.push(format!("{path}: no longer written")),
-            Some(h) if h != hash => problems.push(format!("{path}: bytes changed")),
-            Some(_) => {}
-        }
-    }
-    for path in got.keys().filter(|p| !want.contains_key(*p)) {
-        problems.push(format!("{path}: newly written"));
-    }
+    let problems = differences(&want, &got);
     assert!(
         problems.is_empty(),
         "{name}: {} of {} outputs differ from tests/golden/{name}.b3 (if meant, regenerate with \
@@ -124,16 +130,35 @@ fn every_fixture_target_and_format_bytes_are_pinned() {
 }
 
 #[test]
-fn a_manifest_round_trips_and_a_changed_byte_is_caught() {
-    let mut h = BTreeMap::new();
-    h.insert(
-        "a/b.exr".to_string(),
-        blake3::hash(b"x").to_hex().to_string(),
+fn a_manifest_round_trips_and_a_changed_missing_or_new_file_is_caught() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::create_dir_all(dir.path().join("a")).unwrap();
+    std::fs::write(dir.path().join("a/b.exr"), b"x").unwrap();
+    std::fs::write(dir.path().join("c.json"), b"y").unwrap();
+    std::fs::create_dir_all(dir.path().join(".bake")).unwrap();
+    std::fs::write(dir.path().join(".bake/lock"), b"").unwrap();
+    let mut want = BTreeMap::new();
+    hashes(dir.path(), Path::new(""), &mut want);
+    assert_eq!(
+        want.keys().collect::<Vec<_>>(),
+        ["a/b.exr", "c.json"],
+        "the runner's .bake/ is not an output"
     );
-    h.insert(
-        "c.json".to_string(),
-        blake3::hash(b"y").to_hex().to_string(),
+    assert_eq!(parse_manifest(&manifest_text(&want)), want);
+    assert!(differences(&want, &want).is_empty());
+
+    // One byte more in one file, one file gone, one file new: each named.
+    std::fs::write(dir.path().join("a/b.exr"), b"x\0").unwrap();
+    std::fs::remove_file(dir.path().join("c.json")).unwrap();
+    std::fs::write(dir.path().join("d.ktx2"), b"z").unwrap();
+    let mut got = BTreeMap::new();
+    hashes(dir.path(), Path::new(""), &mut got);
+    assert_eq!(
+        differences(&want, &got),
+        [
+            "a/b.exr: bytes changed",
+            "c.json: no longer written",
+            "d.ktx2: newly written"
+        ]
     );
-    assert_eq!(parse_manifest(&manifest_text(&h)), h);
-    assert_ne!(blake3::hash(b"x"), blake3::hash(b"x\0"));
 }
