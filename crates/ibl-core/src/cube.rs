@@ -83,6 +83,47 @@ impl Face {
     }
 }
 
+/// The texel of an n×n cube that integer coordinates (i, j) of `face`, possibly one texel
+/// outside it, read: the texel itself, or the neighbouring face's texel that the tap's
+/// direction lands on (the re-projection that makes bilinear reads seamless).
+#[inline]
+fn wrapped_index(n: usize, face: Face, i: isize, j: isize) -> (Face, usize, usize) {
+    let m = n as isize;
+    if i >= 0 && j >= 0 && i < m && j < m {
+        return (face, i as usize, j as usize);
+    }
+    let sc = (2.0 * (i as f32 + 0.5)) / n as f32 - 1.0;
+    let tc = (2.0 * (j as f32 + 0.5)) / n as f32 - 1.0;
+    // The tap's direction lies past the edge, so its major axis names the neighbour.
+    let d = face.direction(sc, tc);
+    let (f2, s2, t2) = Face::from_direction(d);
+    let (i2, j2) = face_texel_index(s2, t2, n);
+    (f2, i2, j2)
+}
+
+/// The four texels a seamless bilinear read of an n×n cube in direction `d` blends, with their
+/// weights, as (face·n² + j·n + i, weight): [`Cubemap::sample_bilinear`] is their weighted sum
+/// (to round-off). The read is linear in the texels; this is its row, for fitting texels to
+/// what a read of them should give.
+pub fn bilinear_taps(n: usize, d: Vec3) -> [(usize, f32); 4] {
+    let (face, sc, tc) = Face::from_direction(d);
+    let x = (sc + 1.0) * 0.5 * n as f32 - 0.5;
+    let y = (tc + 1.0) * 0.5 * n as f32 - 0.5;
+    let (x0, y0) = (x.floor(), y.floor());
+    let (fx, fy) = (x - x0, y - y0);
+    let (x0, y0) = (x0 as isize, y0 as isize);
+    let tap = |i: isize, j: isize, w: f32| {
+        let (f, i, j) = wrapped_index(n, face, i, j);
+        (f as usize * n * n + j * n + i, w)
+    };
+    [
+        tap(x0, y0, (1.0 - fx) * (1.0 - fy)),
+        tap(x0 + 1, y0, fx * (1.0 - fy)),
+        tap(x0, y0 + 1, (1.0 - fx) * fy),
+        tap(x0 + 1, y0 + 1, fx * fy),
+    ]
+}
+
 /// Face coordinate of the centre of texel `i` on an `n`-texel edge: 2(i+0.5)/n − 1.
 #[inline]
 pub(crate) fn texel_coord(i: usize, n: usize) -> f32 {
@@ -228,16 +269,7 @@ impl Cubemap {
     /// filtering seamless across edges and corners.
     #[inline]
     pub(crate) fn texel_wrapped(&self, face: Face, i: isize, j: isize) -> Rgb {
-        let n = self.size as isize;
-        if i >= 0 && j >= 0 && i < n && j < n {
-            return self.texel(face, i as usize, j as usize);
-        }
-        let sc = (2.0 * (i as f32 + 0.5)) / n as f32 - 1.0;
-        let tc = (2.0 * (j as f32 + 0.5)) / n as f32 - 1.0;
-        // The tap's direction lies past the edge, so its major axis names the neighbour.
-        let d = face.direction(sc, tc);
-        let (f2, s2, t2) = Face::from_direction(d);
-        let (i2, j2) = face_texel_index(s2, t2, self.size);
+        let (f2, i2, j2) = wrapped_index(self.size, face, i, j);
         self.texel(f2, i2, j2)
     }
 
@@ -500,6 +532,47 @@ mod tests {
             let got = cube.sample_bilinear(d)[0];
             let want = f(d.normalize());
             assert!((got - want).abs() < 0.01, "{d}: {got} vs {want}");
+        }
+    }
+
+    #[test]
+    fn bilinear_taps_are_the_rows_of_sample_bilinear() {
+        // A cube of distinct values per texel and channel: the taps' weighted sum is the
+        // sampler's result everywhere (edges and corners of tiny faces included), the weights
+        // sum to 1 and each index is a texel of the cube.
+        use crate::sampling::Pcg32;
+        let mut rng = Pcg32::new(7, 1);
+        for n in [1usize, 2, 3, 4, 8] {
+            let mut cube = Cubemap::new(n);
+            for face in cube.faces.iter_mut() {
+                face.data
+                    .iter_mut()
+                    .for_each(|v| *v = rng.next_f64() as f32);
+            }
+            for _ in 0..2000 {
+                let d = Vec3::new(
+                    rng.next_f64() as f32 - 0.5,
+                    rng.next_f64() as f32 - 0.5,
+                    rng.next_f64() as f32 - 0.5,
+                );
+                if d.length() < 1e-3 {
+                    continue;
+                }
+                let taps = bilinear_taps(n, d);
+                let w: f32 = taps.iter().map(|t| t.1).sum();
+                assert!((w - 1.0).abs() < 1e-5);
+                let want = cube.sample_bilinear(d);
+                for (c, want) in want.iter().enumerate() {
+                    let got: f32 = taps
+                        .iter()
+                        .map(|&(k, w)| {
+                            assert!(k < 6 * n * n);
+                            w * cube.faces[k / (n * n)].data[3 * (k % (n * n)) + c]
+                        })
+                        .sum();
+                    assert!((got - want).abs() < 1e-5, "n {n}, {d}: {got} vs {want}");
+                }
+            }
         }
     }
 

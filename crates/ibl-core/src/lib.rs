@@ -16,6 +16,7 @@ pub mod equirect;
 pub mod error;
 pub mod image;
 pub mod io;
+pub mod linalg;
 pub mod output;
 pub mod params;
 pub mod progress;

@@ -347,14 +347,22 @@ fn runtime_frontier(root: &Path, quick: bool, fit_only: bool) {
     // The lookup-fitted chains (crate::fit) beside the exact ones they come from, on the
     // largest size.
     let fit_size = *sizes.last().unwrap();
-    let fitted = [(Target::Gltf, 6), (Target::Gltf, 7), (Target::Filament, 6)];
+    // Bevy reads as gltf does (lod = r(N−1)): the gltf rows are its rows.
+    let fitted = [
+        (Target::Gltf, Some(6)),
+        (Target::Gltf, Some(7)),
+        (Target::Gltf, Some(8)),
+        (Target::Filament, Some(6)),
+        (Target::Unity, Some(7)),
+        (Target::Babylon, None),
+    ];
     if fit_only {
         shapes.clear();
         for &(target, n) in &fitted {
             shapes.push(Shape {
                 target,
                 size: fit_size,
-                levels: Some(n),
+                levels: n,
                 fit: false,
             });
         }
@@ -363,7 +371,7 @@ fn runtime_frontier(root: &Path, quick: bool, fit_only: bool) {
         shapes.push(Shape {
             target,
             size: fit_size,
-            levels: Some(n),
+            levels: n,
             fit: true,
         });
     }
@@ -391,7 +399,8 @@ fn runtime_frontier(root: &Path, quick: bool, fit_only: bool) {
          Error: mean absolute relative error of luminance at one roughness; columns give the worst roughness in each range, per fixture ({}) and then over all of them. \
          Bytes: the chain at RGBA16F (8 bytes a texel; RGB9E5 / B10G11R11 halve it). \
          `fit`: `exact` levels are the kernel at their own roughness; `fitted` levels are fitted to the lookup (`--fit-lookup`, \
-         the default for gltf: each inner level minimises the lookup's worst relative error over its roughness range, see `ibl_prefilter::fit`). \
+         the default for gltf: each inner level minimises the lookup's worst relative error over its roughness range, see `ibl_prefilter::fit`, \
+         and levels of at most 8² texels a face are fitted to their bilinear read, see `ibl_prefilter::spatial`). Bevy reads as gltf does (its rows). \
          `% at r = 1`: where the lookup reads the last level alone, the error of that level's own bilinear read. \
          `bake s`: seconds to bake the four chains (levels and fit, without the runtime evaluation) on a shared 2-core machine.\n",
         if quick { " -- --quick" } else { "" },
@@ -704,8 +713,8 @@ fn floor_section() -> String {
          The peak of a small source's prefiltered radiance goes as 1/α² = r⁻⁴ (here P(r) = (r² + 0.05²)⁻²); \
          an engine blends two levels linearly in lod, and the blend of a convex function's two values overshoots between them. \
          Worst relative error of the blend over r ∈ [0.25, 1] (and where it is), with levels exact at their roughness and with levels fitted \
-         to the lookup as `--fit-lookup` fits them (the worst relative error minimised, one level at a time fine to coarse, see `ibl_prefilter::fit`). \
-         This is the part of studio's error no level can remove while the engine's mapping is fixed: a level holds one value per texel for a whole range of roughness (on studio, averaged over directions, it leaves 10% at 7 fitted levels). The other floor is the last level's own read: at r = 1 the lookup reads it alone, and on 4×4 faces its bilinear read costs 2.5–5.4% (column `% at r = 1`), which 8×8 faces bring to 0.5–1.2%.\n\n\
+         to the lookup as `--fit-lookup` fits them (the worst relative error minimised, one level at a time fine to coarse, two sweeps, see `ibl_prefilter::fit`). \
+         This is the part of studio's error no level can remove while the engine's mapping is fixed: a level holds one value per texel for a whole range of roughness (on studio, averaged over directions, it leaves 9.5% at 7 fitted levels). The other floor is the last level's own read: at r = 1 the lookup reads it alone, and on 4×4 faces its bilinear read costs 2.5–5.4% with the level's own values (column `% at r = 1`, exact rows), which 8×8 faces bring to 0.5–1.2%; fitted to the read (`ibl_prefilter::spatial`, the fitted rows) the 4×4 level costs 0.8–2.8%.\n\n\
          | lookup | levels | exact levels: worst % (at r) | fitted levels: worst % (at r) |\n|---|---:|---|---|\n",
     );
     for (mapping, n) in [
@@ -718,19 +727,27 @@ fn floor_section() -> String {
         let rs = mapping.level_roughnesses(n, 256);
         let exact: Vec<f32> = rs.iter().map(|&r| p(r)).collect();
         let mut fitted = exact.clone();
-        // As the bake does: fine to coarse, the finer neighbour as fitted, the last level exact.
-        for l in 1..n - 1 {
-            let plan = fit::plan(mapping, l, n, 256, fit::FIT_NODES);
-            let nodes: Vec<Cubemap> = plan.nodes.iter().map(|q| cube(p(q.roughness))).collect();
-            let hi = plan.hi.map(|h| cube(p(h)));
-            let f = fit::fit_level(
-                &plan,
-                &cube(exact[l]),
-                &cube(fitted[l - 1]),
-                hi.as_ref(),
-                &nodes,
-            );
-            fitted[l] = f.faces[0].data[0];
+        // As the bake does: fine to coarse, the finer neighbour as fitted, the last level
+        // exact; the coarser one following in the first sweep, as stored in later ones.
+        for sweep in 0..fit::SWEEPS {
+            for l in 1..n - 1 {
+                let plan = fit::plan(mapping, l, n, 256, fit::FIT_NODES);
+                let nodes: Vec<Cubemap> = plan.nodes.iter().map(|q| cube(p(q.roughness))).collect();
+                let (hi, coarser) = if sweep == 0 {
+                    (plan.hi.map(|h| cube(p(h))), fit::Coarser::Follows)
+                } else {
+                    (Some(cube(fitted[l + 1])), fit::Coarser::Fixed)
+                };
+                let f = fit::fit_level(
+                    &plan,
+                    &cube(exact[l]),
+                    &cube(fitted[l - 1]),
+                    hi.as_ref(),
+                    &nodes,
+                    coarser,
+                );
+                fitted[l] = f.faces[0].data[0];
+            }
         }
         let worst = |levels: &[f32]| {
             (0..=3000)

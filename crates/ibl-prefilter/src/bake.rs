@@ -7,6 +7,7 @@ use crate::fit;
 use crate::kernel::{reference_level, SourceTexels};
 use crate::runtime::{self, Reference, RuntimeReport};
 use crate::samples::SampleTable;
+use crate::spatial;
 use crate::tree::{tree_level, CellTree, TreeParams};
 use ibl_core::bordered::BorderedMips;
 use ibl_core::cube::{mip_sizes, texel_direction, Cubemap, Face};
@@ -473,6 +474,10 @@ pub struct LevelReport {
     /// With --fit-lookup: the level stores the lookup's best fit, not the exact kernel at its
     /// roughness (see [`crate::fit`]), and this is how far it moved.
     pub fit: Option<fit::LevelFit>,
+    /// With --fit-lookup, on levels of at most [`spatial::SPATIAL_MAX_SIZE`]² texels a face:
+    /// the level is corrected so the engine's bilinear read between its texels matches the
+    /// exact kernel (see [`crate::spatial`]), and the read's error before and after.
+    pub read_fit: Option<spatial::ReadFit>,
 }
 
 /// The error of one level measured against the brute-force kernel on probe texels.
@@ -645,6 +650,12 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
     };
     let source_seconds = t1.elapsed().as_secs_f64();
 
+    let mut stages = vec![Stage {
+        exact: level0.clone(),
+        values: level0.clone(),
+        correction: None,
+        fitting: None,
+    }];
     let mut levels = vec![level0];
     let mut reports = vec![LevelReport {
         level: 0,
@@ -655,6 +666,7 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
         evaluations_per_texel: 0.0,
         estimated_error: None,
         fit: None,
+        read_fit: None,
     }];
     let (mut level_seconds, mut level_work) = (vec![0.0], vec![0u64]);
     let mut estimate_seconds = 0.0;
@@ -675,11 +687,14 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
         // averaged: the reduction itself is exact) with the brute force.
         let estimated_error = (!params.reference).then(|| estimate_error(&fine_cube, &texels, r));
         estimate_seconds += te.elapsed().as_secs_f64();
-        let mut cube = reduce_to(fine_cube, n);
+        let exact = reduce_to(fine_cube, n);
+        let mut cube = exact.clone();
         let tf = Instant::now();
-        let mut fit = None;
+        let mut read_fit = None;
         let mut fit_work = 0;
-        // The last level stays exact: at r = 1 the lookup reads it alone (see crate::fit).
+        // The last level's values stay the kernel's: at r = 1 the lookup reads it alone (see
+        // crate::fit); only its bilinear read is fitted (crate::spatial).
+        let mut fitting = None;
         if params.fits_lookup() && l + 1 < n_chain {
             let plan = fit::plan(lookup, l, n_chain, size, fit::FIT_NODES);
             let mut exact_at = |r: f32| {
@@ -689,11 +704,35 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
             };
             let hi = plan.hi.map(&mut exact_at);
             let at_nodes: Vec<Cubemap> = plan.nodes.iter().map(|q| exact_at(q.roughness)).collect();
-            // The finer neighbour as stored (already fitted: the sweep goes fine to coarse).
-            let lo = reduce_to(levels[l - 1].clone(), n);
-            let fitted = fit::fit_level(&plan, &cube, &lo, hi.as_ref(), &at_nodes);
-            fit = Some(fit::LevelFit::new(&plan, &fitted, &cube));
-            cube = fitted;
+            // The finer neighbour as the engine reads it at this level's texels (already
+            // fitted: the sweep goes fine to coarse).
+            let lo = fit::read_at_texels(&levels[l - 1], n);
+            cube = fit::fit_level(
+                &plan,
+                &exact,
+                &lo,
+                hi.as_ref(),
+                &at_nodes,
+                fit::Coarser::Follows,
+            );
+            fitting = Some((plan, at_nodes));
+        }
+        let mut correction = None;
+        if params.fits_lookup() && n <= spatial::SPATIAL_MAX_SIZE {
+            // The read correction of the exact level at r_l, added to what the per-texel fit
+            // stores (both are small and the read is linear in the texels).
+            let (dense, w) = convolve_points(
+                &engine,
+                &source,
+                &texels,
+                n * spatial::SAMPLES_PER_EDGE,
+                r,
+                progress,
+            );
+            fit_work += w;
+            let (read, report) = spatial::fit_bilinear(&exact, &dense);
+            correction = Some(read);
+            read_fit = Some(report);
         }
         fit_seconds += tf.elapsed().as_secs_f64();
         level_work.push(work + fit_work);
@@ -705,9 +744,49 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
             footprint_samples: k * k,
             evaluations_per_texel: work as f64 / (6 * n * n) as f64,
             estimated_error,
-            fit,
+            fit: None,
+            read_fit,
         });
-        levels.push(cube);
+        levels.push(corrected(&cube, correction.as_ref(), &exact));
+        stages.push(Stage {
+            exact,
+            values: cube,
+            correction,
+            fitting,
+        });
+    }
+    // Further Gauss–Seidel sweeps: each fitted level again, now with both neighbours as the
+    // engine reads them (the coarser one fitted too, no longer assumed to follow).
+    let tf = Instant::now();
+    for _ in 1..fit::SWEEPS {
+        for l in 1..levels.len() {
+            let Some((plan, at_nodes)) = &stages[l].fitting else {
+                continue;
+            };
+            if l + 1 >= levels.len() {
+                continue;
+            }
+            let n = stages[l].exact.size;
+            let lo = fit::read_at_texels(&levels[l - 1], n);
+            let hi = fit::read_at_texels(&levels[l + 1], n);
+            let st = &stages[l];
+            let values = fit::fit_level(
+                plan,
+                &st.exact,
+                &lo,
+                Some(&hi),
+                at_nodes,
+                fit::Coarser::Fixed,
+            );
+            levels[l] = corrected(&values, st.correction.as_ref(), &st.exact);
+            stages[l].values = values;
+        }
+    }
+    fit_seconds += tf.elapsed().as_secs_f64();
+    for (report, st) in reports.iter_mut().zip(&stages) {
+        if let Some((plan, _)) = &st.fitting {
+            report.fit = Some(fit::LevelFit::new(plan, &st.values, &st.exact));
+        }
     }
     let note = (n_baked < n_chain).then(|| {
         format!(
@@ -805,6 +884,32 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
     })
 }
 
+/// One level on its way through the lookup fit.
+struct Stage {
+    /// The kernel at the level's roughness (footprint means where they apply).
+    exact: Cubemap,
+    /// What the per-texel lookup fit stores (crate::fit), `exact` where it does not apply.
+    values: Cubemap,
+    /// The level fitted to its bilinear read (crate::spatial), on small levels.
+    correction: Option<Cubemap>,
+    /// The per-texel fit's plan and the kernel at its nodes, kept for the later sweeps.
+    fitting: Option<(fit::Plan, Vec<Cubemap>)>,
+}
+
+/// What a level stores: the per-texel fit's `values` plus the read correction (the read-fitted
+/// exact level minus the exact level), never negative.
+fn corrected(values: &Cubemap, read: Option<&Cubemap>, exact: &Cubemap) -> Cubemap {
+    let mut out = values.clone();
+    if let Some(read) = read {
+        for ((o, f), e) in out.faces.iter_mut().zip(&read.faces).zip(&exact.faces) {
+            for ((v, f), e) in o.data.iter_mut().zip(&f.data).zip(&e.data) {
+                *v = (*v + (f - e)).max(0.0);
+            }
+        }
+    }
+    out
+}
+
 /// Level texels at roughness `r` by the chosen method: `n`×`n` faces, computed k× finer where
 /// the footprint is averaged ([`footprint_factor`]; [`reduce_to`] gives the level), and the
 /// kernel evaluations spent.
@@ -817,6 +922,19 @@ fn convolve_level(
     progress: &dyn Progress,
 ) -> (Cubemap, u64) {
     let fine = n * footprint_factor(n, r);
+    convolve_points(engine, source, texels, fine, r, progress)
+}
+
+/// The kernel at roughness `r` at the texel centres of a `fine`×`fine` cube by the chosen
+/// method, and the kernel evaluations spent.
+fn convolve_points(
+    engine: &Engine,
+    source: &Cubemap,
+    texels: &SourceTexels,
+    fine: usize,
+    r: f32,
+    progress: &dyn Progress,
+) -> (Cubemap, u64) {
     match engine {
         Engine::Reference => (
             reference_level(source, texels, fine, r, progress),

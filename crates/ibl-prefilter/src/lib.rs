@@ -21,6 +21,7 @@ pub mod fit;
 pub mod kernel;
 pub mod runtime;
 pub mod samples;
+pub mod spatial;
 pub mod tree;
 
 pub use bake::{run, Method, Params, Quality};

@@ -8,7 +8,8 @@
 //! on the §5.1 spheres; the log-space solution is the starting point (the objective is non-convex
 //! in x, and log space is where exp(A·x) is well behaved). The output keeps eq. 11's form.
 
-use crate::solve::{least_squares, solve_spd};
+use crate::solve::least_squares;
+use ibl_core::linalg::solve_spd;
 
 /// The objective and its inputs for one colour channel.
 pub struct RelativeProblem<'a> {

@@ -122,58 +122,6 @@ pub fn least_squares(a: &[f64], m: usize, k: usize, rhs: &[Vec<f64>]) -> Option<
     Some(LsSolution { x, condition })
 }
 
-/// Solves the symmetric positive-definite system G x = b (row-major k×k, full) by Cholesky on
-/// the Jacobi-equilibrated matrix D⁻¹GD⁻¹, D = √diag(G). Returns `None` when G is not
-/// numerically positive definite (a zero diagonal, or a pivot below 1e-12 of the scaled
-/// diagonal, i.e. κ of the equilibrated matrix beyond ~1e12), so callers can fall back to QR.
-///
-/// Why: a Gauss–Newton step needs JᵀJ and Jᵀr, which accumulate row by row in k² work per
-/// row without storing J; QR of J costs ~4× that and m×k memory. κ(JᵀJ) = κ(J)² is acceptable
-/// here because the steps are corrected by the line search and never define the answer alone.
-pub(crate) fn solve_spd(g: &[f64], b: &[f64], k: usize) -> Option<Vec<f64>> {
-    assert_eq!(g.len(), k * k);
-    assert_eq!(b.len(), k);
-    let d: Vec<f64> = (0..k).map(|i| g[i * k + i].sqrt()).collect();
-    if d.iter().any(|v| v.is_nan() || *v <= 0.0 || !v.is_finite()) {
-        return None;
-    }
-    // Lower-triangular L of the scaled matrix, in place.
-    let mut l = vec![0.0f64; k * k];
-    for i in 0..k {
-        for j in 0..=i {
-            let mut sum = g[i * k + j] / (d[i] * d[j]);
-            for p in 0..j {
-                sum -= l[i * k + p] * l[j * k + p];
-            }
-            if i == j {
-                if sum.is_nan() || sum <= 1e-12 {
-                    return None;
-                }
-                l[i * k + i] = sum.sqrt();
-            } else {
-                l[i * k + j] = sum / l[j * k + j];
-            }
-        }
-    }
-    // L y = D⁻¹ b, Lᵀ z = y, x = D⁻¹ z.
-    let mut y = vec![0.0f64; k];
-    for i in 0..k {
-        let mut sum = b[i] / d[i];
-        for p in 0..i {
-            sum -= l[i * k + p] * y[p];
-        }
-        y[i] = sum / l[i * k + i];
-    }
-    for i in (0..k).rev() {
-        let mut sum = y[i];
-        for p in i + 1..k {
-            sum -= l[p * k + i] * y[p];
-        }
-        y[i] = sum / l[i * k + i];
-    }
-    Some(y.iter().zip(&d).map(|(z, di)| z / di).collect())
-}
-
 /// Singular values of a small square matrix (row-major n×n) by one-sided Jacobi rotations.
 pub(crate) fn singular_values(a: &[f64], n: usize) -> Vec<f64> {
     // Work on columns of U = A; rotate pairs until all are orthogonal.
@@ -222,6 +170,7 @@ pub(crate) fn singular_values(a: &[f64], n: usize) -> Vec<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use ibl_core::linalg::solve_spd;
     use ibl_core::sampling::Pcg32;
 
     #[test]

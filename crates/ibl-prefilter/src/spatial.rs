@@ -1,0 +1,363 @@
+//! Coarse levels fitted to the engine's bilinear read (part of `--fit-lookup`): what a level of
+//! a few texels a face stores so that the seamless bilinear tap an engine makes between its
+//! texels gives the exact kernel, not only at the texel centres.
+//!
+//! A level stored as footprint means (or centre values) is exact where it is stored, but an
+//! engine never reads it there: it reads a bilinear blend of four texels, seamless across faces
+//! (texels past an edge re-projected from the neighbour, `ibl_core::cube::bilinear_taps`). On a
+//! 4×4 face the radiance at r = 1 curves too much over a texel for that blend: measured 2.5–5.4%
+//! mean error on four real environments (bench/runtime.md, `% at r = 1`), the largest error of
+//! the whole lookup above r = 0.8. The read is linear in the texels v, so the texels that make it
+//! closest to the exact radiance f are a linear least-squares problem:
+//!
+//!   min_v Σ_s Ω_s (B_s·v − f_s)² / (Y(f_s)² + ε²)   subject to   Σ_i Ω_i v_i = Σ_i Ω_i m_i,
+//!
+//! s over [`SAMPLES_PER_EDGE`]² points per texel (centres of a finer grid, so never a texel
+//! centre), Ω_s their solid angles (the report averages over uniform directions), B_s the
+//! lookup's four taps, the relative weight 1/Y² matching the report's relative error (ε = 10⁻³
+//! of the mean luminance, so black regions do not dominate), one weight for the three channels
+//! so they share the matrix. The constraint keeps the level's power (Σ texel·solid angle) that
+//! of the footprint means m, exactly as before the fit (item 4 of issue 14: a sun's power kept
+//! to 0.1% at every level). Normal equations (n² texels a face: 96 unknowns at 4×4, 384 at
+//! 8×8), solved by Cholesky with the constraint by its Lagrange multiplier:
+//! v = A⁻¹(b − μΩ), μ = (Ωᵀ A⁻¹ b − P) / (Ωᵀ A⁻¹ Ω).
+
+use ibl_core::cube::{bilinear_taps, solid_angle_table, texel_direction, Cubemap, Face};
+use ibl_core::linalg::solve_spd;
+use ibl_core::luminance;
+use serde::Serialize;
+
+/// Levels whose faces have at most this many texels an edge are fitted to the bilinear read
+/// (a 16² level's read is already within 0.1–0.4% at r = 1: bench/runtime.md, 5 levels).
+pub const SPATIAL_MAX_SIZE: usize = 8;
+
+/// Fit samples per texel edge: the exact kernel is evaluated on a grid this much finer.
+pub const SAMPLES_PER_EDGE: usize = 4;
+
+/// What `prefilter.json` says of a level fitted to the bilinear read.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ReadFit {
+    /// Points the read was fitted at (the finer grid's texel centres, every face).
+    pub samples: usize,
+    /// Mean |read − exact| / exact of luminance over those points (solid-angle weighted), of
+    /// the level as it was (footprint means or centre values).
+    pub mean_abs_rel_before: f64,
+    /// The same of the fitted level.
+    pub mean_abs_rel_after: f64,
+    /// Texel channels the fit would have made negative, stored black (their channel then
+    /// rescaled to keep its power).
+    pub clamped: usize,
+}
+
+/// The fitted texels of a level: `stored` the level as computed (footprint means: their power
+/// is kept), `dense` the exact kernel at the centres of a grid [`SAMPLES_PER_EDGE`]× finer.
+/// Returns `stored` unchanged when there is nothing to fit (black) or the system is singular.
+pub fn fit_bilinear(stored: &Cubemap, dense: &Cubemap) -> (Cubemap, ReadFit) {
+    let n = stored.size;
+    let m = dense.size;
+    assert_eq!(m, n * SAMPLES_PER_EDGE, "dense grid of the fit");
+    let k = 6 * n * n;
+    let sa_dense = solid_angle_table(m);
+    let sa = solid_angle_table(n);
+    // Samples in a fixed order (face, row, column): the sums are sequential, so the result is
+    // the same for any thread count.
+    let mut samples = Vec::with_capacity(6 * m * m);
+    for face in Face::ALL {
+        for j in 0..m {
+            for i in 0..m {
+                let f = dense.texel(face, i, j);
+                let taps = bilinear_taps(n, texel_direction(face, i, j, m));
+                samples.push((taps, f, sa_dense[j * m + i] as f64));
+            }
+        }
+    }
+    let total: f64 = samples.iter().map(|s| s.2).sum();
+    let mean_y = samples
+        .iter()
+        .map(|(_, f, w)| luminance(*f) as f64 * w)
+        .sum::<f64>()
+        / total;
+    let before = read_error(stored, &samples);
+    let unchanged = |before| {
+        let report = ReadFit {
+            samples: samples.len(),
+            mean_abs_rel_before: before,
+            mean_abs_rel_after: before,
+            clamped: 0,
+        };
+        (stored.clone(), report)
+    };
+    if !(mean_y > 0.0 && mean_y.is_finite()) {
+        return unchanged(before);
+    }
+    let eps2 = (1e-3 * mean_y).powi(2);
+    let mut a = vec![0.0f64; k * k];
+    let mut b = vec![[0.0f64; 3]; k];
+    for (taps, f, omega) in &samples {
+        let y = luminance(*f) as f64;
+        let w = omega / (y * y + eps2);
+        for &(p, wp) in taps {
+            let wp = w * wp as f64;
+            for c in 0..3 {
+                b[p][c] += wp * f[c] as f64;
+            }
+            for &(q, wq) in taps {
+                a[p * k + q] += wp * wq as f64;
+            }
+        }
+    }
+    // Σ_i Ω_i v_i: the texels' solid angles, the same table on every face.
+    let omega: Vec<f64> = (0..k).map(|p| sa[p % (n * n)] as f64).collect();
+    let Some(a_inv_omega) = solve_spd(&a, &omega, k) else {
+        return unchanged(before);
+    };
+    let omega_a_omega: f64 = omega.iter().zip(&a_inv_omega).map(|(o, x)| o * x).sum();
+    let mut fitted = stored.clone();
+    let mut clamped = 0;
+    for c in 0..3 {
+        let rhs: Vec<f64> = b.iter().map(|v| v[c]).collect();
+        let Some(x) = solve_spd(&a, &rhs, k) else {
+            return unchanged(before);
+        };
+        let power: f64 = (0..k)
+            .map(|p| omega[p] * stored.faces[p / (n * n)].data[3 * (p % (n * n)) + c] as f64)
+            .sum();
+        let omega_x: f64 = omega.iter().zip(&x).map(|(o, v)| o * v).sum();
+        let mu = (omega_x - power) / omega_a_omega;
+        let mut v: Vec<f64> = (0..k).map(|p| x[p] - mu * a_inv_omega[p]).collect();
+        if v.iter().any(|v| !v.is_finite()) {
+            return unchanged(before);
+        }
+        // Light is never negative: where the fit would make it so (texels larger than what
+        // they hold, a 1×1 level), the texel is black and the channel rescaled to keep its
+        // power.
+        let negative = v.iter().filter(|v| **v < 0.0).count();
+        if negative > 0 {
+            v.iter_mut().for_each(|v| *v = v.max(0.0));
+            let kept: f64 = omega.iter().zip(&v).map(|(o, v)| o * v).sum();
+            if kept > 0.0 {
+                v.iter_mut().for_each(|v| *v *= power / kept);
+            }
+            clamped += negative;
+        }
+        for (p, v) in v.iter().enumerate() {
+            fitted.faces[p / (n * n)].data[3 * (p % (n * n)) + c] = *v as f32;
+        }
+    }
+    let after = read_error(&fitted, &samples);
+    let report = ReadFit {
+        samples: samples.len(),
+        mean_abs_rel_before: before,
+        mean_abs_rel_after: after,
+        clamped,
+    };
+    (fitted, report)
+}
+
+type Sample = ([(usize, f32); 4], [f32; 3], f64);
+
+/// Solid-angle-weighted mean |read − exact| / exact of luminance at the samples (exact values
+/// below 10⁻⁶ of the mean left out, as the runtime report does).
+fn read_error(level: &Cubemap, samples: &[Sample]) -> f64 {
+    let n = level.size;
+    let total: f64 = samples.iter().map(|s| s.2).sum();
+    let mean_y: f64 = samples
+        .iter()
+        .map(|(_, f, w)| luminance(*f) as f64 * w)
+        .sum::<f64>()
+        / total;
+    let (mut err, mut weight) = (0.0, 0.0);
+    for (taps, f, w) in samples {
+        let y = luminance(*f) as f64;
+        if y <= 1e-6 * mean_y {
+            continue;
+        }
+        let mut read = [0.0f32; 3];
+        for &(p, wp) in taps {
+            let t = level.texel(Face::from_index(p / (n * n)), p % n, (p % (n * n)) / n);
+            for c in 0..3 {
+                read[c] += wp * t[c];
+            }
+        }
+        err += w * ((luminance(read) as f64 - y) / y).abs();
+        weight += w;
+    }
+    if weight > 0.0 {
+        err / weight
+    } else {
+        0.0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+    use ibl_core::sampling::Pcg32;
+
+    /// Smooth and positive everywhere (no clamping), with a soft bright lobe and colour.
+    fn smooth(d: Vec3) -> [f32; 3] {
+        let d = d.normalize();
+        let lobe = (d.dot(Vec3::new(0.4, 0.7, -0.59).normalize()) + 1.0).powi(3);
+        [
+            0.2 + 0.1 * d.z + lobe,
+            0.3 + 0.15 * d.x * d.x + 0.5 * lobe,
+            0.25 - 0.1 * d.y + 0.8 * lobe,
+        ]
+    }
+
+    /// The fit's objective per channel, computed through the sampler itself (not the taps):
+    /// Σ_s w_s (read(d_s) − f_s)², w_s = Ω_s / (Y(f_s)² + ε²).
+    fn objective(level: &Cubemap, dense: &Cubemap) -> [f64; 3] {
+        let m = dense.size;
+        let sa = solid_angle_table(m);
+        let mut mean_y = (0.0, 0.0);
+        for face in Face::ALL {
+            for (t, s) in dense.faces[face as usize].data.chunks_exact(3).zip(&sa) {
+                mean_y.0 += luminance([t[0], t[1], t[2]]) as f64 * *s as f64;
+                mean_y.1 += *s as f64;
+            }
+        }
+        let eps2 = (1e-3 * mean_y.0 / mean_y.1).powi(2);
+        let mut j = [0.0f64; 3];
+        for face in Face::ALL {
+            for y in 0..m {
+                for x in 0..m {
+                    let f = dense.texel(face, x, y);
+                    let read = level.sample_bilinear(texel_direction(face, x, y, m));
+                    let lum = luminance(f) as f64;
+                    let w = sa[y * m + x] as f64 / (lum * lum + eps2);
+                    for c in 0..3 {
+                        j[c] += w * (read[c] as f64 - f[c] as f64).powi(2);
+                    }
+                }
+            }
+        }
+        j
+    }
+
+    fn power(c: &Cubemap) -> [f64; 3] {
+        let sa = solid_angle_table(c.size);
+        let mut p = [0.0; 3];
+        for face in &c.faces {
+            for (t, s) in face.data.chunks_exact(3).zip(&sa) {
+                for k in 0..3 {
+                    p[k] += t[k] as f64 * *s as f64;
+                }
+            }
+        }
+        p
+    }
+
+    /// The fit is the constrained least-squares optimum: its power is the stored level's,
+    /// and no perturbation that keeps the power (random, projected) lowers the objective,
+    /// measured through `Cubemap::sample_bilinear` rather than the taps the fit used.
+    #[test]
+    fn fit_is_the_constrained_optimum_and_keeps_power() {
+        for n in [1usize, 2, 4] {
+            let dense = Cubemap::from_fn(n * SAMPLES_PER_EDGE, smooth);
+            let stored = Cubemap::from_fn(n, smooth);
+            let (fitted, report) = fit_bilinear(&stored, &dense);
+            let (p0, p1) = (power(&stored), power(&fitted));
+            for c in 0..3 {
+                assert!(
+                    (p1[c] / p0[c] - 1.0).abs() < 1e-6,
+                    "n {n} power {p1:?} vs {p0:?}"
+                );
+            }
+            assert!(
+                report.mean_abs_rel_after < report.mean_abs_rel_before,
+                "{report:?}"
+            );
+            // A 1×1 level cannot hold the lobe without a negative texel; larger ones can, and
+            // are the optimum itself.
+            assert_eq!(report.clamped > 0, n == 1, "n {n}: {report:?}");
+            if report.clamped > 0 {
+                continue;
+            }
+            let j0 = objective(&fitted, &dense);
+            let sa = solid_angle_table(n);
+            let mut rng = Pcg32::new(n as u64, 5);
+            for _ in 0..20 {
+                // A random direction of texel change with Σ Ω δ = 0.
+                let mut delta: Vec<f64> = (0..6 * n * n).map(|_| rng.next_f64() - 0.5).collect();
+                let om = |p: usize| sa[p % (n * n)] as f64;
+                let (dot, norm) = (0..delta.len()).fold((0.0, 0.0), |(a, b), p| {
+                    (a + om(p) * delta[p], b + om(p) * om(p))
+                });
+                for (p, d) in delta.iter_mut().enumerate() {
+                    *d -= dot / norm * om(p);
+                }
+                for t in [-0.02f32, 0.02] {
+                    let mut moved = fitted.clone();
+                    for (p, d) in delta.iter().enumerate() {
+                        for v in &mut moved.faces[p / (n * n)].data[3 * (p % (n * n))..][..3] {
+                            *v += t * *d as f32;
+                        }
+                    }
+                    let j1 = objective(&moved, &dense);
+                    for c in 0..3 {
+                        assert!(
+                            j1[c] >= j0[c] * (1.0 - 1e-6),
+                            "n {n} channel {c}: a feasible step lowers the objective {} → {}",
+                            j0[c],
+                            j1[c]
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    /// On a smooth function the fitted 4×4 level's read is closer to it than the centre
+    /// values' read, by Monte Carlo over random directions (independent of the fit's grid).
+    #[test]
+    fn fitted_read_is_closer_at_random_directions() {
+        let n = 4;
+        let dense = Cubemap::from_fn(n * SAMPLES_PER_EDGE, smooth);
+        let centres = Cubemap::from_fn(n, smooth);
+        let (fitted, _) = fit_bilinear(&centres, &dense);
+        let mut rng = Pcg32::new(9, 9);
+        let (mut e_centres, mut e_fitted) = (0.0, 0.0);
+        let count = 20000;
+        for _ in 0..count {
+            // Uniform on the sphere (Archimedes: z uniform, azimuth uniform).
+            let (z, phi) = (
+                2.0 * rng.next_f32() - 1.0,
+                std::f32::consts::TAU * rng.next_f32(),
+            );
+            let s = (1.0 - z * z).max(0.0).sqrt();
+            let d = Vec3::new(s * phi.cos(), s * phi.sin(), z);
+            let want = luminance(smooth(d)) as f64;
+            let rel = |c: &Cubemap| ((luminance(c.sample_bilinear(d)) as f64 - want) / want).abs();
+            e_centres += rel(&centres) / count as f64;
+            e_fitted += rel(&fitted) / count as f64;
+        }
+        eprintln!("4×4 read: centre values {e_centres:.5}, fitted {e_fitted:.5}");
+        assert!(e_fitted < 0.5 * e_centres, "{e_fitted} vs {e_centres}");
+    }
+
+    #[test]
+    fn black_stays_black_and_a_sun_on_black_stays_finite_and_non_negative() {
+        let (fitted, report) = fit_bilinear(&Cubemap::new(2), &Cubemap::new(8));
+        assert!(fitted
+            .faces
+            .iter()
+            .all(|f| f.data.iter().all(|v| *v == 0.0)));
+        assert_eq!(report.mean_abs_rel_before, report.mean_abs_rel_after);
+        // A cosine lobe of 10⁵ on black: half the sphere is exactly 0.
+        let sun = |d: Vec3| {
+            let c = d
+                .normalize()
+                .dot(Vec3::new(0.1, -0.99, 0.05).normalize())
+                .max(0.0);
+            [1e5 * c, 8e4 * c, 6e4 * c]
+        };
+        let (fitted, report) = fit_bilinear(&Cubemap::from_fn(4, sun), &Cubemap::from_fn(16, sun));
+        assert!(fitted
+            .faces
+            .iter()
+            .all(|f| f.data.iter().all(|v| v.is_finite() && *v >= 0.0)));
+        assert!(report.mean_abs_rel_after.is_finite());
+    }
+}
