@@ -9,10 +9,6 @@ use std::path::Path;
 
 const BIN: Bin = Bin::new(env!("CARGO_BIN_EXE_brdf-lut"), "brdf-lut");
 
-fn ok(args: &[&str]) {
-    BIN.run_ok(args);
-}
-
 /// Reads the R and G channels of an EXR (the core reader keeps a lone R of an RG file).
 fn read_exr_channels(path: &Path) -> (usize, usize, Vec<Vec<f32>>) {
     use exr::prelude::*;
@@ -34,30 +30,18 @@ fn dfg_exr_is_the_library_table_and_deterministic() {
     let dir = tempfile::tempdir().unwrap();
     let a = dir.path().join("a.exr");
     let b = dir.path().join("b.exr");
-    ok(&[
-        "dfg",
-        "-o",
-        a.to_str().unwrap(),
-        "--size",
-        "16",
-        "--samples",
-        "256",
-        "--threads",
-        "1",
-        "-q",
-    ]);
-    ok(&[
-        "dfg",
-        "-o",
-        b.to_str().unwrap(),
-        "--size",
-        "16",
-        "--samples",
-        "256",
-        "--threads",
-        "2",
-        "-q",
-    ]);
+    for (out, threads) in [(&a, "1"), (&b, "2")] {
+        let flags = [
+            "--size",
+            "16",
+            "--samples",
+            "256",
+            "--threads",
+            threads,
+            "-q",
+        ];
+        BIN.bake("dfg", out, &flags);
+    }
     assert_eq!(
         std::fs::read(&a).unwrap(),
         std::fs::read(&b).unwrap(),
@@ -80,32 +64,17 @@ fn dfg_exr_is_the_library_table_and_deterministic() {
 fn dfg_multiscatter_png_json_and_ron() {
     let dir = tempfile::tempdir().unwrap();
     let p = |n: &str| dir.path().join(n);
-    ok(&[
-        "dfg",
-        "-o",
-        p("m.exr").to_str().unwrap(),
-        "--size",
-        "8",
-        "--samples",
-        "64",
-        "--multiscatter",
-        "-q",
-    ]);
+    let dfg = |name: &str, size: &str, extra: &[&str]| {
+        let flags = ["--size", size, "--samples", "64", "-q"];
+        BIN.bake("dfg", p(name), &[&flags[..], extra].concat());
+    };
+    dfg("m.exr", "8", &["--multiscatter"]);
     let m = read_image(&p("m.exr"), ColorSpace::Linear).unwrap();
     assert_eq!(m.channels, 3);
     for t in m.data.chunks(3) {
         assert_eq!(t[2], t[0] + t[1]);
     }
-    ok(&[
-        "dfg",
-        "-o",
-        p("d.png").to_str().unwrap(),
-        "--size",
-        "8",
-        "--samples",
-        "64",
-        "-q",
-    ]);
+    dfg("d.png", "8", &[]);
     let png = read_image(&p("d.png"), ColorSpace::Linear).unwrap();
     assert_eq!((png.width, png.channels), (8, 3));
     let lib = dfg::dfg_table(8, 64, false, &NoProgress);
@@ -116,16 +85,7 @@ fn dfg_multiscatter_png_json_and_ron() {
                 && t[2] == 0.0
         );
     }
-    ok(&[
-        "dfg",
-        "-o",
-        p("d.json").to_str().unwrap(),
-        "--size",
-        "4",
-        "--samples",
-        "64",
-        "-q",
-    ]);
+    dfg("d.json", "4", &[]);
     let j: serde_json::Value =
         serde_json::from_slice(&std::fs::read(p("d.json")).unwrap()).unwrap();
     assert_eq!(j["width"], 4);
@@ -135,16 +95,7 @@ fn dfg_multiscatter_png_json_and_ron() {
         lib.texel(1, 2)[0]
     );
     assert_eq!(j["params"]["samples"], 64);
-    ok(&[
-        "dfg",
-        "-o",
-        p("d.ron").to_str().unwrap(),
-        "--size",
-        "4",
-        "--samples",
-        "64",
-        "-q",
-    ]);
+    dfg("d.ron", "4", &[]);
     let ron_text = std::fs::read_to_string(p("d.ron")).unwrap();
     assert!(
         ron_text.contains("texels") && ron_text.contains("width: 4"),
@@ -156,36 +107,20 @@ fn dfg_multiscatter_png_json_and_ron() {
 fn fresnel_tail_and_as_size_bias() {
     let dir = tempfile::tempdir().unwrap();
     let tail = dir.path().join("tail.exr");
-    ok(&[
+    BIN.bake(
         "fresnel-tail",
-        "-o",
-        tail.to_str().unwrap(),
-        "--size",
-        "8",
-        "--samples",
-        "128",
-        "-q",
-    ]);
+        &tail,
+        &["--size", "8", "--samples", "128", "-q"],
+    );
     let (_, _, ch) = read_exr_channels(&tail);
     let lib = fresnel_tail::tail_table(8, 128, &NoProgress);
     assert_eq!(ch[1][5], lib.data[10]);
     assert_eq!(ch[0][5], lib.data[11]);
 
     let sb = dir.path().join("sb.exr");
-    ok(&[
-        "as-size-bias",
-        "--nu",
-        "20000",
-        "--nv",
-        "70",
-        "-o",
-        sb.to_str().unwrap(),
-        "--size",
-        "8",
-        "--samples",
-        "256",
-        "-q",
-    ]);
+    let lobe = ["--nu", "20000", "--nv", "70"];
+    let small = ["--size", "8", "--samples", "256", "-q"];
+    BIN.bake("as-size-bias", &sb, &[&lobe[..], &small].concat());
     let (w, _, ch) = read_exr_channels(&sb);
     let a = ibl_brdf_as(20000.0, 70.0);
     let lib =
@@ -195,23 +130,13 @@ fn fresnel_tail_and_as_size_bias() {
         assert_eq!((ch[1][k], ch[0][k]), (l[0], l[1]));
     }
     // The thesis's names: a folder, brdfIntegration[NU,NV].png with B = 0.
-    ok(&[
+    let thesis = ["--thesis-names", "--size", "8", "--samples", "64"];
+    let hv = ["--sampler", "hv-lut", "-q"];
+    BIN.bake(
         "as-size-bias",
-        "--nu",
-        "20000",
-        "--nv",
-        "70",
-        "-o",
-        dir.path().to_str().unwrap(),
-        "--thesis-names",
-        "--size",
-        "8",
-        "--samples",
-        "64",
-        "--sampler",
-        "hv-lut",
-        "-q",
-    ]);
+        dir.path(),
+        &[&lobe[..], &thesis, &hv].concat(),
+    );
     let png = read_image(
         &dir.path().join("brdfIntegration[20000,70].png"),
         ColorSpace::Linear,
@@ -225,11 +150,12 @@ fn ibl_brdf_as(nu: f64, nv: f64) -> ibl_brdf::AshikhminShirley {
     ibl_brdf::AshikhminShirley::new(nu, nv)
 }
 
-/// A bad invocation: exit code, exactly one line on stderr, nothing written.
-fn refused(args: &[&str], dir: &Path, code: i32) {
-    BIN.refused(args, code, "");
+/// A bad invocation `table -o out flags…`: exit code, exactly one line on stderr, nothing
+/// written into `dir` (which holds one file, `file`).
+fn refused(table: &str, out: &Path, flags: &[&str], dir: &Path, code: i32) {
+    BIN.refused_bake(table, out, flags, code, "");
     let left = ibl_testkit::files_in(dir);
-    assert!(left.iter().all(|n| n == "file"), "{args:?} left {left:?}");
+    assert!(left.iter().all(|n| n == "file"), "{flags:?} left {left:?}");
 }
 
 #[test]
@@ -237,37 +163,21 @@ fn bad_parameters_are_one_line_errors_with_no_output() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     std::fs::write(d.join("file"), b"x").unwrap();
-    let out = d.join("o.exr");
-    let o = out.to_str().unwrap();
-    refused(&["as-size-bias", "--nu", "0", "--nv", "70", "-o", o], d, 2);
-    refused(&["as-size-bias", "--nv", "70", "-o", o], d, 2);
-    refused(
-        &["as-size-bias", "--nu", "1e7", "--nv", "70", "-o", o],
-        d,
-        2,
-    );
-    refused(
-        &["as-size-bias", "--nu", "nan", "--nv", "70", "-o", o],
-        d,
-        2,
-    );
-    refused(&["dfg", "--size", "0", "-o", o], d, 2);
-    refused(&["dfg", "--size", "100000", "-o", o], d, 2);
-    refused(&["dfg", "--samples", "-5", "-o", o], d, 2);
-    refused(&["dfg", "--samples", "0", "-o", o], d, 2);
-    refused(&["fresnel-tail", "--samples", "x", "-o", o], d, 2);
-    refused(&["dfg", "-o", d.join("o.txt").to_str().unwrap()], d, 3);
-    refused(
-        &[
-            "dfg",
-            "--size",
-            "4",
-            "-o",
-            d.join("file/o.exr").to_str().unwrap(),
-        ],
-        d,
-        4,
-    );
-    refused(&["dfg"], d, 2);
-    refused(&["nonsense"], d, 2);
+    let o = &d.join("o.exr");
+    let asb = "as-size-bias";
+    refused(asb, o, &["--nu", "0", "--nv", "70"], d, 2);
+    refused(asb, o, &["--nv", "70"], d, 2);
+    refused(asb, o, &["--nu", "1e7", "--nv", "70"], d, 2);
+    refused(asb, o, &["--nu", "nan", "--nv", "70"], d, 2);
+    refused("dfg", o, &["--size", "0"], d, 2);
+    refused("dfg", o, &["--size", "100000"], d, 2);
+    refused("dfg", o, &["--samples", "-5"], d, 2);
+    refused("dfg", o, &["--samples", "0"], d, 2);
+    refused("fresnel-tail", o, &["--samples", "x"], d, 2);
+    refused("dfg", &d.join("o.txt"), &[], d, 3);
+    refused("dfg", &d.join("file/o.exr"), &["--size", "4"], d, 4);
+    for args in [["dfg"], ["nonsense"]] {
+        BIN.refused(&args, 2, "");
+    }
+    assert_eq!(ibl_testkit::files_in(d), ["file"]);
 }

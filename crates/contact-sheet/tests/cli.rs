@@ -4,15 +4,10 @@
 
 use ibl_core::io::{self, ColorSpace, FloatDepth, WriteOptions};
 use ibl_core::{CubeMips, Cubemap, Image};
-use ibl_testkit::{assert_one_line_error, Bin};
+use ibl_testkit::Bin;
 use std::path::Path;
-use std::process::Output;
 
 const BIN: Bin = Bin::new(env!("CARGO_BIN_EXE_contact-sheet"), "contact-sheet");
-
-fn run(args: &[&str]) -> Output {
-    BIN.run(args)
-}
 
 fn write_faces(dir: &Path, prefix: &str, cube: &Cubemap) {
     for (k, face) in cube.faces.iter().enumerate() {
@@ -64,19 +59,7 @@ fn sheet_has_every_row_in_order_and_the_lut_as_stored() {
     let root = dir.path().join("out");
     tree(&root);
     let sheet = root.join("sheet.png");
-    let out = run(&[
-        root.to_str().unwrap(),
-        "-o",
-        sheet.to_str().unwrap(),
-        "--height",
-        "48",
-        "--json",
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = BIN.bake(&root, &sheet, &["--height", "48", "--json"]);
     let summary: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let img = io::read_image(&sheet, ColorSpace::Linear).unwrap();
     assert_eq!(summary["details"]["width"], img.width);
@@ -142,24 +125,20 @@ fn sheet_has_every_row_in_order_and_the_lut_as_stored() {
 fn missing_garbled_or_mismatched_inputs_fail_in_one_line_and_write_nothing() {
     let dir = tempfile::tempdir().unwrap();
     let sheet = dir.path().join("sheet.png");
-    let s = sheet.to_str().unwrap();
 
     let missing = dir.path().join("nowhere");
-    let out = run(&[missing.to_str().unwrap(), "-o", s]);
-    assert_one_line_error(&out, 4, "nowhere");
+    BIN.refused_bake(&missing, &sheet, &[], 4, "nowhere");
 
     let garbled = dir.path().join("garbled");
     std::fs::create_dir_all(&garbled).unwrap();
     for f in ["px", "nx", "py", "ny", "pz", "nz"] {
         std::fs::write(garbled.join(format!("{f}.exr")), b"not an exr at all").unwrap();
     }
-    let out = run(&[garbled.to_str().unwrap(), "-o", s]);
-    assert_one_line_error(&out, 2, "garbled");
+    BIN.refused_bake(&garbled, &sheet, &[], 2, "garbled");
 
     let empty = dir.path().join("empty");
     std::fs::create_dir_all(&empty).unwrap();
-    let out = run(&[empty.to_str().unwrap(), "-o", s]);
-    assert_one_line_error(&out, 2, "empty");
+    BIN.refused_bake(&empty, &sheet, &[], 2, "empty");
 
     // prefilter.json that disagrees with the chain beside it.
     let root = dir.path().join("out");
@@ -169,15 +148,9 @@ fn missing_garbled_or_mismatched_inputs_fail_in_one_line_and_write_nothing() {
         r#"{"level":[{"roughness":0.0}]}"#,
     )
     .unwrap();
-    let out = run(&[root.to_str().unwrap(), "-o", s]);
-    assert_one_line_error(&out, 2, "prefilter.json");
+    BIN.refused_bake(&root, &sheet, &[], 2, "prefilter.json");
 
-    let out = run(&[
-        empty.to_str().unwrap(),
-        "-o",
-        dir.path().join("s.jpg").to_str().unwrap(),
-    ]);
-    assert_one_line_error(&out, 2, ".png");
+    BIN.refused_bake(&empty, dir.path().join("s.jpg"), &[], 2, ".png");
 
     assert!(!sheet.exists());
     let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();

@@ -7,18 +7,21 @@ use ibl_core::envmap::read_cube_chain;
 use ibl_core::equirect::pixel_direction;
 use ibl_core::io::{self, ColorSpace, WriteOptions};
 use ibl_core::Image;
-use ibl_testkit::{assert_one_line_error, files_in, fixture, stderr, Bin};
+use ibl_testkit::{files_in, fixture, stderr, Bin};
+use std::ffi::OsStr;
 use std::path::Path;
 use std::process::Output;
 
 const BIN: Bin = Bin::new(env!("CARGO_BIN_EXE_equirect-to-cube"), "equirect-to-cube");
 
-fn run(args: &[&str]) -> Output {
-    BIN.cmd()
-        .args(args)
-        .arg("--quiet")
-        .output()
-        .expect("binary runs")
+/// Runs `input -o out flags… --quiet`; nothing is asserted.
+fn run(input: impl AsRef<OsStr>, out: &Path, flags: &[&str]) -> Output {
+    BIN.run_bake(input, out, &[flags, &["--quiet"]].concat())
+}
+
+/// Runs `input -o out flags… --quiet` and asserts it succeeded.
+fn bake(input: impl AsRef<OsStr>, out: &Path, flags: &[&str]) -> Output {
+    BIN.bake(input, out, &[flags, &["--quiet"]].concat())
 }
 
 /// An equirect whose texels hold their own direction (offset by 2 to stay positive).
@@ -41,14 +44,7 @@ fn every_face_is_oriented_as_design_md() {
     let src = dir.path().join("dirs.exr");
     io::write_image(&src, &direction_equirect(512), &WriteOptions::default()).unwrap();
     let out = dir.path().join("cube");
-    let o = run(&[
-        src.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--size",
-        "16",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    bake(&src, &out, &["--size", "16"]);
     let n = 16;
     let mut worst = 0.0f32;
     for face in Face::ALL {
@@ -81,14 +77,7 @@ fn faces_match_independent_area_filtered_reference() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("cube");
     let src_path = fixture("hdri/city_512.exr");
-    let o = run(&[
-        src_path.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--size",
-        "64",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    bake(&src_path, &out, &["--size", "64"]);
     let mut src = io::read_image(&src_path, ColorSpace::Linear).unwrap();
     ibl_core::image::check_texels(&mut src, &src_path, false).unwrap();
     let n = 64;
@@ -124,15 +113,7 @@ fn ktx2_layout_and_inverse_round_trip() {
     let img = direction_equirect(128);
     io::write_image(&src, &img, &WriteOptions::default()).unwrap();
     let out = dir.path().join("k");
-    let o = run(&[
-        src.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--layout",
-        "ktx2",
-        "--half",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    bake(&src, &out, &["--layout", "ktx2", "--half"]);
     let mips = read_cube_chain(&out.join("cube.ktx2")).unwrap();
     assert_eq!(
         mips.levels[0].size, 32,
@@ -140,15 +121,11 @@ fn ktx2_layout_and_inverse_round_trip() {
     );
     // Back to equirect through the KTX2 file.
     let eq = dir.path().join("back.exr");
-    let o = run(&[
-        out.join("cube.ktx2").to_str().unwrap(),
-        "-o",
-        eq.to_str().unwrap(),
-        "--to-equirect",
-        "--size",
-        "64",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    bake(
+        out.join("cube.ktx2"),
+        &eq,
+        &["--to-equirect", "--size", "64"],
+    );
     let back = io::read_image(&eq, ColorSpace::Linear).unwrap();
     assert_eq!((back.width, back.height), (128, 64));
     let mut worst = 0.0f32;
@@ -190,8 +167,7 @@ fn horizontal_cross_input_is_read() {
     let src = dir.path().join("cross.exr");
     io::write_image(&src, &cross, &WriteOptions::default()).unwrap();
     let out = dir.path().join("c");
-    let o = run(&[src.to_str().unwrap(), "-o", out.to_str().unwrap()]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    bake(&src, &out, &[]);
     for face in Face::ALL {
         let img = io::read_image(
             &out.join(format!("{}.exr", face.name())),
@@ -202,8 +178,9 @@ fn horizontal_cross_input_is_read() {
     }
 }
 
-fn assert_fails_cleanly(args: &[&str], out: &Path, expect: &str, code: i32) {
-    assert_one_line_error(&BIN.run(args), code, expect);
+/// `input -o out` refused: exit `code`, one line containing `expect`, nothing written.
+fn assert_fails_cleanly(input: impl AsRef<OsStr>, out: &Path, expect: &str, code: i32) {
+    BIN.refused_bake(input, out, &[], code, expect);
     assert!(files_in(out).is_empty(), "nothing written");
 }
 
@@ -211,60 +188,42 @@ fn assert_fails_cleanly(args: &[&str], out: &Path, expect: &str, code: i32) {
 fn bad_inputs_fail_with_one_line_and_write_nothing() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out");
-    let o = out.to_str().unwrap();
     // Truncated EXR.
     let good = std::fs::read(fixture("hdri/studio_256.exr")).unwrap();
     let trunc = dir.path().join("trunc.exr");
     std::fs::write(&trunc, &good[..good.len() / 2]).unwrap();
-    assert_fails_cleanly(&[trunc.to_str().unwrap(), "-o", o], &out, "trunc.exr", 2);
+    assert_fails_cleanly(&trunc, &out, "trunc.exr", 2);
     // Empty file, text file, missing file.
     let empty = dir.path().join("empty.exr");
     std::fs::write(&empty, b"").unwrap();
-    assert_fails_cleanly(&[empty.to_str().unwrap(), "-o", o], &out, "empty file", 2);
+    assert_fails_cleanly(&empty, &out, "empty file", 2);
     let text = dir.path().join("notes.txt");
     std::fs::write(&text, b"not an image at all").unwrap();
-    assert_fails_cleanly(&[text.to_str().unwrap(), "-o", o], &out, "notes.txt", 3);
-    assert_fails_cleanly(&["/nonexistent/env.exr", "-o", o], &out, "no such file", 4);
+    assert_fails_cleanly(&text, &out, "notes.txt", 3);
+    assert_fails_cleanly("/nonexistent/env.exr", &out, "no such file", 4);
     // NaN texels: refused with a count, accepted with --sanitize.
     let mut img = Image::new(16, 8, 3);
     img.data[5] = f32::NAN;
     img.data[7] = f32::INFINITY;
     let nan = dir.path().join("nan.exr");
     io::write_image(&nan, &img, &WriteOptions::default()).unwrap();
-    assert_fails_cleanly(&[nan.to_str().unwrap(), "-o", o], &out, "2 NaN/Inf", 2);
-    let ok = BIN
-        .cmd()
-        .args([nan.to_str().unwrap(), "-o", o, "--sanitize"])
-        .output()
-        .unwrap();
-    assert!(ok.status.success());
+    assert_fails_cleanly(&nan, &out, "2 NaN/Inf", 2);
+    let ok = BIN.bake(&nan, &out, &["--sanitize"]);
     assert!(stderr(&ok).contains("set 2 NaN/Inf"), "{}", stderr(&ok));
     std::fs::remove_dir_all(&out).unwrap();
     // Unsupported layout, bad size.
     let odd = dir.path().join("odd.exr");
     io::write_image(&odd, &Image::new(10, 3, 3), &WriteOptions::default()).unwrap();
-    assert_fails_cleanly(&[odd.to_str().unwrap(), "-o", o], &out, "layout", 3);
-    assert_fails_cleanly(
-        &[nan.to_str().unwrap(), "-o", o, "--size", "0"],
-        &out,
-        "--size 0",
-        2,
-    );
+    assert_fails_cleanly(&odd, &out, "layout", 3);
+    BIN.refused_bake(&nan, &out, &["--size", "0"], 2, "--size 0");
+    assert!(files_in(&out).is_empty(), "nothing written");
 }
 
 #[test]
 fn unwritable_output_fails_and_keeps_previous_files() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out");
-    let bake = |input: &str| {
-        run(&[
-            fixture(input).to_str().unwrap(),
-            "-o",
-            out.to_str().unwrap(),
-            "--size",
-            "8",
-        ])
-    };
+    let bake = |input: &str| run(fixture(input), &out, &["--size", "8"]);
     // A first bake, then a folder where the last face (nz.exr) should go: the second bake of a
     // different environment must fail and leave every face of the first one as it was.
     let o = bake("hdri/studio_256.exr");
@@ -303,17 +262,11 @@ fn rotate_applies_to_the_equirect_output_too() {
     io::write_image(&src, &direction_equirect(64), &WriteOptions::default()).unwrap();
     let out_of = |rotate: &str| {
         let p = dir.path().join(format!("eq{rotate}.exr"));
-        let o = run(&[
-            src.to_str().unwrap(),
-            "-o",
-            p.to_str().unwrap(),
-            "--to-equirect",
-            "--size",
-            "16",
-            "--rotate",
-            rotate,
-        ]);
-        assert!(o.status.success(), "{}", stderr(&o));
+        bake(
+            &src,
+            &p,
+            &["--to-equirect", "--size", "16", "--rotate", rotate],
+        );
         io::read_image(&p, ColorSpace::Linear).unwrap()
     };
     let (a, b) = (out_of("0"), out_of("90"));
@@ -348,18 +301,11 @@ fn rotate_applies_to_the_equirect_output_too() {
 fn damaged_fixture_negatives_are_clamped_with_a_warning() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out");
-    let o = BIN
-        .cmd()
-        .args([
-            fixture("hdri-damaged/esplanade.exr").to_str().unwrap(),
-            "-o",
-            out.to_str().unwrap(),
-            "--size",
-            "16",
-        ])
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", stderr(&o));
+    let o = BIN.bake(
+        fixture("hdri-damaged/esplanade.exr"),
+        &out,
+        &["--size", "16"],
+    );
     let err = stderr(&o);
     assert!(
         err.contains("negative texel values") && err.contains("most negative -3"),
@@ -389,18 +335,8 @@ fn every_fixture_is_byte_identical_with_one_and_two_threads() {
         let mut outs = Vec::new();
         for threads in ["1", "2"] {
             let out = dir.path().join(format!("{name}-{threads}"));
-            let o = run(&[
-                src.to_str().unwrap(),
-                "-o",
-                out.to_str().unwrap(),
-                "--size",
-                "24",
-                "--rotate",
-                "12.5",
-                "--threads",
-                threads,
-            ]);
-            assert!(o.status.success(), "{}", stderr(&o));
+            let flags = ["--size", "24", "--rotate", "12.5", "--threads", threads];
+            bake(&src, &out, &flags);
             outs.push(
                 Face::ALL.map(|f| std::fs::read(out.join(format!("{}.exr", f.name()))).unwrap()),
             );
@@ -417,18 +353,8 @@ fn targets_turn_the_cube_as_the_engine_samples_it() {
     let input = fixture("hdri/sunset_256.exr");
     let bake = |t: &str| {
         let out = tmp.path().join(t);
-        let o = run(&[
-            input.to_str().unwrap(),
-            "-o",
-            out.to_str().unwrap(),
-            "--size",
-            "16",
-            "--target",
-            t,
-            "--layout",
-            "faces",
-        ]);
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let flags = ["--size", "16", "--target", t, "--layout", "faces"];
+        bake(&input, &out, &flags);
         out
     };
     let read = |d: &Path, f: &str| {
@@ -472,7 +398,7 @@ fn truncated_jpeg_environments_are_refused() {
     for cut in [bytes.len() / 4, bytes.len() / 2, bytes.len() - 1] {
         let t = dir.path().join("env.jpg");
         std::fs::write(&t, &bytes[..cut]).unwrap();
-        let o = run(&[t.to_str().unwrap(), "-o", out.to_str().unwrap()]);
+        let o = run(&t, &out, &[]);
         let e = stderr(&o);
         assert_eq!(o.status.code(), Some(2), "cut {cut}: {e}");
         assert!(

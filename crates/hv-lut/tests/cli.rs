@@ -6,17 +6,8 @@ use ibl_core::io::{read_image, ColorSpace};
 use ibl_testkit::Bin;
 use std::f64::consts::{FRAC_PI_2, PI};
 use std::path::Path;
-use std::process::Output;
 
 const BIN: Bin = Bin::new(env!("CARGO_BIN_EXE_hv-lut"), "hv-lut");
-
-fn hv_lut(args: &[&str]) -> Output {
-    BIN.run(args)
-}
-
-fn ok(args: &[&str]) {
-    BIN.run_ok(args);
-}
 
 /// The thesis's formulas as printed (tan form, with the quadrant cases), written again here
 /// without the library: (h, p_h(h)/p_h(n)) at (ξ1, ξ2) strictly inside the unit square.
@@ -48,17 +39,7 @@ fn exr_lut_matches_the_thesis_formulas_and_sidecar_restores_the_pdf() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("hv.exr");
     let (nu, nv) = (200.0, 30.0);
-    ok(&[
-        "--nu",
-        "200",
-        "--nv",
-        "30",
-        "-o",
-        out.to_str().unwrap(),
-        "--size",
-        "32",
-        "-q",
-    ]);
+    BIN.generate(&out, &["--nu", "200", "--nv", "30", "--size", "32", "-q"]);
     let img = read_image(&out, ColorSpace::Linear).unwrap();
     assert_eq!((img.width, img.height, img.channels), (32, 32, 4));
     let side: serde_json::Value =
@@ -90,20 +71,9 @@ fn exr_lut_matches_the_thesis_formulas_and_sidecar_restores_the_pdf() {
 #[test]
 fn png_bits_and_thesis_names() {
     let dir = tempfile::tempdir().unwrap();
-    ok(&[
-        "--nu",
-        "20000",
-        "--nv",
-        "70",
-        "-o",
-        dir.path().to_str().unwrap(),
-        "--thesis-names",
-        "--bits",
-        "8",
-        "--size",
-        "16",
-        "-q",
-    ]);
+    let lobe = ["--nu", "20000", "--nv", "70"];
+    let thesis = ["--thesis-names", "--bits", "8", "--size", "16", "-q"];
+    BIN.generate(dir.path(), &[&lobe[..], &thesis].concat());
     let png = dir.path().join("halfVectorSampling[20000,70].png");
     let img = read_image(&png, ColorSpace::Linear).unwrap();
     assert_eq!((img.width, img.channels), (16, 4));
@@ -131,17 +101,7 @@ fn png_bits_and_thesis_names() {
     }
     assert!(worst <= 0.5 / 255.0 + 1e-6, "{worst}");
     let p16 = dir.path().join("hv16.png");
-    ok(&[
-        "--nu",
-        "20000",
-        "--nv",
-        "70",
-        "-o",
-        p16.to_str().unwrap(),
-        "--size",
-        "16",
-        "-q",
-    ]);
+    BIN.generate(&p16, &[&lobe[..], &["--size", "16", "-q"]].concat());
     let img16 = read_image(&p16, ColorSpace::Linear).unwrap();
     assert!(
         img16
@@ -157,17 +117,7 @@ fn extreme_exponents_give_finite_texels() {
     let dir = tempfile::tempdir().unwrap();
     for (nu, nv) in [("1", "1"), ("1e6", "1"), ("1e6", "1e6"), ("1", "1e6")] {
         let out = dir.path().join(format!("hv_{nu}_{nv}.exr"));
-        ok(&[
-            "--nu",
-            nu,
-            "--nv",
-            nv,
-            "-o",
-            out.to_str().unwrap(),
-            "--size",
-            "64",
-            "-q",
-        ]);
+        BIN.generate(&out, &["--nu", nu, "--nv", nv, "--size", "64", "-q"]);
         let img = read_image(&out, ColorSpace::Linear).unwrap();
         assert!(
             img.data
@@ -178,9 +128,10 @@ fn extreme_exponents_give_finite_texels() {
     }
 }
 
-fn refused(args: &[&str], dir: &Path, code: i32) {
-    BIN.refused(args, code, "");
-    assert_eq!(ibl_testkit::files_in(dir).len(), 1, "{args:?} left output");
+/// `-o out flags…` refused with `code` in one line, and nothing added to `dir`.
+fn refused(out: &Path, flags: &[&str], dir: &Path, code: i32) {
+    BIN.refused_generate(out, flags, code, "");
+    assert_eq!(ibl_testkit::files_in(dir).len(), 1, "{flags:?} left output");
 }
 
 #[test]
@@ -188,39 +139,15 @@ fn bad_parameters_are_one_line_errors_with_no_output() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     std::fs::write(d.join("file"), b"x").unwrap();
-    let o = d.join("hv.exr");
-    let o = o.to_str().unwrap();
-    refused(&["--nu", "0", "--nv", "70", "-o", o], d, 2);
-    refused(&["--nu", "-3", "--nv", "70", "-o", o], d, 2);
-    refused(&["--nu", "10", "-o", o], d, 2);
-    refused(&["--nu", "10", "--nv", "10", "--size", "0", "-o", o], d, 2);
-    refused(&["--nu", "10", "--nv", "10", "--bits", "12", "-o", o], d, 2);
-    refused(
-        &[
-            "--nu",
-            "10",
-            "--nv",
-            "10",
-            "-o",
-            d.join("hv.json").to_str().unwrap(),
-        ],
-        d,
-        3,
-    );
-    refused(
-        &[
-            "--nu",
-            "10",
-            "--nv",
-            "10",
-            "--size",
-            "4",
-            "-o",
-            d.join("file/hv.exr").to_str().unwrap(),
-        ],
-        d,
-        4,
-    );
+    let o = &d.join("hv.exr");
+    refused(o, &["--nu", "0", "--nv", "70"], d, 2);
+    refused(o, &["--nu", "-3", "--nv", "70"], d, 2);
+    refused(o, &["--nu", "10"], d, 2);
+    refused(o, &["--nu", "10", "--nv", "10", "--size", "0"], d, 2);
+    refused(o, &["--nu", "10", "--nv", "10", "--bits", "12"], d, 2);
+    refused(&d.join("hv.json"), &["--nu", "10", "--nv", "10"], d, 3);
+    let small = ["--nu", "10", "--nv", "10", "--size", "4"];
+    refused(&d.join("file/hv.exr"), &small, d, 4);
 }
 
 #[test]
@@ -229,40 +156,21 @@ fn a_blocked_sidecar_leaves_the_previous_image_untouched() {
     let d = dir.path();
     let lut = d.join("lut.exr");
     let side = d.join("lut.json");
-    let lut_s = lut.to_str().unwrap();
-    ok(&["--nu", "10", "--nv", "10", "--size", "8", "-o", lut_s, "-q"]);
+    BIN.generate(&lut, &["--nu", "10", "--nv", "10", "--size", "8", "-q"]);
     assert!(side.is_file(), "the first run writes the sidecar");
     let first = std::fs::read(&lut).unwrap();
     // A directory where the sidecar goes: the second run must fail before renaming anything.
     std::fs::remove_file(&side).unwrap();
     std::fs::create_dir(&side).unwrap();
-    let out = hv_lut(&["--nu", "20", "--nv", "10", "--size", "8", "-o", lut_s, "-q"]);
-    let err = String::from_utf8_lossy(&out.stderr);
-    eprintln!(
-        "blocked sidecar -> {:?}: {}",
-        out.status.code(),
-        err.trim_end()
-    );
-    assert_eq!(out.status.code(), Some(4), "{err}");
-    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
-    assert!(err.starts_with("hv-lut: error: "), "{err}");
+    let second_run = ["--nu", "20", "--nv", "10", "--size", "8", "-q"];
+    BIN.refused_generate(&lut, &second_run, 4, "");
     assert_eq!(std::fs::read(&lut).unwrap(), first, "lut.exr was replaced");
     assert!(side.is_dir());
     // The check has teeth: the second run's image differs from the first.
     let other = dir.path().join("other");
     std::fs::create_dir(&other).unwrap();
     let second = other.join("lut.exr");
-    ok(&[
-        "--nu",
-        "20",
-        "--nv",
-        "10",
-        "--size",
-        "8",
-        "-o",
-        second.to_str().unwrap(),
-        "-q",
-    ]);
+    BIN.generate(&second, &second_run);
     assert_ne!(std::fs::read(&second).unwrap(), first);
     std::fs::remove_dir_all(&other).unwrap();
     let mut names: Vec<_> = std::fs::read_dir(d)
@@ -283,14 +191,7 @@ fn outputs_that_are_not_images_name_the_image_formats_only() {
         ("a.json", "'.json'"),
         ("a.txt", "'.txt'"),
     ] {
-        let out = hv_lut(&[
-            "--nu",
-            "10",
-            "--nv",
-            "10",
-            "-o",
-            d.join(name).to_str().unwrap(),
-        ]);
+        let out = BIN.run_generate(d.join(name), &["--nu", "10", "--nv", "10"]);
         let err = String::from_utf8_lossy(&out.stderr);
         eprintln!("-o {name} -> {}", err.trim_end());
         assert_eq!(out.status.code(), Some(3), "{err}");

@@ -1,10 +1,12 @@
-//! Test support shared by the workspace's tests: running a tool binary and checking its
-//! one-line errors, file trees (copy, list), JSON output, and the thread-count determinism
-//! check the parallel bakes' unit tests make. A dev-dependency only; it depends on no crate of
-//! the workspace so that every crate, ibl-core included, can use it without a cycle.
+//! Test support shared by the workspace's tests: running a tool binary (the usual
+//! `input -o out flags…` argv spelt once, here) and checking its one-line errors, file trees
+//! (copy, list), JSON output, and the thread-count determinism check the parallel bakes' unit
+//! tests make. A dev-dependency only; it depends on no crate of the workspace so that every
+//! crate, ibl-core included, can use it without a cycle.
 
 #![warn(missing_docs)]
 
+use std::ffi::{OsStr, OsString};
 use std::fmt::Debug;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -42,15 +44,79 @@ impl Bin {
 
     /// Runs the binary with `args` and waits for it.
     pub fn run(&self, args: &[&str]) -> Output {
+        self.exec(args)
+    }
+
+    /// Runs the binary and asserts it succeeded (the failure message shows its stderr).
+    pub fn run_ok(&self, args: &[&str]) -> Output {
+        self.exec_ok(args)
+    }
+
+    /// Runs the binary and asserts it refused: exit `code`, one stderr line starting with
+    /// `<name>: error: ` and containing `needle`, no panic. Returns that line.
+    pub fn refused(&self, args: &[&str], code: i32, needle: &str) -> String {
+        self.exec_refused(args, code, needle)
+    }
+
+    /// Runs the usual bake, `input -o out flags…` (see [`bake_args`]), and waits for it;
+    /// nothing is asserted. `input` may also be a subcommand (`"dfg"`).
+    pub fn run_bake(
+        &self,
+        input: impl AsRef<OsStr>,
+        out: impl AsRef<OsStr>,
+        flags: &[&str],
+    ) -> Output {
+        self.exec(&bake_args(input, out, flags))
+    }
+
+    /// [`Bin::run_bake`], asserting it succeeded as [`Bin::run_ok`] does.
+    pub fn bake(&self, input: impl AsRef<OsStr>, out: impl AsRef<OsStr>, flags: &[&str]) -> Output {
+        self.exec_ok(&bake_args(input, out, flags))
+    }
+
+    /// [`Bin::run_bake`], asserting it refused as [`Bin::refused`] does; returns the line.
+    pub fn refused_bake(
+        &self,
+        input: impl AsRef<OsStr>,
+        out: impl AsRef<OsStr>,
+        flags: &[&str],
+        code: i32,
+        needle: &str,
+    ) -> String {
+        self.exec_refused(&bake_args(input, out, flags), code, needle)
+    }
+
+    /// Runs a tool that reads no input (a table or map generator) as `-o out flags…` (see
+    /// [`generate_args`]) and waits for it; nothing is asserted.
+    pub fn run_generate(&self, out: impl AsRef<OsStr>, flags: &[&str]) -> Output {
+        self.exec(&generate_args(out, flags))
+    }
+
+    /// [`Bin::run_generate`], asserting it succeeded as [`Bin::run_ok`] does.
+    pub fn generate(&self, out: impl AsRef<OsStr>, flags: &[&str]) -> Output {
+        self.exec_ok(&generate_args(out, flags))
+    }
+
+    /// [`Bin::run_generate`], asserting it refused as [`Bin::refused`] does; returns the line.
+    pub fn refused_generate(
+        &self,
+        out: impl AsRef<OsStr>,
+        flags: &[&str],
+        code: i32,
+        needle: &str,
+    ) -> String {
+        self.exec_refused(&generate_args(out, flags), code, needle)
+    }
+
+    fn exec<S: AsRef<OsStr>>(&self, args: &[S]) -> Output {
         self.cmd()
             .args(args)
             .output()
             .unwrap_or_else(|e| panic!("{} does not start: {e}", self.path))
     }
 
-    /// Runs the binary and asserts it succeeded (the failure message shows its stderr).
-    pub fn run_ok(&self, args: &[&str]) -> Output {
-        let out = self.run(args);
+    fn exec_ok<S: AsRef<OsStr> + Debug>(&self, args: &[S]) -> Output {
+        let out = self.exec(args);
         assert!(
             out.status.success(),
             "{} {args:?} failed ({:?}): {}",
@@ -61,16 +127,34 @@ impl Bin {
         out
     }
 
-    /// Runs the binary and asserts it refused: exit `code`, one stderr line starting with
-    /// `<name>: error: ` and containing `needle`, no panic. Returns that line.
-    pub fn refused(&self, args: &[&str], code: i32, needle: &str) -> String {
-        let out = self.run(args);
+    fn exec_refused<S: AsRef<OsStr> + Debug>(&self, args: &[S], code: i32, needle: &str) -> String {
+        let out = self.exec(args);
         let line = assert_one_line_error(&out, code, needle);
         let prefix = format!("{}: error: ", self.name);
         assert!(line.starts_with(&prefix), "{args:?}: {line}");
         eprintln!("{args:?} -> {line}");
         line
     }
+}
+
+/// The argv the workspace's tools share, `input -o out flags…`: one leading positional (an
+/// input file or folder, or a subcommand), the output, then the flags as given. Paths pass
+/// through as `OsStr`, so a call site needs no `.to_str().unwrap()`.
+pub fn bake_args(
+    input: impl AsRef<OsStr>,
+    out: impl AsRef<OsStr>,
+    flags: &[&str],
+) -> Vec<OsString> {
+    let mut argv = vec![input.as_ref().to_owned()];
+    argv.extend(generate_args(out, flags));
+    argv
+}
+
+/// The argv of a tool that reads no input, `-o out flags…`.
+pub fn generate_args(out: impl AsRef<OsStr>, flags: &[&str]) -> Vec<OsString> {
+    let mut argv = vec![OsString::from("-o"), out.as_ref().to_owned()];
+    argv.extend(flags.iter().map(OsString::from));
+    argv
 }
 
 /// The process's stderr, lossily decoded.
@@ -214,7 +298,7 @@ mod tests {
 
     #[test]
     fn trees_are_copied_and_listed() {
-        let d = tempfile_dir();
+        let d = tempfile_dir("trees");
         std::fs::create_dir_all(d.join("a/b")).unwrap();
         std::fs::write(d.join("a/b/x.txt"), "x").unwrap();
         std::fs::write(d.join("a/y.txt"), "y").unwrap();
@@ -232,8 +316,9 @@ mod tests {
     }
 
     /// A fresh folder under the target's temporary directory (no tempfile dependency here).
-    fn tempfile_dir() -> PathBuf {
-        let d = std::env::temp_dir().join(format!("ibl-testkit-{}", std::process::id()));
+    /// `tag` keeps the tests, which run in parallel, out of each other's folders.
+    fn tempfile_dir(tag: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("ibl-testkit-{tag}-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&d);
         std::fs::create_dir_all(&d).unwrap();
         d
@@ -254,5 +339,45 @@ mod tests {
             .output()
             .unwrap();
         assert!(std::panic::catch_unwind(|| assert_one_line_error(&two, 2, "a")).is_err());
+    }
+
+    #[test]
+    fn bake_argv_is_input_output_then_flags_with_paths_untouched() {
+        assert_eq!(
+            bake_args("in.exr", Path::new("out dir"), &["--size", "8"]),
+            ["in.exr", "-o", "out dir", "--size", "8"]
+        );
+        assert_eq!(generate_args("t.png", &[]), ["-o", "t.png"]);
+        // A path that is not UTF-8 reaches the tool byte for byte.
+        #[cfg(unix)]
+        {
+            use std::os::unix::ffi::OsStrExt;
+            let odd = OsStr::from_bytes(b"caf\xe9.exr");
+            assert_eq!(bake_args(odd, "o", &[])[0], odd);
+        }
+    }
+
+    /// The bake calls on a stand-in tool: a shell script (the "input" of `sh script -o …`)
+    /// that echoes its arguments, or refuses the way the workspace's tools do.
+    #[cfg(unix)]
+    #[test]
+    fn bake_calls_pass_the_argv_and_check_the_outcome() {
+        let d = tempfile_dir("bake");
+        let ok = d.join("ok.sh");
+        std::fs::write(&ok, "echo \"$*\"").unwrap();
+        let no = d.join("no.sh");
+        std::fs::write(&no, "echo \"tool: error: $2: bad $3\" >&2; exit 2").unwrap();
+        let sh = Bin::new("sh", "tool");
+        let out = sh.bake(&ok, d.join("o.exr"), &["--size", "8"]);
+        let want = format!("-o {} --size 8\n", d.join("o.exr").display());
+        assert_eq!(stdout(&out), want);
+        assert_eq!(
+            sh.refused_bake(&no, "o.exr", &["--levels"], 2, "o.exr"),
+            "tool: error: o.exr: bad --levels"
+        );
+        assert_eq!(sh.run_bake(&no, "o.exr", &[]).status.code(), Some(2));
+        assert!(std::panic::catch_unwind(|| sh.bake(&no, "o.exr", &[])).is_err());
+        assert!(std::panic::catch_unwind(|| sh.refused_bake(&ok, "o", &[], 2, "")).is_err());
+        std::fs::remove_dir_all(&d).unwrap();
     }
 }

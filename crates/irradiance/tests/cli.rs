@@ -8,18 +8,21 @@ use ibl_core::cube::{texel_direction, Face};
 use ibl_core::equirect::{pixel_direction, row_solid_angle};
 use ibl_core::io::{self, ColorSpace, WriteOptions};
 use ibl_core::Image;
-use ibl_testkit::{fixture, Bin};
+use ibl_testkit::{fixture, stderr, Bin};
+use std::ffi::OsStr;
 use std::path::Path;
 use std::process::Output;
 
 const BIN: Bin = Bin::new(env!("CARGO_BIN_EXE_irradiance"), "irradiance");
 
-fn run(args: &[&str]) -> Output {
-    BIN.cmd()
-        .args(args)
-        .arg("--quiet")
-        .output()
-        .expect("binary runs")
+/// Runs `input -o out flags… --quiet`; nothing is asserted.
+fn run(input: impl AsRef<OsStr>, out: &Path, flags: &[&str]) -> Output {
+    BIN.run_bake(input, out, &[flags, &["--quiet"]].concat())
+}
+
+/// Runs `input -o out flags… --quiet` and asserts it succeeded.
+fn bake(input: impl AsRef<OsStr>, out: &Path, flags: &[&str]) -> Output {
+    BIN.bake(input, out, &[flags, &["--quiet"]].concat())
 }
 
 fn load_clamped(p: &Path) -> Image {
@@ -61,8 +64,7 @@ struct ShFile {
 fn coefficients_match_an_exact_projection_of_the_source_texels() {
     let dir = tempfile::tempdir().unwrap();
     let src = fixture("hdri/city_512.exr");
-    let o = run(&[src.to_str().unwrap(), "-o", dir.path().to_str().unwrap()]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    bake(&src, dir.path(), &[]);
     let sh: ShFile =
         serde_json::from_slice(&std::fs::read(dir.path().join("sh.json")).unwrap()).unwrap();
     assert_eq!(
@@ -136,17 +138,8 @@ fn exact_cube_matches_brute_force_and_sh_cube_matches_its_coefficients() {
     let src = fixture("hdri/sunset_256.exr");
     let exact_dir = dir.path().join("exact");
     let sh_dir = dir.path().join("sh");
-    for (out, extra) in [(&exact_dir, Some("--exact")), (&sh_dir, None)] {
-        let mut args = vec![
-            src.to_str().unwrap(),
-            "-o",
-            out.to_str().unwrap(),
-            "--size",
-            "8",
-        ];
-        args.extend(extra);
-        let o = run(&args);
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for (out, extra) in [(&exact_dir, &["--exact"][..]), (&sh_dir, &[])] {
+        bake(&src, out, &[&["--size", "8"], extra].concat());
     }
     let img = load_clamped(&src);
     let sh: ShFile =
@@ -188,21 +181,13 @@ fn exact_cube_matches_brute_force_and_sh_cube_matches_its_coefficients() {
 #[test]
 fn ron_output_more_bands_and_window() {
     let dir = tempfile::tempdir().unwrap();
-    let o = run(&[
-        fixture("hdri/studio_256.hdr").to_str().unwrap(),
-        "-o",
-        dir.path().to_str().unwrap(),
-        "--bands",
-        "5",
-        "--window",
-        "--sh-file",
-        "coeffs.ron",
-        "--layout",
-        "ktx2",
-        "--size",
-        "4",
-    ]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let input = fixture("hdri/studio_256.hdr");
+    let coeffs = ["--bands", "5", "--sh-file", "coeffs.ron", "--size", "4"];
+    bake(
+        &input,
+        dir.path(),
+        &[&coeffs[..], &["--window", "--layout", "ktx2"]].concat(),
+    );
     let text = std::fs::read_to_string(dir.path().join("coeffs.ron")).unwrap();
     assert!(text.contains("bands: 5"), "{text}");
     assert!(dir.path().join("irradiance.ktx2").exists());
@@ -210,18 +195,7 @@ fn ron_output_more_bands_and_window() {
     // here by hand: windowed / plain = σ_l for every coefficient, and the radiance coefficients
     // are untouched.
     let plain_dir = dir.path().join("plain");
-    let o = run(&[
-        fixture("hdri/studio_256.hdr").to_str().unwrap(),
-        "-o",
-        plain_dir.to_str().unwrap(),
-        "--bands",
-        "5",
-        "--sh-file",
-        "coeffs.ron",
-        "--size",
-        "4",
-    ]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    bake(&input, &plain_dir, &coeffs);
     #[derive(serde::Deserialize)]
     struct Sh {
         radiance: Vec<(f64, f64, f64)>,
@@ -262,29 +236,16 @@ fn bad_parameters_and_inputs_fail_cleanly() {
         (vec!["--bands", "40"], 2, "--bands 40"),
         (vec!["--sh-file", "sh.txt"], 2, "sh.txt"),
     ] {
-        let o = BIN
-            .cmd()
-            .arg(&src)
-            .arg("-o")
-            .arg(&out)
-            .args(&args)
-            .output()
-            .unwrap();
-        let err = String::from_utf8_lossy(&o.stderr);
-        assert_eq!(o.status.code(), Some(code), "{err}");
-        assert!(
-            err.contains(expect) && err.trim().lines().count() == 1,
-            "{err}"
-        );
+        BIN.refused_bake(&src, &out, &args, code, expect);
         assert!(!out.exists());
     }
     let mut img = Image::new(8, 4, 3);
     img.data[0] = f32::NAN;
     let nan = dir.path().join("nan.exr");
     io::write_image(&nan, &img, &WriteOptions::default()).unwrap();
-    let o = BIN.cmd().arg(&nan).arg("-o").arg(&out).output().unwrap();
+    let o = BIN.run_bake(&nan, &out, &[]);
     assert_eq!(o.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&o.stderr).contains("1 NaN/Inf"));
+    assert!(stderr(&o).contains("1 NaN/Inf"));
     assert!(!out.exists());
 }
 
@@ -297,20 +258,9 @@ fn outputs_are_byte_identical_for_one_and_two_threads() {
         let out = dir.path().join(threads);
         for exact in [false, true] {
             let sub = out.join(if exact { "exact" } else { "sh" });
-            let mut args = vec![
-                src.to_str().unwrap(),
-                "-o",
-                sub.to_str().unwrap(),
-                "--size",
-                "8",
-                "--threads",
-                threads,
-            ];
-            if exact {
-                args.push("--exact");
-            }
-            let o = run(&args);
-            assert!(o.status.success());
+            let flags = ["--size", "8", "--threads", threads];
+            let extra: &[&str] = if exact { &["--exact"] } else { &[] };
+            bake(&src, &sub, &[&flags[..], extra].concat());
         }
         let mut files: Vec<(String, Vec<u8>)> = Vec::new();
         for sub in ["sh", "exact"] {
@@ -334,19 +284,9 @@ fn targets_write_the_engines_sh_forms_and_orientation() {
     let input = fixture("hdri/sunset_256.exr");
     let bake = |t: &str| {
         let out = tmp.path().join(t);
-        let o = run(&[
-            input.to_str().unwrap(),
-            "-o",
-            out.to_str().unwrap(),
-            "--size",
-            "8",
-            "--target",
-            t,
-            // Faces here (each target's own container is checked by `make conformance`).
-            "--layout",
-            "faces",
-        ]);
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        // Faces here (each target's own container is checked by `make conformance`).
+        let flags = ["--size", "8", "--target", t, "--layout", "faces"];
+        bake(&input, &out, &flags);
         out
     };
     let gltf = bake("gltf");
@@ -468,14 +408,7 @@ fn targets_write_the_engines_sh_forms_and_orientation() {
     assert_eq!(j["object"]["type"], "LightProbe");
     assert_eq!(j["object"]["sh"].as_array().unwrap().len(), 27);
     // Fewer than 3 bands cannot make an engine's 9 coefficients.
-    let o = run(&[
-        input.to_str().unwrap(),
-        "-o",
-        tmp.path().join("x").to_str().unwrap(),
-        "--bands",
-        "2",
-        "--target",
-        "unity",
-    ]);
+    let flags = ["--bands", "2", "--target", "unity"];
+    let o = run(&input, &tmp.path().join("x"), &flags);
     assert_eq!(o.status.code(), Some(2));
 }

@@ -3,15 +3,12 @@
 
 use ibl_core::image::Image;
 use ibl_core::io::{self, ColorSpace, WriteOptions};
-use ibl_testkit::{assert_one_line_error, files_in, fixture, Bin};
+use ibl_testkit::{files_in, fixture, stderr, Bin};
+use std::ffi::OsStr;
 use std::path::Path;
 use std::process::Output;
 
 const BIN: Bin = Bin::new(env!("CARGO_BIN_EXE_prefilter"), "prefilter");
-
-fn run(args: &[&str]) -> Output {
-    BIN.run(args)
-}
 
 fn report(dir: &Path) -> serde_json::Value {
     ibl_testkit::read_json(&dir.join("prefilter.json"))
@@ -23,15 +20,8 @@ const FACES: [&str; 6] = ["px", "nx", "py", "ny", "pz", "nz"];
 fn faces_layout_writes_every_level_and_the_report() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("chain");
-    let o = run(&[
-        fixture("hdri/sunset_256.exr").to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--size",
-        "32",
-        "-q",
-    ]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let input = fixture("hdri/sunset_256.exr");
+    BIN.bake(&input, &out, &["--size", "32", "-q"]);
     // Default levels: down to 4×4 faces → 32, 16, 8, 4.
     for (l, n) in [(0, 32usize), (1, 16), (2, 8), (3, 4)] {
         for f in FACES {
@@ -81,10 +71,7 @@ fn faces_layout_writes_every_level_and_the_report() {
 
 /// A quick FIS chain of `levels` levels from 16² faces into `out` (for the folder tests).
 fn quick_chain(input: &str, out: &Path, levels: &str) -> Output {
-    let o = run(&[
-        fixture(input).to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
+    let flags = [
         "--size",
         "16",
         "--levels",
@@ -93,9 +80,8 @@ fn quick_chain(input: &str, out: &Path, levels: &str) -> Output {
         "fis",
         "--samples",
         "16",
-    ]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    o
+    ];
+    BIN.bake(fixture(input), out, &flags)
 }
 
 #[test]
@@ -105,7 +91,7 @@ fn a_shorter_chain_into_the_same_folder_removes_the_old_levels() {
     quick_chain("hdri/studio_256.exr", &out, "5");
     assert!(out.join("m4_px.exr").exists());
     let o = quick_chain("hdri/sunset_256.exr", &out, "2");
-    let err = String::from_utf8_lossy(&o.stderr);
+    let err = stderr(&o);
     assert!(err.contains("m2_px.exr"), "{err}");
     let names = files_in(&out);
     assert!(
@@ -152,19 +138,7 @@ fn ktx2_layout_reads_back_equal_to_the_faces() {
     let (a, b) = (tmp.path().join("faces"), tmp.path().join("ktx"));
     let input = fixture("hdri/studio_256.exr");
     for (dir, extra) in [(&a, vec![]), (&b, vec!["--layout", "ktx2"])] {
-        let mut args = vec![
-            input.to_str().unwrap(),
-            "-o",
-            dir.to_str().unwrap(),
-            "--size",
-            "16",
-            "--levels",
-            "4",
-            "-q",
-        ];
-        args.extend(extra);
-        let o = run(&args);
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        quick_sized(&input, dir, "16", "4", &extra);
     }
     assert_eq!(
         files_in(&b),
@@ -183,20 +157,10 @@ fn ktx2_layout_reads_back_equal_to_the_faces() {
 fn max_roughness_stops_the_chain_and_says_so() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("o");
-    let o = run(&[
-        fixture("hdri/interior_256.exr").to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--size",
-        "32",
-        "--levels",
-        "5",
-        "--max-roughness",
-        "0.6",
-    ]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let stderr = String::from_utf8_lossy(&o.stderr);
-    assert!(stderr.contains("--max-roughness"), "{stderr}");
+    let flags = ["--size", "32", "--levels", "5", "--max-roughness", "0.6"];
+    let o = BIN.bake(fixture("hdri/interior_256.exr"), &out, &flags);
+    let err = stderr(&o);
+    assert!(err.contains("--max-roughness"), "{err}");
     // r = 0, 0.25, 0.5 kept; 0.75 and 1 dropped.
     assert!(out.join("m2_px.exr").exists() && !out.join("m3_px.exr").exists());
     let r = report(&out);
@@ -214,35 +178,15 @@ fn max_roughness_stops_the_chain_and_says_so() {
 fn half_json_reference_and_folder_input() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("h");
-    let o = run(&[
-        fixture("hdri/city_512.exr").to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--size",
-        "8",
-        "--levels",
-        "3",
-        "--half",
-        "--json",
-    ]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let flags = ["--size", "8", "--levels", "3", "--half", "--json"];
+    let o = BIN.bake(fixture("hdri/city_512.exr"), &out, &flags);
     let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(summary["tool"], "prefilter");
     assert_eq!(summary["outputs"].as_array().unwrap().len(), 3 * 6 + 1);
     // The written chain is a face folder: it is a valid input (its level 0 is read).
     let again = tmp.path().join("again");
-    let o = run(&[
-        out.to_str().unwrap(),
-        "-o",
-        again.to_str().unwrap(),
-        "--size",
-        "8",
-        "--levels",
-        "2",
-        "--reference",
-        "-q",
-    ]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let flags = ["--size", "8", "--levels", "2", "--reference", "-q"];
+    BIN.bake(&out, &again, &flags);
     let r = report(&again);
     assert_eq!(r["method"], "reference");
     // The brute-force reference is the exact kernel at every level: never fitted.
@@ -257,19 +201,8 @@ fn same_input_gives_identical_bytes_for_any_thread_count() {
     let mut outputs = Vec::new();
     for threads in ["1", "2"] {
         let out = tmp.path().join(threads);
-        let o = run(&[
-            input.to_str().unwrap(),
-            "-o",
-            out.to_str().unwrap(),
-            "--size",
-            "16",
-            "--levels",
-            "3",
-            "--threads",
-            threads,
-            "-q",
-        ]);
-        assert!(o.status.success());
+        let flags = ["--size", "16", "--levels", "3", "--threads", threads, "-q"];
+        BIN.bake(&input, &out, &flags);
         outputs.push(
             files_in(&out)
                 .iter()
@@ -280,28 +213,29 @@ fn same_input_gives_identical_bytes_for_any_thread_count() {
     assert!(outputs[0] == outputs[1]);
 }
 
-/// A bad run: non-zero exit with `code`, one line on stderr naming the problem, nothing written.
-fn assert_fails_cleanly(args: &[&str], out: &Path, code: i32, needle: &str) {
-    let line = assert_one_line_error(&BIN.run(args), code, needle);
-    eprintln!("{args:?} -> {line}");
+/// A bad run of `input -o out flags…`: non-zero exit with `code`, one line on stderr naming
+/// the problem, nothing written. Returns the line.
+fn assert_fails_cleanly(
+    input: impl AsRef<OsStr>,
+    out: &Path,
+    flags: &[&str],
+    code: i32,
+    needle: &str,
+) -> String {
+    let line = BIN.refused_bake(input, out, flags, code, needle);
     assert!(files_in(out).is_empty(), "wrote {:?}", files_in(out));
+    line
 }
 
 #[test]
 fn bad_inputs_fail_with_one_line_and_write_nothing() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("out");
-    let o = out.to_str().unwrap();
     // Truncated EXR.
     let bytes = std::fs::read(fixture("hdri/sunset_256.exr")).unwrap();
     let truncated = tmp.path().join("truncated.exr");
     std::fs::write(&truncated, &bytes[..bytes.len() / 2]).unwrap();
-    assert_fails_cleanly(
-        &[truncated.to_str().unwrap(), "-o", o, "--size", "8"],
-        &out,
-        2,
-        "truncated.exr",
-    );
+    assert_fails_cleanly(&truncated, &out, &["--size", "8"], 2, "truncated.exr");
     // NaN texels without --sanitize (and with it, the bake runs).
     let mut img = Image::new(16, 8, 3);
     img.data
@@ -311,48 +245,20 @@ fn bad_inputs_fail_with_one_line_and_write_nothing() {
     img.data[40] = f32::NAN;
     let nan = tmp.path().join("nan.exr");
     io::write_image(&nan, &img, &WriteOptions::default()).unwrap();
-    assert_fails_cleanly(
-        &[nan.to_str().unwrap(), "-o", o, "--size", "4"],
-        &out,
-        2,
-        "NaN",
-    );
+    assert_fails_cleanly(&nan, &out, &["--size", "4"], 2, "NaN");
     let ok = tmp.path().join("sanitized");
-    let r = run(&[
-        nan.to_str().unwrap(),
-        "-o",
-        ok.to_str().unwrap(),
-        "--size",
-        "4",
-        "--sanitize",
-        "-q",
-    ]);
-    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    BIN.bake(&nan, &ok, &["--size", "4", "--sanitize", "-q"]);
     // Missing file.
     let missing = tmp.path().join("missing.exr");
-    assert_fails_cleanly(
-        &[missing.to_str().unwrap(), "-o", o],
-        &out,
-        4,
-        "missing.exr",
-    );
+    assert_fails_cleanly(&missing, &out, &[], 4, "missing.exr");
     // Parameters out of range.
-    let input = fixture("hdri/sunset_256.exr");
-    let i = input.to_str().unwrap();
-    assert_fails_cleanly(&[i, "-o", o, "--size", "0"], &out, 2, "--size");
-    assert_fails_cleanly(
-        &[i, "-o", o, "--size", "16", "--levels", "9"],
-        &out,
-        2,
-        "--levels",
-    );
-    assert_fails_cleanly(
-        &[i, "-o", o, "--max-roughness", "2"],
-        &out,
-        2,
-        "--max-roughness",
-    );
-    assert_fails_cleanly(&[i, "-o", o, "--samples", "64"], &out, 2, "--samples");
+    let i = fixture("hdri/sunset_256.exr");
+    assert_fails_cleanly(&i, &out, &["--size", "0"], 2, "--size");
+    let levels = ["--size", "16", "--levels", "9"];
+    assert_fails_cleanly(&i, &out, &levels, 2, "--levels");
+    let rough = ["--max-roughness", "2"];
+    assert_fails_cleanly(&i, &out, &rough, 2, "--max-roughness");
+    assert_fails_cleanly(&i, &out, &["--samples", "64"], 2, "--samples");
 }
 
 #[test]
@@ -412,23 +318,8 @@ fn quick_container(input: &Path, out: &Path, extra: &[&str]) {
 }
 
 fn quick_sized(input: &Path, out: &Path, size: &str, levels: &str, extra: &[&str]) {
-    let mut args = vec![
-        input.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--size",
-        size,
-        "--levels",
-        levels,
-        "-q",
-    ];
-    args.extend(extra);
-    let o = run(&args);
-    assert!(
-        o.status.success(),
-        "{args:?}: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
+    let flags = ["--size", size, "--levels", levels, "-q"];
+    BIN.bake(input, out, &[&flags[..], extra].concat());
 }
 
 #[test]
@@ -450,10 +341,8 @@ fn changing_the_layout_leaves_only_this_run_s_files() {
 fn combinations_that_make_no_sense_are_refused_before_reading_the_input() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("out");
-    let o = out.to_str().unwrap();
     // The input does not exist: the parameters are refused first (exit 2, not 4).
     let missing = tmp.path().join("missing.exr");
-    let m = missing.to_str().unwrap();
     for (args, needle) in [
         (vec!["--format", "bc6h"], "cannot be written as EXR faces"),
         (
@@ -470,10 +359,7 @@ fn combinations_that_make_no_sense_are_refused_before_reading_the_input() {
             "--bc6h-quality",
         ),
     ] {
-        let mut a = vec![m, "-o", o];
-        a.extend(args);
-        assert_fails_cleanly(&a, &out, 2, needle);
-        let e = String::from_utf8_lossy(&run(&a).stderr).into_owned();
+        let e = assert_fails_cleanly(&missing, &out, &args, 2, needle);
         assert!(e.contains("valid:"), "{e}");
     }
 }
@@ -496,18 +382,7 @@ fn damaged_containers_are_refused_cleanly() {
     ] {
         let p = tmp.path().join(name);
         std::fs::write(&p, data).unwrap();
-        assert_fails_cleanly(
-            &[
-                p.to_str().unwrap(),
-                "-o",
-                out.to_str().unwrap(),
-                "--size",
-                "8",
-            ],
-            &out,
-            2,
-            name,
-        );
+        assert_fails_cleanly(&p, &out, &["--size", "8"], 2, name);
     }
 }
 
@@ -517,21 +392,10 @@ fn target_sets_level_roughness_orientation_and_the_runtime_report() {
     let input = fixture("hdri/sunset_256.exr");
     let bake = |target: &str| {
         let out = tmp.path().join(target);
-        let o = run(&[
-            input.to_str().unwrap(),
-            "-o",
-            out.to_str().unwrap(),
-            "--size",
-            "16",
-            "--levels",
-            "5",
-            "--target",
-            target,
-            "--layout",
-            "faces",
-            "-q",
-        ]);
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let flags = [
+            "--size", "16", "--levels", "5", "--target", target, "--layout", "faces", "-q",
+        ];
+        BIN.bake(&input, &out, &flags);
         out
     };
     let gltf = bake("gltf");
@@ -576,19 +440,8 @@ fn target_sets_level_roughness_orientation_and_the_runtime_report() {
 fn target_three_has_no_chain_to_bake() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("t");
-    let o = run(&[
-        fixture("hdri/sunset_256.exr").to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--target",
-        "three",
-    ]);
-    assert_eq!(o.status.code(), Some(2));
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(
-        err.contains("PMREMGenerator") && err.lines().count() == 1,
-        "{err}"
-    );
+    let input = fixture("hdri/sunset_256.exr");
+    BIN.refused_bake(input, &out, &["--target", "three"], 2, "PMREMGenerator");
     assert!(!out.exists());
 }
 
@@ -597,14 +450,12 @@ fn target_babylon_writes_an_env_of_the_full_chain_or_refuses() {
     let tmp = tempfile::tempdir().unwrap();
     let input = fixture("hdri/sunset_256.exr");
     let babylon = |out: &Path, extra: &[&str]| {
-        let mut args = vec![input.to_str().unwrap(), "-o", out.to_str().unwrap()];
-        args.extend(["--size", "16", "--target", "babylon", "-q"]);
-        args.extend(extra);
-        run(&args)
+        let flags = ["--size", "16", "--target", "babylon", "-q"];
+        BIN.run_bake(&input, out, &[&flags[..], extra].concat())
     };
     let out = tmp.path().join("b");
     let o = babylon(&out, &[]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(o.status.success(), "{}", stderr(&o));
     let env = std::fs::read(out.join("environment.env")).unwrap();
     assert_eq!(&env[..8], &[0x86, 0x16, 0x87, 0x96, 0xf6, 0xd6, 0x96, 0x36]);
     assert_eq!(report(&out)["levels"], 5);
@@ -620,14 +471,8 @@ fn negative_values_reach_the_range_check_and_outputs_are_checked_first() {
     let dir = tempfile::tempdir().unwrap();
     let input = fixture("hdri/studio_256.exr");
     let out = dir.path().join("o");
-    let o = run(&[
-        input.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--max-roughness",
-        "-0.5",
-    ]);
-    let e = String::from_utf8_lossy(&o.stderr);
+    let o = BIN.run_bake(&input, &out, &["--max-roughness", "-0.5"]);
+    let e = stderr(&o);
     assert_eq!(o.status.code(), Some(2), "{e}");
     assert!(e.contains("--max-roughness -0.5 is out of range"), "{e}");
     assert!(!e.contains("unexpected argument"), "{e}");
@@ -635,12 +480,6 @@ fn negative_values_reach_the_range_check_and_outputs_are_checked_first() {
     // to do, in one line.
     let notes = dir.path().join("notes.txt");
     std::fs::write(&notes, "x").unwrap();
-    let o = run(&[input.to_str().unwrap(), "-o", notes.to_str().unwrap()]);
-    let e = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(2), "{e}");
-    assert!(
-        e.contains("is an existing file: choose another name"),
-        "{e}"
-    );
-    assert_eq!(e.lines().count(), 1, "{e}");
+    let says = "is an existing file: choose another name";
+    BIN.refused_bake(&input, &notes, &[], 2, says);
 }

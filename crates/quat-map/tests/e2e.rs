@@ -11,10 +11,6 @@ fn fixture(name: &str) -> PathBuf {
     ibl_testkit::fixture(&format!("normals/{name}"))
 }
 
-fn run(args: &[&str]) -> Output {
-    BIN.run(args)
-}
-
 fn png_bit_depth(p: &Path) -> u8 {
     std::fs::read(p).unwrap()[24]
 }
@@ -86,15 +82,11 @@ fn converts_fixtures_within_the_bit_depth_bound() {
     for (bits, bound) in [(16u8, 5.286e-5), (8, 1.3585e-2)] {
         for name in ["0000.png", "0003_256.png", "0008_128.png"] {
             let out = dir.path().join(format!("{name}.{bits}.png"));
-            let o = run(&[
-                fixture(name).to_str().unwrap(),
-                "-o",
-                out.to_str().unwrap(),
-                "--bits",
-                &bits.to_string(),
-                "--quiet",
-            ]);
-            assert!(o.status.success(), "{}", stderr(&o));
+            BIN.bake(
+                fixture(name),
+                &out,
+                &["--bits", &bits.to_string(), "--quiet"],
+            );
             assert_eq!(png_bit_depth(&out), bits);
             let (angle, gram, det) = measure(&fixture(name), &out, false);
             eprintln!("{name} {bits}-bit: n' max error {angle:.3e} rad (bound {bound:.3e}), Gram error {gram:.3e}, min det {det:.6}");
@@ -114,15 +106,11 @@ fn converts_fixtures_within_the_bit_depth_bound() {
 fn check_json_exr_and_y_down() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("q.exr");
-    let o = run(&[
-        fixture("0008_128.png").to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--check",
-        "--json",
-        "--half",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    let o = BIN.bake(
+        fixture("0008_128.png"),
+        &out,
+        &["--check", "--json", "--half"],
+    );
     let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     let check = &j["details"]["check"];
     let (err, bound) = (
@@ -139,14 +127,7 @@ fn check_json_exr_and_y_down() {
     );
     // --y-down: measured against the flipped normal it is as accurate.
     let down = dir.path().join("d.png");
-    let o = run(&[
-        fixture("0008_128.png").to_str().unwrap(),
-        "-o",
-        down.to_str().unwrap(),
-        "--y-down",
-        "-q",
-    ]);
-    assert!(o.status.success());
+    BIN.bake(fixture("0008_128.png"), &down, &["--y-down", "-q"]);
     let (angle, _, _) = measure(&fixture("0008_128.png"), &down, true);
     assert!(angle <= 5.3e-5, "{angle}");
 }
@@ -160,40 +141,32 @@ fn bad_inputs_fail_with_one_line_and_the_right_code() {
     let grey = dir.path().join("grey.png");
     ibl_core::io::write_image(&grey, &ibl_core::Image::new(4, 4, 1), &Default::default()).unwrap();
     let out = dir.path().join("q.png");
-    let o = out.to_str().unwrap();
     let fx = fixture("0008_128.png");
-    let fx = fx.to_str().unwrap();
-    let cases: [(Vec<&str>, i32, &str); 7] = [
-        (vec![truncated.to_str().unwrap(), "-o", o], 2, "broken.png"),
-        (
-            vec!["/nonexistent/normal.png", "-o", o],
-            4,
-            "/nonexistent/normal.png",
-        ),
-        (vec![grey.to_str().unwrap(), "-o", o], 3, "single channel"),
-        (vec![fx, "-o", o, "--bits", "12"], 2, "--bits 12"),
-        (vec![fx, "-o", "q.hdr"], 3, ".png or .exr"),
-        (vec![fx, "-o", o, "--force"], 2, "--batch only"),
-        (vec![fx], 2, "--output"),
+    let missing = Path::new("/nonexistent/normal.png");
+    let cases: [(&Path, &Path, &[&str], i32, &str); 6] = [
+        (&truncated, &out, &[], 2, "broken.png"),
+        (missing, &out, &[], 4, "/nonexistent/normal.png"),
+        (&grey, &out, &[], 3, "single channel"),
+        (&fx, &out, &["--bits", "12"], 2, "--bits 12"),
+        (&fx, Path::new("q.hdr"), &[], 3, ".png or .exr"),
+        (&fx, &out, &["--force"], 2, "--batch only"),
     ];
-    for (args, code, needle) in cases {
-        let r = run(&args);
-        let e = stderr(&r);
-        eprintln!("{args:?} → {} {}", r.status.code().unwrap_or(-1), e.trim());
-        assert_eq!(r.status.code(), Some(code), "{args:?}: {e}");
-        assert!(e.contains(needle), "{args:?}: {e}");
-        if code != 2 || !needle.starts_with("--output") {
-            assert_eq!(e.trim().lines().count(), 1, "{e}");
-        }
-        assert!(!e.contains("panicked"));
+    for (input, to, flags, code, needle) in cases {
+        BIN.refused_bake(input, to, flags, code, needle);
     }
+    // No -o at all: clap's usage error, which takes several lines.
+    let r = BIN.cmd().arg(&fx).output().unwrap();
+    let e = stderr(&r);
+    eprintln!("[{fx:?}] → {} {}", r.status.code().unwrap_or(-1), e.trim());
+    assert_eq!(r.status.code(), Some(2), "{e}");
+    assert!(e.contains("--output") && !e.contains("panicked"), "{e}");
     assert!(!out.exists());
 }
 
 fn batch_json(root: &Path, extra: &[&str]) -> (Output, serde_json::Value) {
     let mut args = vec!["--batch", root.to_str().unwrap(), "--json", "-q"];
     args.extend_from_slice(extra);
-    let o = run(&args);
+    let o = BIN.run(&args);
     let j = serde_json::from_slice(&o.stdout).unwrap_or(serde_json::Value::Null);
     (o, j)
 }
@@ -336,22 +309,11 @@ fn a_batch_where_nothing_matches_fails_naming_the_input_name() {
 /// line, exit 3, no panic, nothing written), converted with it to a = cos 22.5°, b = sin 22.5°.
 fn two_channel_needs_the_flag(input: &Path, tol: f64) {
     let out = input.with_file_name("q.exr");
-    let o = run(&[input.to_str().unwrap(), "-o", out.to_str().unwrap()]);
-    let e = stderr(&o);
-    assert_eq!(o.status.code(), Some(3), "{e}");
-    assert!(!e.contains("panicked"), "{e}");
-    assert_eq!(e.trim().lines().count(), 1, "{e}");
+    let e = BIN.refused_bake(input, &out, &[], 3, "--two-channel");
     let name = input.file_name().unwrap().to_str().unwrap();
-    assert!(e.contains(name) && e.contains("--two-channel"), "{e}");
+    assert!(e.contains(name), "{e}");
     assert!(!out.exists());
-    let o = run(&[
-        input.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--two-channel",
-        "-q",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    BIN.bake(input, &out, &["--two-channel", "-q"]);
     let q = read_image(&out, ColorSpace::Linear).unwrap();
     let q = [0, 1, 2].map(|k| 2.0 * q.data[k] as f64 - 1.0);
     let (sn, cs) = 22.5f64.to_radians().sin_cos();
@@ -380,15 +342,7 @@ fn every_fixture_is_byte_identical_with_one_and_two_threads() {
             .iter()
             .map(|t| {
                 let out = dir.path().join(format!("{t}_{name}"));
-                let o = run(&[
-                    fixture(name).to_str().unwrap(),
-                    "-o",
-                    out.to_str().unwrap(),
-                    "--threads",
-                    t,
-                    "--quiet",
-                ]);
-                assert!(o.status.success(), "{}", stderr(&o));
+                BIN.bake(fixture(name), &out, &["--threads", t, "--quiet"]);
                 std::fs::read(&out).unwrap()
             })
             .collect();
@@ -475,26 +429,14 @@ fn truncated_jpegs_are_refused_with_one_line_and_no_output() {
     let whole = dir.path().join("n.jpg");
     std::fs::write(&whole, &bytes).unwrap();
     let q = dir.path().join("q.png");
-    let o = run(&[
-        whole.to_str().unwrap(),
-        "-o",
-        q.to_str().unwrap(),
-        "--quiet",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    BIN.bake(&whole, &q, &["--quiet"]);
     for f in [0.2, 0.5, 0.8, 0.97] {
         let cut = (bytes.len() as f64 * f) as usize;
         let t = dir.path().join(format!("t{cut}.jpg"));
         std::fs::write(&t, &bytes[..cut]).unwrap();
         let out = dir.path().join(format!("q{cut}.png"));
-        let o = run(&[t.to_str().unwrap(), "-o", out.to_str().unwrap()]);
-        let e = stderr(&o);
-        assert_eq!(o.status.code(), Some(2), "cut {cut}: {e}");
-        assert_eq!(e.lines().count(), 1, "{e}");
-        assert!(
-            e.contains("truncated JPEG") && e.contains(&format!("t{cut}.jpg")),
-            "{e}"
-        );
+        let e = BIN.refused_bake(&t, &out, &[], 2, "truncated JPEG");
+        assert!(e.contains(&format!("t{cut}.jpg")), "cut {cut}: {e}");
         assert!(!out.exists());
     }
 }
@@ -512,18 +454,18 @@ fn output_problems_are_found_before_the_input_is_read() {
         (folder.clone(), "is an existing folder", 2),
         (in_the_way.join("q.png"), "a file in the way", 4),
     ] {
-        let o = run(&[input.to_str().unwrap(), "-o", out.to_str().unwrap()]);
+        let o = BIN.run_bake(&input, &out, &[]);
         let e = stderr(&o);
         assert_eq!(o.status.code(), Some(code), "{e}");
         assert!(e.contains(says), "{e}");
     }
     // A negative value reaches the range check instead of clap's "unexpected argument".
-    let o = run(&[input.to_str().unwrap(), "-o", "q.png", "--min-length", "-1"]);
+    let o = BIN.run_bake(&input, "q.png", &["--min-length", "-1"]);
     let e = stderr(&o);
     assert_eq!(o.status.code(), Some(2), "{e}");
     assert!(e.contains("--min-length -1 is out of range"), "{e}");
     // Checked first: a missing input is not even opened.
-    let o = run(&["missing.png", "-o", folder.to_str().unwrap()]);
+    let o = BIN.run_bake("missing.png", &folder, &[]);
     assert!(
         stderr(&o).contains("is an existing folder"),
         "{}",
@@ -534,7 +476,7 @@ fn output_problems_are_found_before_the_input_is_read() {
 #[test]
 fn json_failure_prints_an_error_object_and_a_closed_stdout_is_quiet() {
     let dir = tempfile::tempdir().unwrap();
-    let o = run(&["missing.png", "-o", "q.png", "--json"]);
+    let o = BIN.run_bake("missing.png", "q.png", &["--json"]);
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("JSON on stdout");
     assert_eq!(v["exit_code"], 4);
     assert!(v["error"].as_str().unwrap().contains("missing.png"));
@@ -562,14 +504,8 @@ fn help_convention_holds_for_a_shader_and_for_a_quaternion_library() {
     let dir = tempfile::tempdir().unwrap();
     let input = fixture("0008_128.png");
     let out = dir.path().join("q.exr");
-    let o = run(&[
-        input.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--quiet",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let help = String::from_utf8_lossy(&run(&["--help"]).stdout).into_owned();
+    BIN.bake(&input, &out, &["--quiet"]);
+    let help = ibl_testkit::stdout(&BIN.run(&["--help"]));
     assert!(help.contains("Quat::from_xyzw(−b, −c, 0, a)"), "{help}");
     let n_img = read_image(&input, ColorSpace::Linear).unwrap();
     let q_img = read_image(&out, ColorSpace::Linear).unwrap();
@@ -615,8 +551,7 @@ fn a_flat_folder_converts_with_stem_output_names() {
         "{stem}_quat.png",
         "--quiet",
     ];
-    let o = run(&args);
-    assert!(o.status.success(), "{}", stderr(&o));
+    BIN.run_ok(&args);
     for stem in ["0003_256", "0008_128"] {
         let out = dir.path().join(format!("{stem}_normal_quat.png"));
         let (angle, _, _) = measure(&dir.path().join(format!("{stem}_normal.png")), &out, false);
@@ -624,7 +559,7 @@ fn a_flat_folder_converts_with_stem_output_names() {
     }
     // The outputs fit "*.png" too, but are never taken as inputs: a second run has nothing
     // new to convert and writes no *_quat_quat.png.
-    let o = run(&[&args[..], &["--json"]].concat());
+    let o = BIN.run(&[&args[..], &["--json"]].concat());
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(v["details"]["skipped"].as_array().unwrap().len(), 2, "{v}");
     assert!(!dir.path().join("0003_256_normal_quat_quat.png").exists());

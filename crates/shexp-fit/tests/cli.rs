@@ -3,9 +3,8 @@
 use ibl_core::io::{write_image, WriteOptions};
 use ibl_core::Image;
 use ibl_shexp::Coeffs;
-use ibl_testkit::{stderr, Bin};
+use ibl_testkit::Bin;
 use std::path::{Path, PathBuf};
-use std::process::Output;
 
 const BIN: Bin = Bin::new(env!("CARGO_BIN_EXE_shexp-fit"), "shexp-fit");
 
@@ -29,21 +28,8 @@ fn write_env(path: &Path, nan: bool) {
     write_image(path, &img, &WriteOptions::default()).unwrap();
 }
 
-fn run(args: &[&str]) -> Output {
-    BIN.run(args)
-}
-
-fn small() -> Vec<&'static str> {
-    vec![
-        "--normals",
-        "16",
-        "--views",
-        "16",
-        "--samples",
-        "64",
-        "--quiet",
-    ]
-}
+/// The small fit the tests run: 16 normals × 16 views, 64 samples.
+const SMALL: [&str; 6] = ["--normals", "16", "--views", "16", "--samples", "64"];
 
 /// Fits `dir`/env.exr (written on first use) into `dir`/`name` with the small settings and
 /// `extra` flags; returns the output path and the probe read back.
@@ -53,11 +39,7 @@ fn fit_ok(dir: &Path, name: &str, extra: &[&str]) -> (PathBuf, Coeffs) {
         write_env(&env, false);
     }
     let out = dir.join(name);
-    let mut args = vec![env.to_str().unwrap(), "-o", out.to_str().unwrap()];
-    args.extend(extra);
-    args.extend(small());
-    let o = run(&args);
-    assert!(o.status.success(), "{}", stderr(&o));
+    BIN.bake(&env, &out, &[extra, &SMALL, &["--quiet"]].concat());
     let c: Coeffs = ibl_core::io::data::read(&out).unwrap();
     (out, c)
 }
@@ -131,15 +113,7 @@ fn the_objective_is_chosen_by_flag_and_recorded() {
     // The refinement moves the solution (it starts from the log fit and must change it here).
     assert_ne!(fitted[0].p, fitted[1].p);
     let out = dir.path().join("bad.json");
-    let o = run(&[
-        env.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--objective",
-        "linear",
-    ]);
-    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
-    assert_eq!(stderr(&o).trim().lines().count(), 1, "{}", stderr(&o));
+    BIN.refused_bake(&env, &out, &["--objective", "linear"], 2, "");
     assert!(!out.exists());
 }
 
@@ -177,24 +151,18 @@ fn output_is_identical_for_any_thread_count_and_ron_by_extension() {
         .map(|t| dir.path().join(format!("c{t}.json")))
         .collect();
     for (t, out) in ["1", "2"].iter().zip(&outs) {
-        let mut args = vec![
-            env.to_str().unwrap(),
-            "-o",
-            out.to_str().unwrap(),
-            "--threads",
-            t,
-        ];
-        args.extend(small());
-        assert!(run(&args).status.success());
+        BIN.bake(
+            &env,
+            out,
+            &[&["--threads", t], &SMALL[..], &["--quiet"]].concat(),
+        );
     }
     assert_eq!(
         std::fs::read(&outs[0]).unwrap(),
         std::fs::read(&outs[1]).unwrap()
     );
     let ron = dir.path().join("c.ron");
-    let mut args = vec![env.to_str().unwrap(), "-o", ron.to_str().unwrap()];
-    args.extend(small());
-    assert!(run(&args).status.success());
+    BIN.bake(&env, &ron, &[&SMALL[..], &["--quiet"]].concat());
     let a: Coeffs = ibl_core::io::data::read(&ron).unwrap();
     let b: Coeffs = ibl_core::io::data::read(&outs[0]).unwrap();
     assert_eq!(a.p, b.p);
@@ -205,19 +173,7 @@ fn fixture_fit_reports_json_summary() {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/hdri/sunset_256.exr");
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("sunset.json");
-    let o = run(&[
-        root.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--normals",
-        "16",
-        "--views",
-        "16",
-        "--samples",
-        "64",
-        "--json",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    let o = BIN.bake(&root, &out, &[&SMALL[..], &["--json"]].concat());
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(v["details"]["rows"], 1024);
     assert!(v["details"]["timings"]["estimate"].as_f64().unwrap() >= 0.0);
@@ -237,70 +193,36 @@ fn bad_inputs_fail_cleanly() {
     write_env(&nan, true);
     let out = dir.path().join("never.json");
     let missing = dir.path().join("missing.exr");
-    let (e, n, m, o) = (
-        env.to_str().unwrap(),
-        nan.to_str().unwrap(),
-        missing.to_str().unwrap(),
-        out.to_str().unwrap(),
-    );
-    let cases: Vec<(Vec<&str>, i32, &str)> = vec![
-        (vec![m, "-o", o], 4, "missing.exr"),
-        (vec![n, "-o", o], 2, "NaN"),
-        (vec![e, "-o", o, "--p-order", "0"], 2, "p-order"),
-        (vec![e, "-o", o, "--alphas", ""], 2, "alphas"),
-        (vec![e, "-o", o, "--alphas", "0.5,1.5"], 2, "alphas"),
+    let (e, n) = (&env, &nan);
+    let knots = "--alpha-knots";
+    let cases: Vec<(&Path, Vec<&str>, i32, &str)> = vec![
+        (&missing, vec![], 4, "missing.exr"),
+        (n, vec![], 2, "NaN"),
+        (e, vec!["--p-order", "0"], 2, "p-order"),
+        (e, vec!["--alphas", ""], 2, "alphas"),
+        (e, vec!["--alphas", "0.5,1.5"], 2, "alphas"),
         (
-            vec![
-                e,
-                "-o",
-                o,
-                "--normals",
-                "2",
-                "--views",
-                "2",
-                "--alphas",
-                "0.5",
-            ],
+            e,
+            vec!["--normals", "2", "--views", "2", "--alphas", "0.5"],
             2,
             "unknowns",
         ),
-        (vec![e, "-o", o, "--samples", "zero"], 2, "samples"),
-        (vec![e, "-o", o, "--alpha-knots", "0.5"], 2, "alpha-knots"),
-        (
-            vec![e, "-o", o, "--alpha-knots", "0.6,0.3"],
-            2,
-            "alpha-knots",
-        ),
-        (vec![e, "-o", o, "--alpha-knots", "0.2,2"], 2, "alpha-knots"),
-        (
-            vec![e, "-o", o, "--alpha-knots", "0.2,0.3,0.4,1"],
-            2,
-            "alpha-knots",
-        ),
+        (e, vec!["--samples", "zero"], 2, "samples"),
+        (e, vec![knots, "0.5"], 2, "alpha-knots"),
+        (e, vec![knots, "0.6,0.3"], 2, "alpha-knots"),
+        (e, vec![knots, "0.2,2"], 2, "alpha-knots"),
+        (e, vec![knots, "0.2,0.3,0.4,1"], 2, "alpha-knots"),
     ];
-    for (args, code, needle) in cases {
-        let r = run(&args);
-        let err = stderr(&r);
-        eprintln!("{args:?} → {:?}: {}", r.status.code(), err.trim());
-        assert_eq!(r.status.code(), Some(code), "{args:?}: {err}");
-        assert_eq!(err.trim().lines().count(), 1, "{err}");
-        assert!(err.contains(needle), "{err}");
+    for (input, flags, code, needle) in cases {
+        BIN.refused_bake(input, &out, &flags, code, needle);
         assert!(!out.exists());
     }
     // --sanitize accepts the NaN environment.
-    let r = run(&[
+    let tiny = ["--normals", "8", "--views", "8", "--samples", "32"];
+    BIN.bake(
         n,
-        "-o",
-        o,
-        "--sanitize",
-        "--normals",
-        "8",
-        "--views",
-        "8",
-        "--samples",
-        "32",
-        "--quiet",
-    ]);
-    assert!(r.status.success(), "{}", stderr(&r));
+        &out,
+        &[&["--sanitize"], &tiny[..], &["--quiet"]].concat(),
+    );
     assert!(out.exists());
 }

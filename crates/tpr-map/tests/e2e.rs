@@ -5,13 +5,8 @@ use ibl_core::Image;
 use ibl_testkit::{stderr, Bin};
 use std::f64::consts::PI;
 use std::path::Path;
-use std::process::Output;
 
 const BIN: Bin = Bin::new(env!("CARGO_BIN_EXE_tpr-map"), "tpr-map");
-
-fn run(args: &[&str]) -> Output {
-    BIN.run(args)
-}
 
 fn tangent(img: &Image, i: usize, j: usize) -> [f64; 2] {
     let t = img.texel(i, j);
@@ -22,18 +17,8 @@ fn tangent(img: &Image, i: usize, j: usize) -> [f64; 2] {
 fn radial_preset_against_circle_tangents() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("pan.png");
-    let o = run(&[
-        "-o",
-        out.to_str().unwrap(),
-        "--size",
-        "64x32",
-        "--preset",
-        "radial:0.25,0.5",
-        "--roughness",
-        "0.2,0.6",
-        "-q",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    let preset = ["--preset", "radial:0.25,0.5", "--roughness", "0.2,0.6"];
+    BIN.generate(&out, &[&["--size", "64x32", "-q"][..], &preset].concat());
     let img = read_image(&out, ColorSpace::Linear).unwrap();
     assert_eq!((img.width, img.height, img.channels), (64, 32, 4));
     assert_eq!(std::fs::read(&out).unwrap()[24], 16, "16-bit PNG");
@@ -64,27 +49,9 @@ fn wave_preset_equals_the_thesis_expression_and_its_closed_form() {
     let dir = tempfile::tempdir().unwrap();
     let a = dir.path().join("a.exr");
     let b = dir.path().join("b.exr");
-    assert!(run(&[
-        "-o",
-        a.to_str().unwrap(),
-        "--size",
-        "16x24",
-        "--preset",
-        "wave",
-        "-q"
-    ])
-    .status
-    .success());
-    let o = run(&[
-        "-o",
-        b.to_str().unwrap(),
-        "--size",
-        "16x24",
-        "--expr",
-        "x = cos(pi*v); y = sin(pi*v)",
-        "-q",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    BIN.generate(&a, &["--size", "16x24", "--preset", "wave", "-q"]);
+    let expr = "x = cos(pi*v); y = sin(pi*v)";
+    BIN.generate(&b, &["--size", "16x24", "--expr", expr, "-q"]);
     assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
     let img = read_image(&a, ColorSpace::Linear).unwrap();
     let mut worst = 0.0f64;
@@ -126,16 +93,8 @@ fn angle_map_and_roughness_map() {
     )
     .unwrap();
     let out = dir.path().join("t.exr");
-    let o = run(&[
-        "-o",
-        out.to_str().unwrap(),
-        "--angle-map",
-        angles.to_str().unwrap(),
-        "--roughness-map",
-        rough.to_str().unwrap(),
-        "--json",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    let (a, r) = (angles.to_str().unwrap(), rough.to_str().unwrap());
+    let o = BIN.generate(&out, &["--angle-map", a, "--roughness-map", r, "--json"]);
     let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(j["details"]["stats"]["width"], 8);
     let img = read_image(&out, ColorSpace::Linear).unwrap();
@@ -154,65 +113,46 @@ fn angle_map_and_roughness_map() {
 #[test]
 fn fallbacks_are_reported_and_errors_are_one_line() {
     let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("t.png");
-    let o = out.to_str().unwrap();
+    let o = &dir.path().join("t.png");
     // 5×5 radial: the centre texel has no direction.
-    let r = run(&["-o", o, "--size", "5", "--preset", "radial", "--json"]);
-    assert!(r.status.success());
+    let r = BIN.generate(o, &["--size", "5", "--preset", "radial", "--json"]);
     let j: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
     assert_eq!(j["details"]["stats"]["zero_length"], 1);
     assert!(j["warnings"][0].as_str().unwrap().contains("zero-length"));
     let missing = Path::new("/nonexistent/a.png");
-    let cases: [(Vec<&str>, i32, &str); 7] = [
+    let wave = ["--size", "8", "--preset", "wave"];
+    let rough_expr = ["--roughness-expr", "rx = 0.5; ry = q"];
+    let cases: [(&Path, Vec<&str>, i32, &str); 7] = [
         (
-            vec!["-o", o, "--size", "8", "--expr", "x = cos(pi*v; y = 0"],
+            o,
+            vec!["--size", "8", "--expr", "x = cos(pi*v; y = 0"],
             2,
             "--expr: column 13",
         ),
         (
-            vec![
-                "-o",
-                o,
-                "--size",
-                "8",
-                "--preset",
-                "wave",
-                "--roughness-expr",
-                "rx = 0.5; ry = q",
-            ],
+            o,
+            [&wave[..], &rough_expr].concat(),
             2,
             "--roughness-expr: column 16",
         ),
+        (o, vec!["--size", "8"], 2, "exactly one direction source"),
+        (o, vec!["--preset", "wave"], 2, "--size"),
         (
-            vec!["-o", o, "--size", "8"],
-            2,
-            "exactly one direction source",
-        ),
-        (vec!["-o", o, "--preset", "wave"], 2, "--size"),
-        (
-            vec!["-o", o, "--size", "8", "--preset", "swirl"],
+            o,
+            vec!["--size", "8", "--preset", "swirl"],
             2,
             "unknown preset",
         ),
         (
-            vec!["-o", o, "--angle-map", missing.to_str().unwrap()],
+            o,
+            vec!["--angle-map", missing.to_str().unwrap()],
             4,
             "/nonexistent/a.png",
         ),
-        (
-            vec!["-o", "t.jpg", "--size", "8", "--preset", "wave"],
-            3,
-            ".png or .exr",
-        ),
+        (Path::new("t.jpg"), wave.to_vec(), 3, ".png or .exr"),
     ];
-    for (args, code, needle) in cases {
-        let r = run(&args);
-        let e = stderr(&r);
-        eprintln!("{args:?} → {} {}", r.status.code().unwrap_or(-1), e.trim());
-        assert_eq!(r.status.code(), Some(code), "{args:?}: {e}");
-        assert!(e.contains(needle), "{args:?}: {e}");
-        assert_eq!(e.trim().lines().count(), 1, "{args:?}: {e}");
-        assert!(!e.contains("panicked"));
+    for (out, flags, code, needle) in cases {
+        BIN.refused_generate(out, &flags, code, needle);
     }
 }
 
@@ -227,18 +167,8 @@ fn presets_and_expressions_are_byte_identical_with_one_and_two_threads() {
             .iter()
             .map(|t| {
                 let out = dir.path().join(format!("{t}.png"));
-                let o = run(&[
-                    "-o",
-                    out.to_str().unwrap(),
-                    "--size",
-                    "96x64",
-                    source[0],
-                    source[1],
-                    "--threads",
-                    t,
-                    "--quiet",
-                ]);
-                assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+                let flags = ["--size", "96x64", source[0], source[1]];
+                BIN.generate(&out, &[&flags[..], &["--threads", t, "--quiet"]].concat());
                 std::fs::read(&out).unwrap()
             })
             .collect();
@@ -261,15 +191,13 @@ fn two_channel_exr_is_a_direction_map_and_grey_is_not() {
     assert_eq!(read_image(&rg, ColorSpace::Linear).unwrap().channels, 2);
     let out = dir.path().join("t.exr");
     for kind in ["auto", "direction"] {
-        let o = run(&[
-            "-o",
-            out.to_str().unwrap(),
+        let map = [
             "--angle-map",
             rg.to_str().unwrap(),
             "--angle-map-kind",
             kind,
-            "-q",
-        ]);
+        ];
+        let o = BIN.run_generate(&out, &[&map[..], &["-q"]].concat());
         let e = stderr(&o);
         assert!(o.status.success() && !e.contains("panicked"), "{kind}: {e}");
         let img = read_image(&out, ColorSpace::Linear).unwrap();
@@ -293,21 +221,14 @@ fn two_channel_exr_is_a_direction_map_and_grey_is_not() {
     )
     .unwrap();
     let bad = dir.path().join("bad.exr");
-    let o = run(&[
-        "-o",
-        bad.to_str().unwrap(),
+    let map = [
         "--angle-map",
         grey.to_str().unwrap(),
         "--angle-map-kind",
         "direction",
-    ]);
-    let e = stderr(&o);
-    assert_eq!(o.status.code(), Some(3), "{e}");
-    assert_eq!(e.trim().lines().count(), 1, "{e}");
-    assert!(
-        e.contains("grey.exr") && e.contains("single channel"),
-        "{e}"
-    );
+    ];
+    let e = BIN.refused_generate(&bad, &map, 3, "single channel");
+    assert!(e.contains("grey.exr"), "{e}");
     assert!(!bad.exists());
 }
 
@@ -329,30 +250,12 @@ fn non_finite_maps_are_refused_unless_sanitized_and_inputs_are_not_overwritten()
     )
     .unwrap();
     let out = dir.path().join("t.exr");
-    let args = |extra: &[&'static str]| {
-        let mut a = vec![
-            "-o".to_string(),
-            out.to_str().unwrap().to_string(),
-            "--angle-map".into(),
-            angles.to_str().unwrap().into(),
-            "--roughness-map".into(),
-            rough.to_str().unwrap().into(),
-        ];
-        a.extend(extra.iter().map(|s| s.to_string()));
-        a
-    };
-    let o = BIN.cmd().args(args(&[])).output().unwrap();
-    let e = stderr(&o);
-    assert_eq!(o.status.code(), Some(2), "{e}");
-    assert_eq!(e.trim().lines().count(), 1, "{e}");
-    assert!(e.contains("angles.exr") && e.contains("1 NaN/Inf"), "{e}");
+    let (a, r) = (angles.to_str().unwrap(), rough.to_str().unwrap());
+    let maps = ["--angle-map", a, "--roughness-map", r];
+    let e = BIN.refused_generate(&out, &maps, 2, "1 NaN/Inf");
+    assert!(e.contains("angles.exr"), "{e}");
     assert!(!out.exists());
-    let o = BIN
-        .cmd()
-        .args(args(&["--sanitize", "--json"]))
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", stderr(&o));
+    let o = BIN.generate(&out, &[&maps[..], &["--sanitize", "--json"]].concat());
     let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     let warnings: Vec<&str> = j["warnings"]
         .as_array()
@@ -379,20 +282,8 @@ fn non_finite_maps_are_refused_unless_sanitized_and_inputs_are_not_overwritten()
     assert_eq!(img.texel(0, 0)[2], 0.0);
     // Writing over an input map is refused and leaves it as it was.
     let before = std::fs::read(&rough).unwrap();
-    let o = run(&[
-        "-o",
-        rough.to_str().unwrap(),
-        "--preset",
-        "wave",
-        "--size",
-        "4",
-        "--roughness-map",
-        rough.to_str().unwrap(),
-    ]);
-    let e = stderr(&o);
-    assert_eq!(o.status.code(), Some(2), "{e}");
-    assert_eq!(e.trim().lines().count(), 1, "{e}");
-    assert!(e.contains("is the input"), "{e}");
+    let over = ["--preset", "wave", "--size", "4", "--roughness-map", r];
+    BIN.refused_generate(&rough, &over, 2, "is the input");
     assert_eq!(std::fs::read(&rough).unwrap(), before);
 }
 
@@ -411,12 +302,7 @@ fn truncated_jpeg_angle_maps_are_refused() {
     for cut in [bytes.len() / 3, bytes.len() * 2 / 3, bytes.len() - 2] {
         let t = dir.path().join("a.jpg");
         std::fs::write(&t, &bytes[..cut]).unwrap();
-        let o = run(&[
-            "--angle-map",
-            t.to_str().unwrap(),
-            "-o",
-            out.to_str().unwrap(),
-        ]);
+        let o = BIN.run_generate(&out, &["--angle-map", t.to_str().unwrap()]);
         let e = stderr(&o);
         assert_eq!(o.status.code(), Some(2), "cut {cut}: {e}");
         assert!(e.contains("a.jpg: truncated JPEG"), "{e}");
