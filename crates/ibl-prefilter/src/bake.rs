@@ -169,11 +169,12 @@ pub struct Params {
     /// Set NaN/Inf input texels to 0 instead of refusing the input.
     #[arg(long)]
     pub sanitize: bool,
-    /// Fit the inner levels to the target's lookup (true/false; default true for gltf, false
-    /// otherwise and with --reference): each stores what makes the engine's blend between
-    /// levels closest to the exact kernel at every roughness (the worst relative error
-    /// minimised), no longer the exact kernel at its own roughness; prefilter.json says by how
-    /// much, per level. Costs about 2.5–3× the bake time (bench/runtime.md).
+    /// Fit the levels to the target's lookup (true/false; default true, false for three and
+    /// with --reference): each inner level stores what makes the engine's blend between levels
+    /// closest to the exact kernel at every roughness (the worst relative error minimised), and
+    /// levels of 8² texels a face or less what makes its bilinear read closest, no longer the
+    /// exact kernel at their own roughness; prefilter.json says by how much, per level. Costs
+    /// about 2.5× the bake time (bench/runtime.md); false gives the exact levels peers write.
     #[arg(long, value_name = "BOOL")]
     pub fit_lookup: Option<bool>,
 }
@@ -201,13 +202,16 @@ pub(crate) const MAX_SOURCE_FACTOR: usize = 2;
 /// (bench/runtime.md).
 pub const GLTF_SMALLEST_FACE: usize = 4;
 
-/// Targets whose levels are fitted to the lookup unless --fit-lookup says otherwise: gltf, whose
-/// default 256² × 7 chain measured 3.6 / 2.5 / 3.9 / 10.1% worst over r ∈ [0.25, 1] fitted
-/// against 4.0 / 2.5 / 5.9 / 26.6% exact (city / sunset / interior / studio, bench/runtime.md).
-/// The others keep their exact levels (Filament's 6 levels gain as much, 4.5 / 3.0 / 4.8 / 9.1%
-/// against 5.0 / 3.3 / 5.4 / 17.8%, with `--fit-lookup true`).
+/// Targets whose levels are fitted to the lookup unless --fit-lookup says otherwise: every one
+/// whose engine reads the chain through a fixed lod mapping. At the same bytes the fitted chain
+/// measured a lower worst error over r ∈ [0.25, 1] on every fixture and every target
+/// (city / sunset / interior / studio, 256², bench/runtime.md): gltf and Bevy × 7 levels
+/// 2.3 / 1.2 / 3.1 / 9.5% against 4.0 / 2.5 / 5.9 / 26.6% exact; Filament × 6 3.8 / 2.5 / 4.2 /
+/// 8.9% against 5.0 / 3.3 / 5.4 / 17.8%; Unity × 7 1.3 / 0.8 / 2.1 / 7.0% against 3.7 / 2.5 /
+/// 3.9 / 15.2%; Babylon × 9 3.1 / 2.3 / 3.5 / 9.6% against 5.7 / 3.4 / 6.0 / 18.4%. three.js
+/// filters its own chain (PMREM) from level 0, so nothing of ours is read between levels.
 fn fit_by_default(target: Target) -> bool {
-    target == Target::Gltf
+    target != Target::Three
 }
 
 /// Levels a chain from `size` can hold (halving down to 1×1).
@@ -652,11 +656,10 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
 
     let mut stages = vec![Stage {
         exact: level0.clone(),
-        values: level0.clone(),
+        values: level0,
         correction: None,
         fitting: None,
     }];
-    let mut levels = vec![level0];
     let mut reports = vec![LevelReport {
         level: 0,
         size,
@@ -672,7 +675,15 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
     let mut estimate_seconds = 0.0;
     let mut fit_seconds = 0.0;
     let lookup = params.target.spec().lod;
-    for l in 1..n_baked {
+    let fits = params.fits_lookup();
+    // The exact levels first (with --max-roughness and the fit, one more past the last baked
+    // level: its coarser neighbour, which the engine's blend reads and the fit needs).
+    let n_exact = if fits && n_baked < n_chain {
+        n_baked + 1
+    } else {
+        n_baked
+    };
+    for l in 1..n_exact {
         let t = Instant::now();
         let n = (size >> l).max(1);
         let r = params.level_roughness(l);
@@ -682,60 +693,13 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
         let k = footprint_factor(n, r);
         let (fine_cube, work) = convolve_level(&engine, &source, &texels, n, r, progress);
         level_seconds.push(t.elapsed().as_secs_f64());
+        level_work.push(work);
         let te = Instant::now();
         // The estimate compares the computed texels (the fine ones when a footprint is
         // averaged: the reduction itself is exact) with the brute force.
         let estimated_error = (!params.reference).then(|| estimate_error(&fine_cube, &texels, r));
         estimate_seconds += te.elapsed().as_secs_f64();
         let exact = reduce_to(fine_cube, n);
-        let mut cube = exact.clone();
-        let tf = Instant::now();
-        let mut read_fit = None;
-        let mut fit_work = 0;
-        // The last level's values stay the kernel's: at r = 1 the lookup reads it alone (see
-        // crate::fit); only its bilinear read is fitted (crate::spatial).
-        let mut fitting = None;
-        if params.fits_lookup() && l + 1 < n_chain {
-            let plan = fit::plan(lookup, l, n_chain, size, fit::FIT_NODES);
-            let mut exact_at = |r: f32| {
-                let (c, w) = convolve_level(&engine, &source, &texels, n, r, progress);
-                fit_work += w;
-                reduce_to(c, n)
-            };
-            let hi = plan.hi.map(&mut exact_at);
-            let at_nodes: Vec<Cubemap> = plan.nodes.iter().map(|q| exact_at(q.roughness)).collect();
-            // The finer neighbour as the engine reads it at this level's texels (already
-            // fitted: the sweep goes fine to coarse).
-            let lo = fit::read_at_texels(&levels[l - 1], n);
-            cube = fit::fit_level(
-                &plan,
-                &exact,
-                &lo,
-                hi.as_ref(),
-                &at_nodes,
-                fit::Coarser::Follows,
-            );
-            fitting = Some((plan, at_nodes));
-        }
-        let mut correction = None;
-        if params.fits_lookup() && n <= spatial::SPATIAL_MAX_SIZE {
-            // The read correction of the exact level at r_l, added to what the per-texel fit
-            // stores (both are small and the read is linear in the texels).
-            let (dense, w) = convolve_points(
-                &engine,
-                &source,
-                &texels,
-                n * spatial::SAMPLES_PER_EDGE,
-                r,
-                progress,
-            );
-            fit_work += w;
-            let (read, report) = spatial::fit_bilinear(&exact, &dense);
-            correction = Some(read);
-            read_fit = Some(report);
-        }
-        fit_seconds += tf.elapsed().as_secs_f64();
-        level_work.push(work + fit_work);
         reports.push(LevelReport {
             level: l,
             size: n,
@@ -745,44 +709,77 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
             evaluations_per_texel: work as f64 / (6 * n * n) as f64,
             estimated_error,
             fit: None,
-            read_fit,
+            read_fit: None,
         });
-        levels.push(corrected(&cube, correction.as_ref(), &exact));
         stages.push(Stage {
+            values: exact.clone(),
             exact,
-            values: cube,
-            correction,
-            fitting,
+            correction: None,
+            fitting: None,
         });
     }
-    // Further Gauss–Seidel sweeps: each fitted level again, now with both neighbours as the
-    // engine reads them (the coarser one fitted too, no longer assumed to follow).
     let tf = Instant::now();
-    for _ in 1..fit::SWEEPS {
-        for l in 1..levels.len() {
-            let Some((plan, at_nodes)) = &stages[l].fitting else {
-                continue;
-            };
-            if l + 1 >= levels.len() {
+    if fits {
+        // Small levels fitted to their bilinear read (crate::spatial): a correction of the
+        // exact level, later added to what the per-texel fit stores (both are small and the
+        // read is linear in the texels).
+        for (l, st) in stages.iter_mut().enumerate().skip(1) {
+            let n = st.exact.size;
+            if n > spatial::SPATIAL_MAX_SIZE {
                 continue;
             }
-            let n = stages[l].exact.size;
-            let lo = fit::read_at_texels(&levels[l - 1], n);
-            let hi = fit::read_at_texels(&levels[l + 1], n);
-            let st = &stages[l];
-            let values = fit::fit_level(
-                plan,
-                &st.exact,
-                &lo,
-                Some(&hi),
-                at_nodes,
-                fit::Coarser::Fixed,
-            );
-            levels[l] = corrected(&values, st.correction.as_ref(), &st.exact);
-            stages[l].values = values;
+            let r = params.level_roughness(l);
+            let dense_size = n * spatial::SAMPLES_PER_EDGE;
+            let (dense, w) = convolve_points(&engine, &source, &texels, dense_size, r, progress);
+            level_work[l] += w;
+            let (read, report) = spatial::fit_bilinear(&st.exact, &dense);
+            st.correction = Some(read);
+            reports[l].read_fit = Some(report);
+        }
+        // The per-texel lookup fit (crate::fit), fine to coarse: Gauss–Seidel sweeps. The
+        // neighbours enter as the engine reads them at this level's texel centres: the finer
+        // one as stored (fitted already), the coarser one exact (first sweep, assumed to
+        // follow) then as stored. The last level's values stay the kernel's: at r = 1 the
+        // lookup reads it alone.
+        for sweep in 0..fit::SWEEPS {
+            for l in 1..n_baked.min(n_chain - 1) {
+                let n = stages[l].exact.size;
+                if stages[l].fitting.is_none() {
+                    let plan = fit::plan(lookup, l, n_chain, size, fit::FIT_NODES);
+                    let at_nodes: Vec<Cubemap> = plan
+                        .nodes
+                        .iter()
+                        .map(|q| {
+                            let (c, w) =
+                                convolve_level(&engine, &source, &texels, n, q.roughness, progress);
+                            level_work[l] += w;
+                            reduce_to(c, n)
+                        })
+                        .collect();
+                    stages[l].fitting = Some((plan, at_nodes));
+                }
+                let lo = fit::read_at_texels(&stages[l - 1].stored(), n);
+                let hi = fit::read_at_texels(&stages[l + 1].stored(), n);
+                let coarser = if sweep == 0 {
+                    fit::Coarser::Follows
+                } else {
+                    fit::Coarser::Fixed
+                };
+                let st = &stages[l];
+                let (plan, at_nodes) = st.fitting.as_ref().expect("planned above");
+                let hi = plan.hi.map(|_| &hi);
+                let values = fit::fit_level(plan, &st.exact, &lo, hi, at_nodes, coarser);
+                stages[l].values = values;
+            }
         }
     }
     fit_seconds += tf.elapsed().as_secs_f64();
+    // The extra coarser neighbour is not part of the chain.
+    stages.truncate(n_baked);
+    reports.truncate(n_baked);
+    level_seconds.truncate(n_baked);
+    level_work.truncate(n_baked);
+    let levels: Vec<Cubemap> = stages.iter().map(Stage::stored).collect();
     for (report, st) in reports.iter_mut().zip(&stages) {
         if let Some((plan, _)) = &st.fitting {
             report.fit = Some(fit::LevelFit::new(plan, &st.values, &st.exact));
@@ -896,18 +893,20 @@ struct Stage {
     fitting: Option<(fit::Plan, Vec<Cubemap>)>,
 }
 
-/// What a level stores: the per-texel fit's `values` plus the read correction (the read-fitted
-/// exact level minus the exact level), never negative.
-fn corrected(values: &Cubemap, read: Option<&Cubemap>, exact: &Cubemap) -> Cubemap {
-    let mut out = values.clone();
-    if let Some(read) = read {
-        for ((o, f), e) in out.faces.iter_mut().zip(&read.faces).zip(&exact.faces) {
-            for ((v, f), e) in o.data.iter_mut().zip(&f.data).zip(&e.data) {
-                *v = (*v + (f - e)).max(0.0);
+impl Stage {
+    /// What the level stores: the per-texel fit's values plus the read correction (the
+    /// read-fitted exact level minus the exact level), never negative.
+    fn stored(&self) -> Cubemap {
+        let mut out = self.values.clone();
+        if let Some(read) = &self.correction {
+            for ((o, f), e) in out.faces.iter_mut().zip(&read.faces).zip(&self.exact.faces) {
+                for ((v, f), e) in o.data.iter_mut().zip(&f.data).zip(&e.data) {
+                    *v = (*v + (f - e)).max(0.0);
+                }
             }
         }
+        out
     }
-    out
 }
 
 /// Level texels at roughness `r` by the chosen method: `n`×`n` faces, computed k× finer where
