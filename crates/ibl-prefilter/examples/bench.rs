@@ -713,8 +713,8 @@ fn floor_section() -> String {
          The peak of a small source's prefiltered radiance goes as 1/α² = r⁻⁴ (here P(r) = (r² + 0.05²)⁻²); \
          an engine blends two levels linearly in lod, and the blend of a convex function's two values overshoots between them. \
          Worst relative error of the blend over r ∈ [0.25, 1] (and where it is), with levels exact at their roughness and with levels fitted \
-         to the lookup as `--fit-lookup` fits them (the worst relative error minimised, one level at a time fine to coarse, two sweeps, see `ibl_prefilter::fit`). \
-         This is the part of studio's error no level can remove while the engine's mapping is fixed: a level holds one value per texel for a whole range of roughness (on studio, averaged over directions, it leaves 9.5% at 7 fitted levels). The other floor is the last level's own read: at r = 1 the lookup reads it alone, and on 4×4 faces its bilinear read costs 2.5–5.4% with the level's own values (column `% at r = 1`, exact rows), which 8×8 faces bring to 0.5–1.2%; fitted to the read (`ibl_prefilter::spatial`, the fitted rows) the 4×4 level costs 0.8–2.8%.\n\n\
+         to the lookup as `--fit-lookup` fits them (the worst relative error minimised, one level at a time fine to coarse, two sweeps, see `ibl_prefilter::fit`; one texel alone, so without the power the bake keeps, which no single texel can). \
+         This is the part of studio's error no level can remove while the engine's mapping is fixed: a level holds one value per texel for a whole range of roughness (on studio, averaged over directions, it leaves 9.6% at 7 fitted levels). The other floor is the last level's own read: at r = 1 the lookup reads it alone, and on 4×4 faces its bilinear read costs 2.5–5.4% with the level's own values (column `% at r = 1`, exact rows), which 8×8 faces bring to 0.5–1.2%; fitted to the read (`ibl_prefilter::spatial`, the fitted rows) the 4×4 level costs 0.8–2.8%.\n\n\
          | lookup | levels | exact levels: worst % (at r) | fitted levels: worst % (at r) |\n|---|---:|---|---|\n",
     );
     for (mapping, n) in [
@@ -745,6 +745,7 @@ fn floor_section() -> String {
                     hi.as_ref(),
                     &nodes,
                     coarser,
+                    fit::Power::Free,
                 );
                 fitted[l] = f.faces[0].data[0];
             }

@@ -768,7 +768,15 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
                 let st = &stages[l];
                 let (plan, at_nodes) = st.fitting.as_ref().expect("planned above");
                 let hi = plan.hi.map(|_| &hi);
-                let values = fit::fit_level(plan, &st.exact, &lo, hi, at_nodes, coarser);
+                let values = fit::fit_level(
+                    plan,
+                    &st.exact,
+                    &lo,
+                    hi,
+                    at_nodes,
+                    coarser,
+                    fit::Power::Kept,
+                );
                 stages[l].values = values;
             }
         }
@@ -895,13 +903,30 @@ struct Stage {
 
 impl Stage {
     /// What the level stores: the per-texel fit's values plus the read correction (the
-    /// read-fitted exact level minus the exact level), never negative.
+    /// read-fitted exact level minus the exact level), never negative. Both keep the exact
+    /// level's power; where a texel had to be clamped to 0, its channel is rescaled to it.
     fn stored(&self) -> Cubemap {
         let mut out = self.values.clone();
-        if let Some(read) = &self.correction {
-            for ((o, f), e) in out.faces.iter_mut().zip(&read.faces).zip(&self.exact.faces) {
-                for ((v, f), e) in o.data.iter_mut().zip(&f.data).zip(&e.data) {
-                    *v = (*v + (f - e)).max(0.0);
+        let Some(read) = &self.correction else {
+            return out;
+        };
+        let mut clamped = false;
+        for ((o, f), e) in out.faces.iter_mut().zip(&read.faces).zip(&self.exact.faces) {
+            for ((v, f), e) in o.data.iter_mut().zip(&f.data).zip(&e.data) {
+                let sum = *v + (f - e);
+                clamped |= sum < 0.0;
+                *v = sum.max(0.0);
+            }
+        }
+        if clamped {
+            let (want, got) = (self.exact.mean_radiance(), out.mean_radiance());
+            for face in &mut out.faces {
+                for t in face.data.chunks_exact_mut(3) {
+                    for c in 0..3 {
+                        if got[c] > 0.0 {
+                            t[c] = (t[c] as f64 * want[c] / got[c]) as f32;
+                        }
+                    }
                 }
             }
         }
@@ -1158,8 +1183,7 @@ mod tests {
         src.faces[Face::Py as usize].data[k..k + 3].copy_from_slice(&[5000.0, 4000.0, 3000.0]);
         let p0 = power(&src);
         for target in [Target::Gltf, Target::Filament, Target::Unity] {
-            // The exact levels: the lookup fit (on by default for gltf) moves levels 1… by
-            // design and with them their power (crate::fit).
+            // The exact levels, then the levels fitted to the lookup (the default).
             let params = Params {
                 size: 16,
                 levels: Some(5),
@@ -1177,6 +1201,26 @@ mod tests {
             // Without the footprint means the coarse levels would be off (centre values).
             let last = chain.report.level.last().unwrap();
             assert!(last.footprint_samples > 1);
+            let fitted = bake_chain(
+                &Params {
+                    fit_lookup: Some(true),
+                    ..params.clone()
+                },
+                &Environment::Cube(src.clone()),
+                &NoProgress,
+            )
+            .unwrap();
+            // Levels fitted to the lookup keep it too (crate::fit::Power::Kept, and the read
+            // fit's constraint in crate::spatial).
+            for (l, c) in fitted.mips.levels.iter().enumerate() {
+                let e = power(c) / p0 - 1.0;
+                eprintln!("{target:?} fitted level {l} ({}²): power {e:+.2e}", c.size);
+                assert!(
+                    e.abs() < 1e-3,
+                    "{target:?} fitted level {l}: power off by {e:.2e}"
+                );
+            }
+            assert!(fitted.report.level[1].fit.is_some());
         }
     }
 
