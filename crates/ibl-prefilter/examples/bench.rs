@@ -399,7 +399,7 @@ fn runtime_frontier(root: &Path, quick: bool, fit_only: bool) {
          Error: mean absolute relative error of luminance at one roughness; columns give the worst roughness in each range, per fixture ({}) and then over all of them. \
          Bytes: the chain at RGBA16F (8 bytes a texel; RGB9E5 / B10G11R11 halve it). \
          `fit`: `exact` levels are the kernel at their own roughness; `fitted` levels are fitted to the lookup (`--fit-lookup`, \
-         the default for gltf: each inner level minimises the lookup's worst relative error over its roughness range, see `ibl_prefilter::fit`, \
+         the default for every target but three: each inner level minimises the lookup's worst relative error over its roughness range keeping the level's power, see `ibl_prefilter::fit`, \
          and levels of at most 8² texels a face are fitted to their bilinear read, see `ibl_prefilter::spatial`). Bevy reads as gltf does (its rows). \
          `% at r = 1`: where the lookup reads the last level alone, the error of that level's own bilinear read. \
          `bake s`: seconds to bake the four chains (levels and fit, without the runtime evaluation) on a shared 2-core machine.\n",

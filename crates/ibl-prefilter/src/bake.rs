@@ -206,9 +206,9 @@ pub const GLTF_SMALLEST_FACE: usize = 4;
 /// whose engine reads the chain through a fixed lod mapping. At the same bytes the fitted chain
 /// measured a lower worst error over r ∈ [0.25, 1] on every fixture and every target
 /// (city / sunset / interior / studio, 256², bench/runtime.md): gltf and Bevy × 7 levels
-/// 2.3 / 1.2 / 3.1 / 9.5% against 4.0 / 2.5 / 5.9 / 26.6% exact; Filament × 6 3.8 / 2.5 / 4.2 /
-/// 8.9% against 5.0 / 3.3 / 5.4 / 17.8%; Unity × 7 1.3 / 0.8 / 2.1 / 7.0% against 3.7 / 2.5 /
-/// 3.9 / 15.2%; Babylon × 9 3.1 / 2.3 / 3.5 / 9.6% against 5.7 / 3.4 / 6.0 / 18.4%. three.js
+/// 2.3 / 1.3 / 3.1 / 9.6% against 4.0 / 2.5 / 5.9 / 26.6% exact; Filament × 6 3.8 / 2.5 / 4.3 /
+/// 9.1% against 5.0 / 3.3 / 5.4 / 17.8%; Unity × 7 1.3 / 0.8 / 2.2 / 7.1% against 3.7 / 2.5 /
+/// 3.9 / 15.2%; Babylon × 9 3.1 / 2.2 / 3.5 / 9.6% against 5.7 / 3.4 / 6.0 / 18.4%. three.js
 /// filters its own chain (PMREM) from level 0, so nothing of ours is read between levels.
 fn fit_by_default(target: Target) -> bool {
     target != Target::Three
