@@ -173,8 +173,9 @@ pub struct Params {
     /// with --reference): each inner level stores what makes the engine's blend between levels
     /// closest to the exact kernel at every roughness (the worst relative error minimised), and
     /// levels of 8² texels a face or less what makes its bilinear read closest, no longer the
-    /// exact kernel at their own roughness; prefilter.json says by how much, per level. Costs
-    /// about 2.5× the bake time (bench/runtime.md); false gives the exact levels peers write.
+    /// exact kernel at their own roughness (each level keeping its power); prefilter.json says
+    /// by how much, per level. Costs about 2.5–3× the bake time (bench/runtime.md); false gives
+    /// the exact levels peers write.
     #[arg(long, value_name = "BOOL")]
     pub fit_lookup: Option<bool>,
 }
@@ -674,7 +675,6 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
     let (mut level_seconds, mut level_work) = (vec![0.0], vec![0u64]);
     let mut estimate_seconds = 0.0;
     let mut fit_seconds = 0.0;
-    let lookup = params.target.spec().lod;
     let fits = params.fits_lookup();
     // The exact levels first (with --max-roughness and the fit, one more past the last baked
     // level: its coarser neighbour, which the engine's blend reads and the fit needs).
@@ -720,66 +720,16 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
     }
     let tf = Instant::now();
     if fits {
-        // Small levels fitted to their bilinear read (crate::spatial): a correction of the
-        // exact level, later added to what the per-texel fit stores (both are small and the
-        // read is linear in the texels).
-        for (l, st) in stages.iter_mut().enumerate().skip(1) {
-            let n = st.exact.size;
-            if n > spatial::SPATIAL_MAX_SIZE {
-                continue;
-            }
-            let r = params.level_roughness(l);
-            let dense_size = n * spatial::SAMPLES_PER_EDGE;
-            let (dense, w) = convolve_points(&engine, &source, &texels, dense_size, r, progress);
-            level_work[l] += w;
-            let (read, report) = spatial::fit_bilinear(&st.exact, &dense);
-            st.correction = Some(read);
-            reports[l].read_fit = Some(report);
-        }
-        // The per-texel lookup fit (crate::fit), fine to coarse: Gauss–Seidel sweeps. The
-        // neighbours enter as the engine reads them at this level's texel centres: the finer
-        // one as stored (fitted already), the coarser one exact (first sweep, assumed to
-        // follow) then as stored. The last level's values stay the kernel's: at r = 1 the
-        // lookup reads it alone.
-        for sweep in 0..fit::SWEEPS {
-            for l in 1..n_baked.min(n_chain - 1) {
-                let n = stages[l].exact.size;
-                if stages[l].fitting.is_none() {
-                    let plan = fit::plan(lookup, l, n_chain, size, fit::FIT_NODES);
-                    let at_nodes: Vec<Cubemap> = plan
-                        .nodes
-                        .iter()
-                        .map(|q| {
-                            let (c, w) =
-                                convolve_level(&engine, &source, &texels, n, q.roughness, progress);
-                            level_work[l] += w;
-                            reduce_to(c, n)
-                        })
-                        .collect();
-                    stages[l].fitting = Some((plan, at_nodes));
-                }
-                let lo = fit::read_at_texels(&stages[l - 1].stored(), n);
-                let hi = fit::read_at_texels(&stages[l + 1].stored(), n);
-                let coarser = if sweep == 0 {
-                    fit::Coarser::Follows
-                } else {
-                    fit::Coarser::Fixed
-                };
-                let st = &stages[l];
-                let (plan, at_nodes) = st.fitting.as_ref().expect("planned above");
-                let hi = plan.hi.map(|_| &hi);
-                let values = fit::fit_level(
-                    plan,
-                    &st.exact,
-                    &lo,
-                    hi,
-                    at_nodes,
-                    coarser,
-                    fit::Power::Kept,
-                );
-                stages[l].values = values;
-            }
-        }
+        let sources = (&engine, &source, &texels);
+        fit_to_lookup(
+            params,
+            n_baked,
+            sources,
+            &mut stages,
+            &mut reports,
+            &mut level_work,
+            progress,
+        );
     }
     fit_seconds += tf.elapsed().as_secs_f64();
     // The extra coarser neighbour is not part of the chain.
@@ -887,6 +837,82 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
         fit_seconds,
         warnings,
     })
+}
+
+/// Fits the chain's levels to the target's lookup, in place (`--fit-lookup`): the small levels
+/// to their bilinear read ([`crate::spatial`]), then every inner level to the engine's blend
+/// between levels ([`crate::fit`]), keeping each level's power.
+fn fit_to_lookup(
+    params: &Params,
+    n_baked: usize,
+    (engine, source, texels): (&Engine, &Cubemap, &SourceTexels),
+    stages: &mut [Stage],
+    reports: &mut [LevelReport],
+    level_work: &mut [u64],
+    progress: &dyn Progress,
+) {
+    let (size, n_chain) = (params.size, params.chain_levels());
+    let lookup = params.target.spec().lod;
+    // Small levels fitted to their bilinear read (crate::spatial): a correction of the
+    // exact level, later added to what the per-texel fit stores (both are small and the
+    // read is linear in the texels).
+    for (l, st) in stages.iter_mut().enumerate().skip(1) {
+        let n = st.exact.size;
+        if n > spatial::SPATIAL_MAX_SIZE {
+            continue;
+        }
+        let r = params.level_roughness(l);
+        let dense_size = n * spatial::SAMPLES_PER_EDGE;
+        let (dense, w) = convolve_points(engine, source, texels, dense_size, r, progress);
+        level_work[l] += w;
+        let (read, report) = spatial::fit_bilinear(&st.exact, &dense);
+        st.correction = Some(read);
+        reports[l].read_fit = Some(report);
+    }
+    // The per-texel lookup fit (crate::fit), fine to coarse: Gauss–Seidel sweeps. The
+    // neighbours enter as the engine reads them at this level's texel centres: the finer
+    // one as stored (fitted already), the coarser one exact (first sweep, assumed to
+    // follow) then as stored. The last level's values stay the kernel's: at r = 1 the
+    // lookup reads it alone.
+    for sweep in 0..fit::SWEEPS {
+        for l in 1..n_baked.min(n_chain - 1) {
+            let n = stages[l].exact.size;
+            if stages[l].fitting.is_none() {
+                let plan = fit::plan(lookup, l, n_chain, size, fit::FIT_NODES);
+                let at_nodes: Vec<Cubemap> = plan
+                    .nodes
+                    .iter()
+                    .map(|q| {
+                        let (c, w) =
+                            convolve_level(engine, source, texels, n, q.roughness, progress);
+                        level_work[l] += w;
+                        reduce_to(c, n)
+                    })
+                    .collect();
+                stages[l].fitting = Some((plan, at_nodes));
+            }
+            let lo = fit::read_at_texels(&stages[l - 1].stored(), n);
+            let hi = fit::read_at_texels(&stages[l + 1].stored(), n);
+            let coarser = if sweep == 0 {
+                fit::Coarser::Follows
+            } else {
+                fit::Coarser::Fixed
+            };
+            let st = &stages[l];
+            let (plan, at_nodes) = st.fitting.as_ref().expect("planned above");
+            let hi = plan.hi.map(|_| &hi);
+            let values = fit::fit_level(
+                plan,
+                &st.exact,
+                &lo,
+                hi,
+                at_nodes,
+                coarser,
+                fit::Power::Kept,
+            );
+            stages[l].values = values;
+        }
+    }
 }
 
 /// One level on its way through the lookup fit.
