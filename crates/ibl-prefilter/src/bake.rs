@@ -59,7 +59,7 @@ impl Quality {
     }
 
     /// Opening angle, leaf size and horizon split of the hierarchical sum.
-    pub(crate) fn tree_params(self) -> TreeParams {
+    pub fn tree_params(self) -> TreeParams {
         match self {
             Quality::Draft => TreeParams {
                 theta: 1.0,
