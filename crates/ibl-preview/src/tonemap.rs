@@ -59,6 +59,36 @@ pub fn display(rgb: [f32; 3], scale: f32) -> [f32; 3] {
     rgb.map(|c| srgb_encode(aces(c * scale)))
 }
 
+/// Log-average luminance of the non-black pixels of a flat image (a render on a black
+/// background: the background must not set the exposure).
+pub fn image_log_average(img: &ibl_core::Image) -> f32 {
+    let (mut sum, mut n) = (0.0f64, 0usize);
+    for y in 0..img.height {
+        for x in 0..img.width {
+            let l = luminance(img.rgb(x, y));
+            if l > 0.0 && l.is_finite() {
+                sum += (l as f64 + LOG_FLOOR).ln();
+                n += 1;
+            }
+        }
+    }
+    if n == 0 {
+        return LOG_FLOOR as f32;
+    }
+    ((sum / n as f64).exp() - LOG_FLOOR).max(LOG_FLOOR) as f32
+}
+
+/// A linear HDR image as display values (exposure `scale`, ACES, sRGB), RGB, for an 8-bit PNG.
+pub fn display_image(img: &ibl_core::Image, scale: f32) -> ibl_core::Image {
+    let mut out = ibl_core::Image::new(img.width, img.height, 3);
+    for y in 0..img.height {
+        for x in 0..img.width {
+            out.texel_mut(x, y).copy_from_slice(&display(img.rgb(x, y), scale));
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
