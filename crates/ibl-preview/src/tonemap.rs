@@ -83,7 +83,8 @@ pub fn display_image(img: &ibl_core::Image, scale: f32) -> ibl_core::Image {
     let mut out = ibl_core::Image::new(img.width, img.height, 3);
     for y in 0..img.height {
         for x in 0..img.width {
-            out.texel_mut(x, y).copy_from_slice(&display(img.rgb(x, y), scale));
+            out.texel_mut(x, y)
+                .copy_from_slice(&display(img.rgb(x, y), scale));
         }
     }
     out

@@ -20,7 +20,16 @@ use ibl_lut::reference::DfgReference;
 
 /// Whose BRDF terms a render uses.
 #[derive(
-    Clone, Copy, Debug, PartialEq, Eq, Hash, Default, clap::ValueEnum, serde::Serialize, serde::Deserialize,
+    Clone,
+    Copy,
+    Debug,
+    PartialEq,
+    Eq,
+    Hash,
+    Default,
+    clap::ValueEnum,
+    serde::Serialize,
+    serde::Deserialize,
 )]
 #[serde(rename_all = "kebab-case")]
 pub enum Engine {
@@ -182,7 +191,11 @@ pub fn dfg_roughness(engine: Engine, r: f64) -> f64 {
 /// [`dfg_roughness`]`(engine, r)` (used by the engines whose shaders sample a DFG table).
 pub fn weights(engine: Engine, n_dot_v: f64, r: f64, metallic: bool, dfg: &ExactDfg) -> Weights {
     let nv = n_dot_v.clamp(0.0, 1.0);
-    let f0 = if metallic { 1.0 } else { crate::scene::DIELECTRIC_F0 };
+    let f0 = if metallic {
+        1.0
+    } else {
+        crate::scene::DIELECTRIC_F0
+    };
     let albedo = if metallic { 0.0 } else { 1.0 };
     debug_assert!((dfg.roughness() - dfg_roughness(engine, r)).abs() < 1e-12);
     match engine {
@@ -308,7 +321,9 @@ mod tests {
                 let nv = 0.26 + 0.74 * (k as f64 + 0.37) / 40.0;
                 let want = q.dfg(nv, r * r);
                 let got = t.ab(nv);
-                worst = worst.max((got[0] - want[0]).abs()).max((got[1] - want[1]).abs());
+                worst = worst
+                    .max((got[0] - want[0]).abs())
+                    .max((got[1] - want[1]).abs());
             }
             eprintln!("exact DFG r {r}: worst |table − quadrature(256²)| = {worst:.2e}");
             assert!(worst < 2e-5, "r {r}: {worst}");
@@ -325,20 +340,33 @@ mod tests {
             assert!((b - (1.0f64 - nv).powi(5)).abs() < 1e-12);
             // α = 0.01 is all but a mirror: within 1e-3.
             let near = q.dfg(nv, 1e-2);
-            assert!((near[0] - a).abs() < 2e-3 && (near[1] - b).abs() < 2e-3, "{nv}: {near:?} vs {a} {b}");
+            assert!(
+                (near[0] - a).abs() < 2e-3 && (near[1] - b).abs() < 2e-3,
+                "{nv}: {near:?} vs {a} {b}"
+            );
         }
     }
 
     #[test]
     fn karis_fit_is_within_its_known_error_of_the_exact_dfg() {
-        // The fit is a few percent off the exact integral (its paper's own figure); a gross
-        // transcription error (a swapped constant) would be tens of percent.
+        // The fit was made to UE4's table (separable Schlick-Smith G), not the height-correlated
+        // integral: measured up to 17% below it (A + B at r = 0.5, n·v = 0.6: 0.725 against 0.872). A transcription error (a
+        // swapped constant) is far larger, and the mirror must come out as Schlick's A + B = 1.
+        for nv in [0.3f64, 0.6, 1.0] {
+            let [a, b] = karis_ab(0.0, nv);
+            assert!((a + b - 1.0).abs() < 0.01, "mirror nv {nv}: {a} + {b}");
+        }
+        assert!(karis_ab(0.0, 1.0)[1].abs() < 0.01);
         for r in [0.2f64, 0.5, 1.0] {
             let t = ExactDfg::new(r);
             for nv in [0.3f64, 0.6, 0.95] {
                 let [a, b] = karis_ab(r, nv);
                 let [ea, eb] = t.ab(nv);
-                assert!((a + b - (ea + eb)).abs() < 0.06, "r {r} nv {nv}: {a}+{b} vs {ea}+{eb}");
+                assert!(
+                    (a + b - (ea + eb)).abs() < 0.2,
+                    "r {r} nv {nv}: {a}+{b} vs {ea}+{eb}"
+                );
+                assert!((b - eb).abs() < 0.05, "r {r} nv {nv}: B {b} vs {eb}");
             }
         }
     }
@@ -359,7 +387,10 @@ mod tests {
                 let [a, b] = t.ab(nv);
                 assert!((total(Engine::Exact) - (a + b)).abs() < 1e-12);
                 assert!((total(Engine::Babylon) - 1.0).abs() < 1e-9, "babylon r {r}");
-                assert!((total(Engine::Filament) - 1.0).abs() < 1e-9, "filament r {r}");
+                assert!(
+                    (total(Engine::Filament) - 1.0).abs() < 1e-9,
+                    "filament r {r}"
+                );
                 assert!((total(Engine::Three) - 1.0).abs() < 1e-9, "three r {r}");
                 assert!((total(Engine::Bevy) - 1.0).abs() < 1e-9, "bevy r {r}");
                 // glTF's F = FssEss + FmsEms with F0 = 1 is Ess/(1 − Ems) = 1 as well.
@@ -378,10 +409,20 @@ mod tests {
                 let t = ExactDfg::new(dfg_roughness(e, r));
                 for nv in [0.26f64, 0.5, 1.0] {
                     let w = weights(e, nv, r, false, &t);
-                    assert!(w.radiance > 0.0 && w.radiance < 1.0, "{e:?} {r} {nv}: {w:?}");
-                    assert!(w.irradiance > 0.0 && w.irradiance <= 1.0, "{e:?} {r} {nv}: {w:?}");
-                    // Energy: a white dielectric in a furnace reflects at most (about) 1.
-                    assert!(w.radiance + w.irradiance < 1.06, "{e:?} {r} {nv}: {w:?}");
+                    assert!(
+                        w.radiance > 0.0 && w.radiance < 1.0,
+                        "{e:?} {r} {nv}: {w:?}"
+                    );
+                    assert!(
+                        w.irradiance > 0.0 && w.irradiance <= 1.0,
+                        "{e:?} {r} {nv}: {w:?}"
+                    );
+                    // Energy: a white dielectric in a furnace reflects at most (about) 1 — except
+                    // in Unity, whose diffuse (0.96 albedo) ignores the specular it adds, and in
+                    // `exact`, which by definition adds the diffuse unmodified.
+                    if e != Engine::Unity && e != Engine::Exact {
+                        assert!(w.radiance + w.irradiance < 1.06, "{e:?} {r} {nv}: {w:?}");
+                    }
                 }
             }
         }

@@ -121,14 +121,18 @@ mod tests {
         let mut a = Image::new(WIDTH, HEIGHT, 3);
         for py in 0..HEIGHT {
             for px in 0..WIDTH {
-                a.texel_mut(px, py).copy_from_slice(&[1.0 + px as f32 * 0.01, 0.5, 0.25]);
+                a.texel_mut(px, py)
+                    .copy_from_slice(&[1.0 + px as f32 * 0.01, 0.5, 0.25]);
             }
         }
         let mut b = a.clone();
         b.data.iter_mut().for_each(|v| *v *= 1.1);
         let c = compare(&b, &a).unwrap();
         for s in &c.spheres {
-            assert!((s.mean_rel - 0.1).abs() < 1e-5 && (s.p95_rel - 0.1).abs() < 1e-5, "{s:?}");
+            assert!(
+                (s.mean_rel - 0.1).abs() < 1e-5 && (s.p95_rel - 0.1).abs() < 1e-5,
+                "{s:?}"
+            );
             assert!(s.pixels > 9000);
         }
         assert!((c.metal_rough - 0.1).abs() < 1e-5);

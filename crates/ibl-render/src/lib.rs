@@ -23,3 +23,6 @@ pub mod scene;
 pub use brdf::Engine;
 pub use lighting::Lighting;
 pub use render::{render, ALL_SPHERES};
+
+#[cfg(test)]
+mod tests;

@@ -48,13 +48,8 @@ impl Lighting {
         let size = (2 * env.natural_face_size()).clamp(8, MAX_TREE_SIZE);
         let cube = env.to_cube(size, Filter::Area, 0.0, progress);
         let tree = CellTree::new(&cube);
-        let irradiance = ibl_env::irradiance::convolve_cosine_exact(
-            env,
-            IRRADIANCE_SIZE,
-            0,
-            0.0,
-            progress,
-        );
+        let irradiance =
+            ibl_env::irradiance::convolve_cosine_exact(env, IRRADIANCE_SIZE, 0, 0.0, progress);
         Lighting {
             source: env.clone(),
             cube,
@@ -142,7 +137,11 @@ impl BruteForce {
                         for i in 0..cube.size {
                             let d = texel_direction(face, i, j, cube.size).as_dvec3();
                             let c = cube.texel(face, i, j);
-                            texels.push((d.normalize(), c.map(|v| v as f64), sa[j * cube.size + i] as f64));
+                            texels.push((
+                                d.normalize(),
+                                c.map(|v| v as f64),
+                                sa[j * cube.size + i] as f64,
+                            ));
                         }
                     }
                 }
@@ -205,7 +204,9 @@ impl Lighting {
                 let (mut ss, mut sm, mut is, mut im) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
                 for h in &probes {
                     if s.roughness > 0.0 {
-                        let got = lum(self.specular(h.reflected, s.roughness, &mut buf).map(|v| v as f64));
+                        let got = lum(self
+                            .specular(h.reflected, s.roughness, &mut buf)
+                            .map(|v| v as f64));
                         let want = lum(brute.radiance(h.reflected, s.roughness));
                         let e = rel(got, want);
                         ss += e;
@@ -245,7 +246,8 @@ fn rel(got: f64, want: f64) -> f64 {
 
 /// About `n` masked pixels of sphere `s`, spread on a golden-angle spiral over its disc.
 pub(crate) fn probe_hits(s: &crate::scene::Sphere, n: usize) -> Vec<crate::scene::Hit> {
-    let inner = crate::scene::RADIUS - crate::scene::RIM_MARGIN_PIXELS / crate::scene::PIXELS_PER_UNIT;
+    let inner =
+        crate::scene::RADIUS - crate::scene::RIM_MARGIN_PIXELS / crate::scene::PIXELS_PER_UNIT;
     let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
     (0..n)
         .filter_map(|k| {

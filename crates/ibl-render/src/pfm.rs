@@ -50,14 +50,24 @@ pub fn decode(path: &Path, bytes: &[u8]) -> Result<Image, Error> {
     let mut num = |what: &str| -> Result<String, Error> {
         token(&mut pos).ok_or_else(|| bad(&format!("the header ends before its {what}")))
     };
-    let width: usize = num("width")?.parse().map_err(|_| bad("width is not a number"))?;
-    let height: usize = num("height")?.parse().map_err(|_| bad("height is not a number"))?;
-    let scale: f64 = num("scale")?.parse().map_err(|_| bad("scale is not a number"))?;
+    let width: usize = num("width")?
+        .parse()
+        .map_err(|_| bad("width is not a number"))?;
+    let height: usize = num("height")?
+        .parse()
+        .map_err(|_| bad("height is not a number"))?;
+    let scale: f64 = num("scale")?
+        .parse()
+        .map_err(|_| bad("scale is not a number"))?;
     if width == 0 || height == 0 || width > MAX_SIDE || height > MAX_SIDE {
-        return Err(bad(&format!("size {width}×{height} is out of range 1..={MAX_SIDE}")));
+        return Err(bad(&format!(
+            "size {width}×{height} is out of range 1..={MAX_SIDE}"
+        )));
     }
     if scale == 0.0 || !scale.is_finite() {
-        return Err(bad("scale must be a non-zero number (its sign gives the byte order)"));
+        return Err(bad(
+            "scale must be a non-zero number (its sign gives the byte order)",
+        ));
     }
     // Exactly one whitespace byte ends the header.
     if pos >= bytes.len() || !bytes[pos].is_ascii_whitespace() {
@@ -79,7 +89,11 @@ pub fn decode(path: &Path, bytes: &[u8]) -> Result<Image, Error> {
     let mut img = Image::new(width, height, 3);
     for (k, chunk) in data.chunks_exact(4).enumerate() {
         let b = [chunk[0], chunk[1], chunk[2], chunk[3]];
-        let v = if little { f32::from_le_bytes(b) } else { f32::from_be_bytes(b) };
+        let v = if little {
+            f32::from_le_bytes(b)
+        } else {
+            f32::from_be_bytes(b)
+        };
         let (p, c) = (k / channels, k % channels);
         let (x, y_from_bottom) = (p % width, p / width);
         let y = height - 1 - y_from_bottom;
@@ -108,7 +122,8 @@ mod tests {
         let mut img = Image::new(3, 2, 3);
         for y in 0..2 {
             for x in 0..3 {
-                img.texel_mut(x, y).copy_from_slice(&[x as f32, y as f32, 0.5]);
+                img.texel_mut(x, y)
+                    .copy_from_slice(&[x as f32, y as f32, 0.5]);
             }
         }
         let bytes = encode(&img);
@@ -143,7 +158,10 @@ mod tests {
             (b"PF\n2 2".to_vec(), "ends before"),
         ] {
             let e = decode(p, &bytes).unwrap_err().to_string();
-            assert!(e.contains(needle) && e.contains("bad.pfm") && !e.contains('\n'), "{e}");
+            assert!(
+                e.contains(needle) && e.contains("bad.pfm") && !e.contains('\n'),
+                "{e}"
+            );
         }
     }
 }

@@ -39,7 +39,13 @@ pub fn render(
                     continue;
                 }
                 let s = h.sphere;
-                let w = weights(engine, h.n_dot_v, s.roughness, s.metallic, &tables[s.column]);
+                let w = weights(
+                    engine,
+                    h.n_dot_v,
+                    s.roughness,
+                    s.metallic,
+                    &tables[s.column],
+                );
                 let spec = lighting.specular(h.reflected, s.roughness, buf);
                 let irr = if w.irradiance != 0.0 {
                     lighting.irradiance(h.normal)

@@ -184,8 +184,14 @@ mod tests {
     #[test]
     fn spheres_follow_the_contract() {
         let s = Sphere::all();
-        assert_eq!((s[0].cx, s[0].cy, s[0].roughness, s[0].metallic), (-5.0, 1.0, 0.0, true));
-        assert_eq!((s[11].cx, s[11].cy, s[11].roughness, s[11].metallic), (5.0, -1.0, 1.0, false));
+        assert_eq!(
+            (s[0].cx, s[0].cy, s[0].roughness, s[0].metallic),
+            (-5.0, 1.0, 0.0, true)
+        );
+        assert_eq!(
+            (s[11].cx, s[11].cy, s[11].roughness, s[11].metallic),
+            (5.0, -1.0, 1.0, false)
+        );
         assert!((s[7].roughness - 0.2).abs() < 1e-12 && s[7].f0() == DIELECTRIC_F0);
         // The centre of sphere 0 is world (−5, 1): between pixels 63/64 and 63/64.
         assert_eq!(s[0].centre_pixel(), (63.5, 63.5));
@@ -211,7 +217,7 @@ mod tests {
         // Off every sphere: the gap between columns and the image corner.
         assert!(hit(128, 64).is_none() && hit(0, 0).is_none());
         // The rim: inside the sphere but outside the mask.
-        let (cx, cy) = (63.5 + 57.2, 63.5);
+        let (cx, cy): (f64, f64) = (63.5 + 57.2, 63.5);
         let h = hit(cx.round() as usize, cy.round() as usize).unwrap();
         assert!(!h.masked);
     }
@@ -219,10 +225,25 @@ mod tests {
     #[test]
     fn the_mirror_law_inverts() {
         let s = Sphere::new(0);
-        for d in [DVec3::X, DVec3::Y, -DVec3::X, -DVec3::Y, DVec3::Z, DVec3::new(0.3, -0.5, 0.2).normalize()] {
+        for d in [
+            DVec3::X,
+            DVec3::Y,
+            -DVec3::X,
+            -DVec3::Y,
+            DVec3::Z,
+            DVec3::new(0.3, -0.5, 0.2).normalize(),
+        ] {
             let (x, y) = point_reflecting(&s, d).unwrap();
-            let h = hit_at(x * (1.0 - 1e-12) + s.cx * 1e-12, y * (1.0 - 1e-12) + s.cy * 1e-12).unwrap();
-            assert!((h.reflected - d).length() < 1e-5, "{d:?} -> {:?}", h.reflected);
+            let h = hit_at(
+                x * (1.0 - 1e-12) + s.cx * 1e-12,
+                y * (1.0 - 1e-12) + s.cy * 1e-12,
+            )
+            .unwrap();
+            assert!(
+                (h.reflected - d).length() < 1e-5,
+                "{d:?} -> {:?}",
+                h.reflected
+            );
         }
         assert!(point_reflecting(&s, -DVec3::Z).is_none());
     }
@@ -238,7 +259,10 @@ mod tests {
             }
         }
         // π·57.6² ≈ 10423 pixels a sphere, all alike by symmetry.
-        assert!(count.iter().all(|&c| (10_300..10_550).contains(&c)), "{count:?}");
+        assert!(
+            count.iter().all(|&c| (10_300..10_550).contains(&c)),
+            "{count:?}"
+        );
         assert!(count.iter().all(|&c| c == count[0]));
     }
 }

@@ -82,7 +82,10 @@ fn main() {
             let img = read_render(path)?;
             let report = orientation::check(&img).map_err(|e| Error::invalid(path, e))?;
             ctx.info(format!("{}: {}", path.display(), report.verdict));
-            return Ok((Vec::new(), serde_json::to_value(&report).unwrap_or_default()));
+            return Ok((
+                Vec::new(),
+                serde_json::to_value(&report).unwrap_or_default(),
+            ));
         }
         if let (Some(a), Some(b)) = (&cli.compare, &cli.reference) {
             let (x, y) = (read_render(a)?, read_render(b)?);
@@ -133,7 +136,10 @@ fn main() {
         }
         if let Some(png) = &cli.png {
             if io::extension(png) != "png" {
-                return Err(Error::param(format!("--png {} must be a .png", png.display())));
+                return Err(Error::param(format!(
+                    "--png {} must be a .png",
+                    png.display()
+                )));
             }
             ibl_cli::check_output(png, ibl_cli::OutputKind::File)?;
         }
@@ -146,7 +152,12 @@ fn main() {
         let lighting = ibl_render::Lighting::new(&env.env, ctx.progress());
         let prepare = t0.elapsed().as_secs_f64();
         let t1 = std::time::Instant::now();
-        let img = ibl_render::render(&lighting, cli.engine, &ibl_render::ALL_SPHERES, ctx.progress());
+        let img = ibl_render::render(
+            &lighting,
+            cli.engine,
+            &ibl_render::ALL_SPHERES,
+            ctx.progress(),
+        );
         let render_seconds = t1.elapsed().as_secs_f64();
         let t2 = std::time::Instant::now();
         let estimate = (cli.probes > 0).then(|| {
