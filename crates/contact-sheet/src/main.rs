@@ -25,13 +25,17 @@ struct Cli {
     /// Height in pixels of every tile.
     #[arg(long, default_value_t = 192)]
     height: usize,
+    /// Leave out the sphere rows (the probe on the scene's spheres as glTF reads the baked
+    /// chain, beside the reference render).
+    #[arg(long)]
+    no_spheres: bool,
     #[command(flatten)]
     common: ibl_cli::CommonArgs,
 }
 
 fn main() {
     let cli = ibl_cli::parse::<Cli>("contact-sheet");
-    ibl_cli::run("contact-sheet", cli.common.clone(), |_ctx| {
+    ibl_cli::run("contact-sheet", cli.common.clone(), |ctx| {
         if io::extension(&cli.output) != "png" {
             return Err(Error::param(format!(
                 "--output {} must be a .png",
@@ -49,7 +53,16 @@ fn main() {
             assets.extend(ibl_preview::assets::discover(input)?);
         }
         let exposure = ibl_preview::sheet::exposure_for(&assets, cli.exposure);
-        let rows = ibl_preview::sheet::rows(&assets, exposure, cli.height);
+        let mut rows = ibl_preview::sheet::rows(&assets, exposure, cli.height);
+        let mut spheres = None;
+        if !cli.no_spheres {
+            if let Some((r, c)) =
+                ibl_preview::sheet::sphere_rows(&assets, exposure, cli.height, ctx.progress())
+            {
+                rows.extend(r);
+                spheres = Some(c);
+            }
+        }
         let footer = format!(
             "ACES tone map, sRGB; exposure {:+.1} EV: log-average luminance {:.3} -> 0.18; LUT as stored",
             cli.exposure, exposure.mean_luminance
@@ -71,6 +84,7 @@ fn main() {
                     "tiles": r.tiles.iter().map(|t| &t.caption).collect::<Vec<_>>(),
                 })).collect::<Vec<_>>(),
                 "mean_luminance": exposure.mean_luminance,
+                "spheres": spheres,
                 "exposure_scale": exposure.scale,
             }),
         ))

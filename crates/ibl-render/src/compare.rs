@@ -42,18 +42,29 @@ pub const EPSILON_OF_MEAN: f64 = 1e-3;
 
 /// Compares `render` with `reference` (both 768×256, row 0 at the top).
 pub fn compare(render: &Image, reference: &Image) -> Result<Comparison, String> {
+    compare_scaled(render, reference, 1)
+}
+
+/// [`compare`] for the scene drawn `scale` times smaller (previews).
+pub fn compare_scaled(
+    render: &Image,
+    reference: &Image,
+    scale: usize,
+) -> Result<Comparison, String> {
+    let scale = scale.max(1);
+    let (w, h) = (WIDTH / scale, HEIGHT / scale);
     for (name, img) in [("render", render), ("reference", reference)] {
-        if (img.width, img.height) != (WIDTH, HEIGHT) || img.channels < 3 {
+        if (img.width, img.height) != (w, h) || img.channels < 3 {
             return Err(format!(
-                "the {name} is {}×{}×{}, the scene is {WIDTH}×{HEIGHT} RGB",
+                "the {name} is {}×{}×{}, the scene is {w}×{h} RGB",
                 img.width, img.height, img.channels
             ));
         }
     }
     let mut per: Vec<Vec<(f64, f64)>> = vec![Vec::new(); SPHERES];
-    for py in 0..HEIGHT {
-        for px in 0..WIDTH {
-            if let Some(h) = scene::hit(px, py).filter(|h| h.masked) {
+    for py in 0..h {
+        for px in 0..w {
+            if let Some(h) = scene::hit_scaled(px, py, scale).filter(|h| h.masked) {
                 let a = luminance(render.rgb(px, py)) as f64;
                 let b = luminance(reference.rgb(px, py)) as f64;
                 per[h.sphere.index].push((a, b));

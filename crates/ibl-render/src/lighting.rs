@@ -42,10 +42,16 @@ pub struct Lighting {
 }
 
 impl Lighting {
-    /// Prepares the lighting of `env`: its cube for the tree at twice its natural face size
-    /// (at most [`MAX_TREE_SIZE`]; the area filter keeps the power), the tree, and E/π.
+    /// Prepares the lighting of `env`: its cube for the tree (an equirect at twice its natural
+    /// face size, at most [`MAX_TREE_SIZE`], the area filter keeping the power; a cube as it
+    /// is), the tree, and E/π.
     pub fn new(env: &Environment, progress: &dyn Progress) -> Lighting {
-        let size = (2 * env.natural_face_size()).clamp(8, MAX_TREE_SIZE);
+        // A cube input is summed as it is (resampling it finer adds nothing); an equirect at
+        // twice its natural face size, so the resampling costs far less than the kernel's width.
+        let size = match env {
+            Environment::Cube(c) => c.size,
+            Environment::Equirect(_) => (2 * env.natural_face_size()).clamp(8, MAX_TREE_SIZE),
+        };
         let cube = env.to_cube(size, Filter::Area, 0.0, progress);
         let tree = CellTree::new(&cube);
         let irradiance =

@@ -5,8 +5,10 @@
 use crate::brdf::{dfg_roughness, weights, Engine, ExactDfg};
 use crate::lighting::Lighting;
 use crate::scene::{self, Sphere, HEIGHT, SPHERES, WIDTH};
+use glam::DVec3;
 use ibl_core::progress::Progress;
 use ibl_core::Image;
+use ibl_core::Rgb;
 use ibl_prefilter::tree::TreeBuffers;
 
 /// Renders the scene lit by `lighting` with `engine`'s BRDF terms: a 768×256 RGB float image,
@@ -19,20 +21,51 @@ pub fn render(
     spheres: &[bool; SPHERES],
     progress: &dyn Progress,
 ) -> Image {
+    render_lit(lighting, engine, spheres, 1, progress)
+}
+
+/// What lights the spheres: the prefiltered radiance and the irradiance E/π at any direction.
+pub trait Lit: Sync {
+    /// The prefiltered radiance at perceptual roughness `r` in direction `d` (unit).
+    fn specular(&self, d: DVec3, r: f64, buffers: &mut TreeBuffers) -> Rgb;
+    /// E(n)/π.
+    fn irradiance(&self, n: DVec3) -> Rgb;
+}
+
+impl Lit for Lighting {
+    fn specular(&self, d: DVec3, r: f64, buffers: &mut TreeBuffers) -> Rgb {
+        Lighting::specular(self, d, r, buffers)
+    }
+    fn irradiance(&self, n: DVec3) -> Rgb {
+        Lighting::irradiance(self, n)
+    }
+}
+
+/// The scene lit by `lit`, drawn `scale` times smaller than the contract (768/scale ×
+/// 256/scale; 1 is the contract image).
+pub fn render_lit(
+    lit: &dyn Lit,
+    engine: Engine,
+    spheres: &[bool; SPHERES],
+    scale: usize,
+    progress: &dyn Progress,
+) -> Image {
     use rayon::prelude::*;
+    let scale = scale.max(1);
+    let (width, height) = (WIDTH / scale, HEIGHT / scale);
     // The engine's DFG, once per column (its table's roughness is the column's, clamped as the
     // engine clamps it).
     let tables: Vec<ExactDfg> = (0..scene::COLUMNS)
         .into_par_iter()
         .map(|c| ExactDfg::new(dfg_roughness(engine, Sphere::new(c).roughness)))
         .collect();
-    progress.start("render", HEIGHT as u64);
-    let rows: Vec<Vec<f32>> = (0..HEIGHT)
+    progress.start("render", height as u64);
+    let rows: Vec<Vec<f32>> = (0..height)
         .into_par_iter()
         .map_init(TreeBuffers::default, |buf, py| {
-            let mut row = vec![0.0f32; WIDTH * 3];
-            for px in 0..WIDTH {
-                let Some(h) = scene::hit(px, py) else {
+            let mut row = vec![0.0f32; width * 3];
+            for px in 0..width {
+                let Some(h) = scene::hit_scaled(px, py, scale) else {
                     continue;
                 };
                 if !spheres[h.sphere.index] {
@@ -46,9 +79,9 @@ pub fn render(
                     s.metallic,
                     &tables[s.column],
                 );
-                let spec = lighting.specular(h.reflected, s.roughness, buf);
+                let spec = lit.specular(h.reflected, s.roughness, buf);
                 let irr = if w.irradiance != 0.0 {
-                    lighting.irradiance(h.normal)
+                    lit.irradiance(h.normal)
                 } else {
                     [0.0; 3]
                 };
@@ -62,8 +95,45 @@ pub fn render(
         })
         .collect();
     progress.finish();
-    Image::from_data(WIDTH, HEIGHT, 3, rows.concat()).expect("768×256×3 floats")
+    Image::from_data(width, height, 3, rows.concat()).expect("width × height × 3 floats")
 }
 
 /// Every sphere.
 pub const ALL_SPHERES: [bool; SPHERES] = [true; SPHERES];
+
+/// A baked chain as an engine's shader reads it: its lod for roughness r by the engine's
+/// mapping, bilinear within a level and seamless across faces, linear between levels
+/// (`ibl_prefilter::runtime::lookup`), and its irradiance cube read bilinearly.
+pub struct ChainLookup {
+    chain: ibl_core::bordered::BorderedMips,
+    mapping: ibl_target::LodMapping,
+    irradiance: Option<ibl_core::Cubemap>,
+}
+
+impl ChainLookup {
+    /// The lookup of `mips` by `mapping` (e.g. `Target::Gltf.spec().lod`), with the E/π cube
+    /// `irradiance` (None: the diffuse term reads the chain's last level, as a fallback).
+    pub fn new(
+        mips: &ibl_core::CubeMips,
+        mapping: ibl_target::LodMapping,
+        irradiance: Option<ibl_core::Cubemap>,
+    ) -> ChainLookup {
+        ChainLookup {
+            chain: ibl_core::bordered::BorderedMips::new(mips),
+            mapping,
+            irradiance,
+        }
+    }
+}
+
+impl Lit for ChainLookup {
+    fn specular(&self, d: DVec3, r: f64, _buffers: &mut TreeBuffers) -> Rgb {
+        ibl_prefilter::runtime::lookup(&self.chain, self.mapping, d.as_vec3(), r as f32)
+    }
+    fn irradiance(&self, n: DVec3) -> Rgb {
+        match &self.irradiance {
+            Some(c) => c.sample_bilinear(n.as_vec3()),
+            None => ibl_prefilter::runtime::lookup(&self.chain, self.mapping, n.as_vec3(), 1.0),
+        }
+    }
+}

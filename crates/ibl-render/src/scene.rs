@@ -146,6 +146,13 @@ pub fn hit(px: usize, py: usize) -> Option<Hit> {
     hit_at(x, y)
 }
 
+/// What pixel (px, py) of the scene drawn `scale` times smaller (768/scale × 256/scale, for
+/// previews) sees; scale 1 is [`hit`].
+pub fn hit_scaled(px: usize, py: usize, scale: usize) -> Option<Hit> {
+    let k = scale.max(1) as f64 / PIXELS_PER_UNIT;
+    hit_at(-6.0 + (px as f64 + 0.5) * k, 2.0 - (py as f64 + 0.5) * k)
+}
+
 /// Where on the image a mirror sphere reflects direction `d` (unit): the world point whose
 /// reflection vector is `d` on sphere `sphere` (the normal is the half vector of v and d), or
 /// None when no visible normal does (d = −v exactly, behind the sphere).

@@ -25,13 +25,34 @@ fn pfm_pixel(bytes: &[u8], x: usize, y_top: usize) -> [f32; 3] {
 fn panorama_render_check_and_compare() {
     let dir = tempfile::tempdir().unwrap();
     let pano = dir.path().join("pano.exr");
-    BIN.run_ok(&["--orientation-panorama", "-o", s(&pano), "--width", "128", "-q"]);
+    BIN.run_ok(&[
+        "--orientation-panorama",
+        "-o",
+        s(&pano),
+        "--width",
+        "128",
+        "-q",
+    ]);
     let out = dir.path().join("ref.pfm");
     let png = dir.path().join("ref.png");
-    let o = BIN.run_ok(&[s(&pano), "-o", s(&out), "--png", s(&png), "--engine", "exact", "--probes", "4", "--json"]);
+    let o = BIN.run_ok(&[
+        s(&pano),
+        "-o",
+        s(&out),
+        "--png",
+        s(&png),
+        "--engine",
+        "exact",
+        "--probes",
+        "4",
+        "--json",
+    ]);
     let j = stdout_json(&o);
     assert_eq!(j["details"]["scene"], "sphere-rows v1");
-    assert_eq!(j["details"]["estimated_error"].as_array().unwrap().len(), 12);
+    assert_eq!(
+        j["details"]["estimated_error"].as_array().unwrap().len(),
+        12
+    );
     assert!(j["details"]["worst_specular_mean_rel"].as_f64().unwrap() < 0.05);
     assert!(png.is_file());
     let bytes = std::fs::read(&out).unwrap();
@@ -62,11 +83,33 @@ fn bad_input_gets_one_line_errors() {
     assert_one_line_error(&BIN.run(&[s(&missing), "-o", s(&out)]), 4, "missing.exr");
     assert!(!out.exists());
     // Wrong output extension, checked before the input is read.
-    assert_one_line_error(&BIN.run(&[s(&missing), "-o", s(&p("o.png"))]), 2, "must be a .pfm");
-    assert_one_line_error(&BIN.run(&["--orientation-panorama", "-o", s(&p("x.png"))]), 2, ".exr, .hdr or .pfm");
-    assert_one_line_error(&BIN.run(&["--orientation-panorama", "-o", s(&p("x.exr")), "--width", "7"]), 2, "--width 7");
+    assert_one_line_error(
+        &BIN.run(&[s(&missing), "-o", s(&p("o.png"))]),
+        2,
+        "must be a .pfm",
+    );
+    assert_one_line_error(
+        &BIN.run(&["--orientation-panorama", "-o", s(&p("x.png"))]),
+        2,
+        ".exr, .hdr or .pfm",
+    );
+    assert_one_line_error(
+        &BIN.run(&[
+            "--orientation-panorama",
+            "-o",
+            s(&p("x.exr")),
+            "--width",
+            "7",
+        ]),
+        2,
+        "--width 7",
+    );
     // Two modes at once, or none.
-    assert_one_line_error(&BIN.run(&[s(&missing), "--orientation-panorama", "-o", s(&out)]), 2, "exactly one of");
+    assert_one_line_error(
+        &BIN.run(&[s(&missing), "--orientation-panorama", "-o", s(&out)]),
+        2,
+        "exactly one of",
+    );
     assert_one_line_error(&BIN.run(&["-o", s(&out)]), 2, "exactly one of");
     // Truncated and garbled PFMs.
     let bad = p("bad.pfm");
@@ -79,8 +122,16 @@ fn bad_input_gets_one_line_errors() {
     let mut b = b"PF\n2 1\n-1.0\n".to_vec();
     b.extend(std::iter::repeat_n(0u8, 24));
     std::fs::write(&small, &b).unwrap();
-    assert_one_line_error(&BIN.run(&["--check-orientation", s(&small)]), 2, "the scene is 768");
-    assert_one_line_error(&BIN.run(&["--compare", s(&small), "--reference", s(&small)]), 2, "768");
+    assert_one_line_error(
+        &BIN.run(&["--check-orientation", s(&small)]),
+        2,
+        "the scene is 768",
+    );
+    assert_one_line_error(
+        &BIN.run(&["--compare", s(&small), "--reference", s(&small)]),
+        2,
+        "768",
+    );
     // A garbled environment.
     let env = p("env.exr");
     std::fs::write(&env, b"not an exr at all").unwrap();
