@@ -130,7 +130,7 @@ pub struct Report {
 /// Which patch a colour is: its channels above half its largest one must match a patch's.
 fn classify(c: [f32; 3]) -> Option<&'static str> {
     let m = c.iter().cloned().fold(0.0f32, f32::max);
-    if !(m > 0.0) || !m.is_finite() {
+    if m.is_nan() || m <= 0.0 || !m.is_finite() {
         return None;
     }
     let bits = c.map(|v| v > 0.5 * m);

@@ -106,7 +106,7 @@ fn main() {
             .ok_or_else(|| Error::param("-o OUT is required"))?;
         ibl_cli::check_output(out, ibl_cli::OutputKind::File)?;
         if cli.orientation_panorama {
-            if !(16..=16384).contains(&cli.width) || cli.width % 2 != 0 {
+            if !(16..=16384).contains(&cli.width) || !cli.width.is_multiple_of(2) {
                 return Err(Error::param(format!(
                     "--width {} must be even and within 16..=16384",
                     cli.width
