@@ -191,7 +191,7 @@ fn a_mirror_symmetric_environment_renders_symmetric_spheres() {
 
 #[test]
 fn the_render_is_independent_of_the_thread_count() {
-    let lighting = Lighting::new(&Environment::Equirect(sky(64)), &NoProgress);
+    let lighting = Lighting::with_irradiance_size(&Environment::Equirect(sky(64)), 8, &NoProgress);
     let some: [bool; SPHERES] = std::array::from_fn(|i| i == 2 || i == 9);
     ibl_testkit::thread_count_independent(&[1, 2, 3], || {
         render(&lighting, Engine::Filament, &some, &NoProgress).data
@@ -216,7 +216,8 @@ fn the_orientation_checker_names_flips_and_turns() {
     };
     let mirror_only: [bool; SPHERES] = std::array::from_fn(|i| i == 0);
     let verdict = |img: Image| {
-        let lighting = Lighting::new(&Environment::Equirect(img), &NoProgress);
+        // Only the mirror is drawn: no irradiance is read.
+        let lighting = Lighting::with_irradiance_size(&Environment::Equirect(img), 2, &NoProgress);
         let r = render(&lighting, Engine::Exact, &mirror_only, &NoProgress);
         orientation::check(&r).unwrap().verdict
     };
