@@ -138,3 +138,36 @@ fn bad_input_gets_one_line_errors() {
     assert_one_line_error(&BIN.run(&[s(&env), "-o", s(&out)]), 2, "env.exr");
     assert!(!out.exists());
 }
+
+/// NaN/Inf texels are refused (exit 2, one line, nothing written) unless --sanitize.
+#[test]
+fn non_finite_input_is_refused_unless_sanitized() {
+    use ibl_core::io::{write_image, WriteOptions};
+    let dir = tempfile::tempdir().unwrap();
+    let env = dir.path().join("nan.exr");
+    let mut img = ibl_core::Image::new(16, 8, 3);
+    img.data.iter_mut().for_each(|v| *v = 0.5);
+    img.data[40] = f32::NAN;
+    write_image(&env, &img, &WriteOptions::default()).unwrap();
+    let out = dir.path().join("o.pfm");
+    assert_one_line_error(&BIN.run(&[s(&env), "-o", s(&out)]), 2, "NaN/Inf");
+    assert!(!out.exists());
+    let o = BIN.run_ok(&[
+        s(&env),
+        "-o",
+        s(&out),
+        "--sanitize",
+        "--probes",
+        "2",
+        "--engine",
+        "unity",
+        "--json",
+    ]);
+    let j = stdout_json(&o);
+    assert_eq!(j["details"]["engine"], "unity");
+    assert!(j["details"]["brdf_source"]
+        .as_str()
+        .unwrap()
+        .contains("Unity-Technologies/Graphics"));
+    assert!(out.is_file());
+}
