@@ -22,7 +22,7 @@ pub mod scene;
 
 pub use brdf::Engine;
 pub use lighting::Lighting;
-pub use render::{render, render_lit, ChainLookup, Lit, ALL_SPHERES};
+pub use render::{render, render_engines, render_lit, ChainLookup, Lit, ALL_SPHERES};
 
 #[cfg(test)]
 mod tests;

@@ -50,20 +50,41 @@ pub fn render_lit(
     scale: usize,
     progress: &dyn Progress,
 ) -> Image {
+    render_engines(lit, &[engine], spheres, scale, progress)
+        .pop()
+        .expect("one engine, one image")
+}
+
+/// One render per engine of `engines`, the lighting evaluated once per pixel for all of them
+/// (it is nearly all the cost): what `render-ref --all-engines` writes.
+pub fn render_engines(
+    lit: &dyn Lit,
+    engines: &[Engine],
+    spheres: &[bool; SPHERES],
+    scale: usize,
+    progress: &dyn Progress,
+) -> Vec<Image> {
     use rayon::prelude::*;
     let scale = scale.max(1);
     let (width, height) = (WIDTH / scale, HEIGHT / scale);
-    // The engine's DFG, once per column (its table's roughness is the column's, clamped as the
-    // engine clamps it).
-    let tables: Vec<ExactDfg> = (0..scene::COLUMNS)
-        .into_par_iter()
-        .map(|c| ExactDfg::new(dfg_roughness(engine, Sphere::new(c).roughness)))
+    // Each engine's DFG, once per column (its table's roughness is the column's, clamped as
+    // the engine clamps it).
+    let tables: Vec<Vec<ExactDfg>> = engines
+        .iter()
+        .map(|&e| {
+            (0..scene::COLUMNS)
+                .into_par_iter()
+                .map(|c| ExactDfg::new(dfg_roughness(e, Sphere::new(c).roughness)))
+                .collect()
+        })
         .collect();
+    let n = engines.len();
     progress.start("render", height as u64);
     let rows: Vec<Vec<f32>> = (0..height)
         .into_par_iter()
         .map_init(TreeBuffers::default, |buf, py| {
-            let mut row = vec![0.0f32; width * 3];
+            // The row of every engine, side by side.
+            let mut row = vec![0.0f32; n * width * 3];
             for px in 0..width {
                 let Some(h) = scene::hit_scaled(px, py, scale) else {
                     continue;
@@ -72,22 +93,22 @@ pub fn render_lit(
                     continue;
                 }
                 let s = h.sphere;
-                let w = weights(
-                    engine,
-                    h.n_dot_v,
-                    s.roughness,
-                    s.metallic,
-                    &tables[s.column],
-                );
+                let ws: Vec<_> = engines
+                    .iter()
+                    .zip(&tables)
+                    .map(|(&e, t)| weights(e, h.n_dot_v, s.roughness, s.metallic, &t[s.column]))
+                    .collect();
                 let spec = lit.specular(h.reflected, s.roughness, buf);
-                let irr = if w.irradiance != 0.0 {
+                let irr = if ws.iter().any(|w| w.irradiance != 0.0) {
                     lit.irradiance(h.normal)
                 } else {
                     [0.0; 3]
                 };
-                for k in 0..3 {
-                    row[px * 3 + k] =
-                        (w.radiance * spec[k] as f64 + w.irradiance * irr[k] as f64) as f32;
+                for (e, w) in ws.iter().enumerate() {
+                    for k in 0..3 {
+                        row[(e * width + px) * 3 + k] =
+                            (w.radiance * spec[k] as f64 + w.irradiance * irr[k] as f64) as f32;
+                    }
                 }
             }
             progress.inc(1);
@@ -95,7 +116,15 @@ pub fn render_lit(
         })
         .collect();
     progress.finish();
-    Image::from_data(width, height, 3, rows.concat()).expect("width × height × 3 floats")
+    (0..n)
+        .map(|e| {
+            let data: Vec<f32> = rows
+                .iter()
+                .flat_map(|r| r[e * width * 3..(e + 1) * width * 3].iter().copied())
+                .collect();
+            Image::from_data(width, height, 3, data).expect("width × height × 3 floats")
+        })
+        .collect()
 }
 
 /// Every sphere.

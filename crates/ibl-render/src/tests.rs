@@ -242,3 +242,16 @@ fn the_orientation_checker_names_flips_and_turns() {
         .verdict
         .starts_with("unrecognised"));
 }
+
+/// All engines at once give exactly what each engine's own render gives.
+#[test]
+fn render_engines_matches_one_engine_at_a_time() {
+    let lighting = Lighting::with_irradiance_size(&Environment::Equirect(sky(64)), 8, &NoProgress);
+    let some: [bool; SPHERES] = std::array::from_fn(|i| i == 3 || i == 6 || i == 10);
+    let all = crate::render::render_engines(&lighting, &Engine::ALL, &some, 1, &NoProgress);
+    for (k, e) in Engine::ALL.iter().enumerate() {
+        assert_eq!(all[k], render(&lighting, *e, &some, &NoProgress), "{e:?}");
+    }
+    // And the engines differ (their BRDF terms are not all the same).
+    assert_ne!(all[0], all[6]);
+}

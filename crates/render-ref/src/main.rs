@@ -24,7 +24,12 @@ struct Cli {
     /// Whose BRDF terms (DFG table or fit, diffuse modifiers) the render uses.
     #[arg(long, value_enum, default_value_t = Engine::Gltf)]
     engine: Engine,
-    /// Also write a tone-mapped PNG of the render (ACES, sRGB; exposure from the spheres).
+    /// Render every engine's BRDF terms in one run (the lighting is evaluated once): -o
+    /// city.pfm writes city-gltf.pfm, city-three.pfm, … city-exact.pfm.
+    #[arg(long)]
+    all_engines: bool,
+    /// Also write a tone-mapped PNG of the render (ACES, sRGB; exposure from the spheres), of
+    /// --engine's with --all-engines.
     #[arg(long, value_name = "PNG")]
     png: Option<PathBuf>,
     /// Probe pixels per sphere at which the reference is checked against the brute-force sum
@@ -152,12 +157,20 @@ fn main() {
         let lighting = ibl_render::Lighting::new(&env.env, ctx.progress());
         let prepare = t0.elapsed().as_secs_f64();
         let t1 = std::time::Instant::now();
-        let img = ibl_render::render(
+        let engines: Vec<Engine> = if cli.all_engines {
+            Engine::ALL.to_vec()
+        } else {
+            vec![cli.engine]
+        };
+        let images = ibl_render::render_engines(
             &lighting,
-            cli.engine,
+            &engines,
             &ibl_render::ALL_SPHERES,
+            1,
             ctx.progress(),
         );
+        let shown = engines.iter().position(|&e| e == cli.engine).unwrap_or(0);
+        let img = &images[shown];
         let render_seconds = t1.elapsed().as_secs_f64();
         let t2 = std::time::Instant::now();
         let estimate = (cli.probes > 0).then(|| {
@@ -165,13 +178,27 @@ fn main() {
             lighting.estimate(&brute, cli.probes)
         });
         let estimate_seconds = t2.elapsed().as_secs_f64();
-        let mut files = vec![(out.clone(), pfm::encode(&img))];
+        let mut files: Vec<(PathBuf, Vec<u8>)> = if cli.all_engines {
+            let stem = out.file_stem().and_then(|s| s.to_str()).unwrap_or("render");
+            engines
+                .iter()
+                .zip(&images)
+                .map(|(e, im)| {
+                    (
+                        out.with_file_name(format!("{stem}-{}.pfm", e.name())),
+                        pfm::encode(im),
+                    )
+                })
+                .collect()
+        } else {
+            vec![(out.clone(), pfm::encode(img))]
+        };
         if let Some(png) = &cli.png {
             let scale = ibl_preview::tonemap::exposure_scale(
-                ibl_preview::tonemap::image_log_average(&img),
+                ibl_preview::tonemap::image_log_average(img),
                 0.0,
             );
-            let shown = ibl_preview::tonemap::display_image(&img, scale);
+            let shown = ibl_preview::tonemap::display_image(img, scale);
             let opts = WriteOptions {
                 png_bits: 8,
                 ..WriteOptions::default()
@@ -199,6 +226,7 @@ fn main() {
                 "scene": "sphere-rows v1",
                 "engine": cli.engine.name(),
                 "brdf_source": cli.engine.source(),
+                "engines": engines.iter().map(|e| serde_json::json!({"engine": e.name(), "brdf_source": e.source()})).collect::<Vec<_>>(),
                 "width": img.width,
                 "height": img.height,
                 "tree_face_size": lighting.tree_size(),

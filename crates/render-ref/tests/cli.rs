@@ -63,6 +63,27 @@ fn panorama_render_check_and_compare() {
     assert!(centre[2] > 0.8 && centre[0] < 0.1, "{centre:?}");
     let top = pfm_pixel(&bytes, 63, 63 - 40);
     assert!(top[1] > 0.8 && top[0] < 0.1, "{top:?}");
+    // Every engine in one run: seven files, `exact`'s the same bytes as the run above.
+    let all = dir.path().join("all.pfm");
+    BIN.run_ok(&[
+        s(&pano),
+        "-o",
+        s(&all),
+        "--all-engines",
+        "--probes",
+        "0",
+        "-q",
+    ]);
+    for e in [
+        "gltf", "three", "babylon", "filament", "bevy", "unity", "exact",
+    ] {
+        assert!(dir.path().join(format!("all-{e}.pfm")).is_file(), "{e}");
+    }
+    assert!(!all.exists());
+    assert_eq!(
+        std::fs::read(dir.path().join("all-exact.pfm")).unwrap(),
+        bytes
+    );
     let o = BIN.run_ok(&["--check-orientation", s(&out), "--json"]);
     let j = stdout_json(&o);
     assert_eq!(j["details"]["verdict"], "correct");
