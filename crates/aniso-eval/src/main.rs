@@ -75,8 +75,9 @@ fn main() {
                     ),
                 ),
                 None => {
+                    let chain_size = cli.params.chain_size.unwrap_or(size.clamp(8, 256));
                     let p = ibl_prefilter::Params {
-                        size: cli.params.chain_size,
+                        size: chain_size,
                         target: cli.params.target,
                         ..Default::default()
                     };
@@ -88,7 +89,7 @@ fn main() {
                         format!(
                             "{name}: prefilter --target {} --size {} ({n} levels, fitted to the lookup), truth cube {size}²",
                             cli.params.target.name(),
-                            cli.params.chain_size
+                            chain_size
                         ),
                     )
                 }

@@ -84,9 +84,10 @@ pub struct Params {
     /// Monte Carlo samples per pixel of the truth.
     #[arg(long, default_value_t = 4096)]
     pub truth_samples: u32,
-    /// Level-0 face size of the chain baked when no --prefiltered chain is given.
-    #[arg(long, default_value_t = 128)]
-    pub chain_size: usize,
+    /// Level-0 face size of the chain baked when no --prefiltered chain is given (default:
+    /// the truth cube's face size, at most 256: a larger chain than the source only upsamples).
+    #[arg(long, value_name = "N")]
+    pub chain_size: Option<usize>,
     /// Engine whose lod mapping reads the chain (and whose chain is baked).
     #[arg(long, value_enum, default_value_t = ibl_target::Target::Gltf)]
     pub target: ibl_target::Target,
@@ -123,13 +124,18 @@ impl Params {
         if self.roughness.is_empty() || self.roughness.iter().any(|r| !(*r > 0.0 && *r <= 1.0)) {
             return bad("--roughness needs values in (0, 1]".into());
         }
-        if self.eta.is_empty() || self.eta.iter().any(|e| !(e.abs() < 1.0)) {
+        if self.eta.is_empty() || self.eta.iter().any(|e| e.is_nan() || e.abs() >= 1.0) {
             return bad("--eta needs values in (-1, 1)".into());
         }
         if self.views.is_empty() || self.views.iter().any(|v| !v.is_finite()) {
             return bad("--views needs finite azimuths in degrees".into());
         }
-        if self.elevations.is_empty() || self.elevations.iter().any(|v| !(v.abs() < 90.0)) {
+        if self.elevations.is_empty()
+            || self
+                .elevations
+                .iter()
+                .any(|v| v.is_nan() || v.abs() >= 90.0)
+        {
             return bad("--elevations needs angles in (-90, 90) degrees".into());
         }
         if !(16..=1 << 20).contains(&self.truth_samples) {
@@ -138,11 +144,10 @@ impl Params {
                 self.truth_samples
             ));
         }
-        if !(8..=1024).contains(&self.chain_size) {
-            return bad(format!(
-                "--chain-size {} is out of range 8..=1024",
-                self.chain_size
-            ));
+        if let Some(n) = self.chain_size {
+            if !(8..=1024).contains(&n) {
+                return bad(format!("--chain-size {n} is out of range 8..=1024"));
+            }
         }
         if let Some(n) = self.size {
             if n == 0 || n > 2048 {
@@ -275,6 +280,9 @@ pub struct CaseImages {
     pub methods: Vec<(String, String, Vec<E01>)>,
 }
 
+/// One method × lookup on one case: names, per-pixel (E0, E1), (cube, table) taps.
+type Run = (String, String, Vec<E01>, (usize, usize));
+
 /// F0 values scored.
 pub const F0S: [f64; 2] = [1.0, 0.04];
 
@@ -341,7 +349,7 @@ pub fn evaluate(
                             )
                         })
                         .collect();
-                    let mut runs: Vec<(String, String, Vec<E01>, (usize, usize))> = Vec::new();
+                    let mut runs: Vec<Run> = Vec::new();
                     for m in methods {
                         let lookups: Vec<&Lookup> = if m.reads_chain() {
                             [env.engine.as_ref(), env.oracle.as_ref()]

@@ -175,7 +175,7 @@ mod tests {
             };
             let (mut hi, mut lo) = (f64::MIN, f64::MAX);
             // 10⁵ values on the 10⁴ cases would take minutes: sample 10⁵ on every 100th case.
-            let n = if worst_max == 0.0 || rng.next_u32() % 100 == 0 {
+            let n = if worst_max == 0.0 || rng.next_u32().is_multiple_of(100) {
                 steps
             } else {
                 2000

@@ -19,6 +19,7 @@ use ibl_shexp::dfg::Dfg;
 use ibl_target::LodMapping;
 
 /// How a method reads prefiltered radiance at (direction, perceptual roughness).
+#[allow(clippy::large_enum_variant)] // one or two per environment
 pub enum Lookup {
     /// The target's baked chain read by its engine's lookup (`ibl_prefilter::runtime::lookup`).
     Engine {
