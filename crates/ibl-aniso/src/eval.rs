@@ -71,7 +71,7 @@ pub struct Params {
     /// turning the sphere's ring tangent.
     #[arg(long, default_value = "constant:0")]
     pub tangent: String,
-    /// Methods: iso, bent-lg18, bent-filament, bent-khr, major-N[-bBETA][-kK], fis-N.
+    /// Methods: iso, bent-lg18, bent-filament, bent-khr, major-N[-bBETA][-kK][-cC], fis-N.
     #[arg(
         long,
         value_delimiter = ',',
@@ -325,6 +325,18 @@ pub fn evaluate(
     methods: &[Method],
     preset: &Preset,
 ) -> (Vec<Case>, Vec<CaseImages>) {
+    evaluate_with(env, params, methods, preset, |_| true)
+}
+
+/// [`evaluate`], with the oracle lookup (when the environment has one) only for the methods
+/// `use_oracle` accepts: the oracle sums the exact kernel per tap, the cost of a sweep.
+pub fn evaluate_with(
+    env: &Env,
+    params: &Params,
+    methods: &[Method],
+    preset: &Preset,
+    use_oracle: impl Fn(&Method) -> bool,
+) -> (Vec<Case>, Vec<CaseImages>) {
     let dfg = Dfg::standard();
     let mut cases = Vec::new();
     let mut images = Vec::new();
@@ -351,8 +363,9 @@ pub fn evaluate(
                         .collect();
                     let mut runs: Vec<Run> = Vec::new();
                     for m in methods {
+                        let oracle = env.oracle.as_ref().filter(|_| use_oracle(m));
                         let lookups: Vec<&Lookup> = if m.reads_chain() {
-                            [env.engine.as_ref(), env.oracle.as_ref()]
+                            [env.engine.as_ref(), oracle]
                                 .into_iter()
                                 .flatten()
                                 .collect()

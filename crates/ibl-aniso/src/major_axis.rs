@@ -22,6 +22,10 @@ pub struct Params {
     pub beta: f32,
     /// k of eq. 6 (1 in the paper).
     pub k: f32,
+    /// Not in the paper: the width term of eq. 10 is Δ'/(2k·c). c = 1 is the paper; c = √2
+    /// undoes H1 (an isotropic lobe seen head-on is then read at its own α, not α√2). Fitted
+    /// on training environments by the bench (`bench/aniso.md`), never on the scored ones.
+    pub c: f32,
 }
 
 impl Default for Params {
@@ -30,6 +34,7 @@ impl Default for Params {
             taps: 16,
             beta: 2.3,
             k: 1.0,
+            c: 1.0,
         }
     }
 }
@@ -144,7 +149,7 @@ pub fn taps(o: Vec3, sigma_u: f32, sigma_v: f32, p: &Params) -> (Vec<Vec3>, f32)
         })
         .collect();
     // Eq. 10 and §5.7.
-    let rs = (width / (2.0 * p.k)).max(p.beta * major / (2.0 * n as f32));
+    let rs = (width / (2.0 * p.k * p.c)).max(p.beta * major / (2.0 * n as f32));
     (dirs, rs.max(0.0).sqrt().min(1.0))
 }
 

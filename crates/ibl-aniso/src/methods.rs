@@ -101,20 +101,26 @@ impl Method {
             Method::BentFilament => "bent-filament".into(),
             Method::BentKhr => "bent-khr".into(),
             Method::MajorAxis(p) => {
-                if p.beta == 2.3 && p.k == 1.0 {
-                    format!("major-{}", p.taps)
-                } else {
-                    format!("major-{}-b{}-k{}", p.taps, p.beta, p.k)
+                let mut s = format!("major-{}", p.taps);
+                if p.beta != 2.3 {
+                    s += &format!("-b{}", p.beta);
                 }
+                if p.k != 1.0 {
+                    s += &format!("-k{}", p.k);
+                }
+                if p.c != 1.0 {
+                    s += &format!("-c{}", p.c);
+                }
+                s
             }
             Method::Fis { taps } => format!("fis-{taps}"),
         }
     }
 
-    /// Parses `iso`, `bent-lg18`, `bent-filament`, `bent-khr`, `major-N[-bBETA][-kK]`, `fis-N`.
+    /// Parses `iso`, `bent-lg18`, `bent-filament`, `bent-khr`, `major-N[-bBETA][-kK][-cC]`, `fis-N`.
     pub fn parse(s: &str) -> Result<Method, String> {
         let bad = || {
-            format!("unknown method '{s}' (iso, bent-lg18, bent-filament, bent-khr, major-N[-bBETA][-kK], fis-N)")
+            format!("unknown method '{s}' (iso, bent-lg18, bent-filament, bent-khr, major-N[-bBETA][-kK][-cC], fis-N)")
         };
         let taps = |t: &str| -> Result<usize, String> {
             let n: usize = t.parse().map_err(|_| bad())?;
@@ -150,6 +156,8 @@ impl Method {
                         p.beta = num(b)?;
                     } else if let Some(k) = part.strip_prefix('k') {
                         p.k = num(k)?;
+                    } else if let Some(c) = part.strip_prefix('c') {
+                        p.c = num(c)?;
                     } else {
                         return Err(bad());
                     }
@@ -454,6 +462,10 @@ mod tests {
         );
         let m = Method::parse("major-8-b1.5-k2").unwrap();
         assert_eq!(m.name(), "major-8-b1.5-k2");
+        assert_eq!(
+            Method::parse("major-16-c1.4").unwrap().name(),
+            "major-16-c1.4"
+        );
         assert_eq!(Method::parse("fis-32").unwrap(), Method::Fis { taps: 32 });
         for bad in ["major-0", "major-x", "fis-", "bent", "major-4-q1"] {
             assert!(Method::parse(bad).is_err(), "{bad}");
