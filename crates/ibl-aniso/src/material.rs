@@ -25,6 +25,23 @@ pub enum Material {
         /// Exponent along b.
         nv: f64,
     },
+    /// Kurt et al. 2010's normalised anisotropic Beckmann (`ibl_brdf::Beckmann`).
+    Beckmann {
+        /// α along t.
+        alpha_t: f32,
+        /// α along b.
+        alpha_b: f32,
+    },
+    /// GTR_γ of roughness α_b stretched along t by α_t/α_b: Atanasov et al. 2022's transformed
+    /// microsurface (`ibl_brdf::Transformed<Gtr>`, M = diag(α_t/α_b, 1)). γ = 2 is GGX.
+    TransformedGtr {
+        /// α along t.
+        alpha_t: f32,
+        /// α along b (the base GTR's α).
+        alpha_b: f32,
+        /// Tail exponent γ.
+        gamma: f32,
+    },
 }
 
 impl Material {
@@ -44,7 +61,7 @@ impl Material {
     pub fn ggx_alphas(&self) -> Option<(f32, f32)> {
         match *self {
             Material::Ggx { alpha_t, alpha_b } => Some((alpha_t, alpha_b)),
-            Material::AshikhminShirley { .. } => None,
+            _ => None,
         }
     }
 }

@@ -20,7 +20,7 @@ use crate::material::Material;
 use crate::scene::Frame;
 use glam::{DVec3, Vec3};
 use ibl_brdf::microfacet::Microfacet;
-use ibl_brdf::{reflect, AshikhminShirley, Ggx};
+use ibl_brdf::{reflect, AshikhminShirley, Beckmann, Ggx, Gtr, TangentTransform, Transformed};
 use ibl_core::cube::{face_texel_index, texel_direction, texel_solid_angle, Face};
 use ibl_core::sampling::{hammersley, Pcg32};
 use ibl_core::Cubemap;
@@ -64,22 +64,61 @@ pub fn nearest(cube: &Cubemap, d: Vec3) -> [f32; 3] {
     cube.texel(face, i, j)
 }
 
+/// Calls `f` with the microfacet distribution of `mat` (None for Ashikhmin–Shirley, whose
+/// BRDF is not of the D·G2 form).
+pub fn with_microfacet<R>(mat: &Material, f: impl FnOnce(&dyn Microfacet) -> R) -> Option<R> {
+    match *mat {
+        Material::Ggx { alpha_t, alpha_b } => Some(f(&Ggx::new(alpha_t, alpha_b))),
+        Material::Beckmann { alpha_t, alpha_b } => Some(f(&Beckmann::new(alpha_t, alpha_b))),
+        Material::TransformedGtr {
+            alpha_t,
+            alpha_b,
+            gamma,
+        } => {
+            let m = TangentTransform::new((alpha_t / alpha_b) as f64, 0.0, 0.0, 1.0);
+            Some(f(&Transformed::new(Gtr::new(alpha_b, gamma), m)))
+        }
+        Material::AshikhminShirley { .. } => None,
+    }
+}
+
+/// One microfacet sample: visible normals where the distribution has a sampler (weight
+/// G2/G1(v), Heitz 2018 §2), else m ~ D(m)(n·m) (weight f·(n·l)/p_l = G2 (v·m)/((n·v)(n·m)),
+/// Walter et al. 2007 eq. 38). Returns (weight, Schlick tail, local l).
+#[inline]
+fn sample_microfacet(
+    g: &dyn Microfacet,
+    vl: Vec3,
+    lambda_v: f32,
+    u1: f32,
+    u2: f32,
+) -> Option<(f64, f64, Vec3)> {
+    if let Some(m) = g.sample_visible(vl, u1, u2) {
+        let l = reflect(vl, m);
+        if l.z <= 0.0 {
+            return None;
+        }
+        let w = (1.0 + lambda_v as f64) / (1.0 + lambda_v as f64 + g.lambda(l) as f64);
+        let vh = (vl.dot(m) as f64).clamp(0.0, 1.0);
+        return Some((w, (1.0 - vh).powi(5), l));
+    }
+    let m = g.sample_d(u1, u2);
+    let vh = vl.dot(m);
+    if vh <= 0.0 || m.z <= 0.0 {
+        return None;
+    }
+    let l = reflect(vl, m);
+    if l.z <= 0.0 {
+        return None;
+    }
+    let w = g.g2(vl, l, m) as f64 * vh as f64 / (vl.z as f64 * m.z as f64);
+    Some((w, (1.0 - (vh as f64).min(1.0)).powi(5), l))
+}
+
 /// One sample's contribution: (weight for E0, Schlick tail χ = (1−v·h)⁵, local l), or None.
 #[inline]
 fn sample(mat: &Material, vl: Vec3, lambda_v: f32, u1: f32, u2: f32) -> Option<(f64, f64, Vec3)> {
     match *mat {
-        Material::Ggx { alpha_t, alpha_b } => {
-            let g = Ggx::new(alpha_t, alpha_b);
-            let m = g.sample_visible(vl, u1, u2)?;
-            let l = reflect(vl, m);
-            if l.z <= 0.0 {
-                return None;
-            }
-            // VNDF weight f·(n·l)/p_l = G2(v,l)/G1(v) (Heitz 2018 §2, eq. 19 of Heitz 2014).
-            let w = (1.0 + lambda_v as f64) / (1.0 + lambda_v as f64 + g.lambda(l) as f64);
-            let vh = (vl.dot(m) as f64).clamp(0.0, 1.0);
-            Some((w, (1.0 - vh).powi(5), l))
-        }
         Material::AshikhminShirley { nu, nv } => {
             let a = AshikhminShirley::new(nu, nv);
             let h = a.sample(u1 as f64, u2 as f64).h;
@@ -96,6 +135,7 @@ fn sample(mat: &Material, vl: Vec3, lambda_v: f32, u1: f32, u2: f32) -> Option<(
             let w = l.z / v.z.max(l.z);
             Some((w, (1.0 - vh.min(1.0)).powi(5), l.as_vec3()))
         }
+        _ => with_microfacet(mat, |g| sample_microfacet(g, vl, lambda_v, u1, u2)).flatten(),
     }
 }
 
@@ -115,10 +155,7 @@ pub fn mc_truth(
         return TruthValue::default();
     }
     let vl = vl.normalize();
-    let lambda_v = match *mat {
-        Material::Ggx { alpha_t, alpha_b } => Ggx::new(alpha_t, alpha_b).lambda(vl),
-        Material::AshikhminShirley { .. } => 0.0,
-    };
+    let lambda_v = with_microfacet(mat, |g| g.lambda(vl)).unwrap_or(0.0);
     let per = samples.div_ceil(BATCHES).max(1);
     let mut rng = Pcg32::new(seed, 0x5eed_a115);
     let mut means = [[0.0f64; 6]; BATCHES as usize];
@@ -171,15 +208,15 @@ pub fn brdf_cos(mat: &Material, vl: Vec3, ll: Vec3) -> (f64, f64) {
     let vh = (vl.dot(h) as f64).clamp(0.0, 1.0);
     let chi = (1.0 - vh).powi(5);
     let f = match *mat {
-        Material::Ggx { alpha_t, alpha_b } => {
-            let g = Ggx::new(alpha_t, alpha_b);
-            g.d(h) as f64 * g.g2(vl, ll, h) as f64 / (4.0 * vl.z as f64)
-        }
         Material::AshikhminShirley { nu, nv } => {
             let v = DVec3::new(vl.x as f64, vl.y as f64, vl.z as f64);
             let l = DVec3::new(ll.x as f64, ll.y as f64, ll.z as f64);
             AshikhminShirley::new(nu, nv).brdf(v, l, 1.0) * l.z
         }
+        _ => with_microfacet(mat, |g| {
+            g.d(h) as f64 * g.g2(vl, ll, h) as f64 / (4.0 * vl.z as f64)
+        })
+        .unwrap_or(0.0),
     };
     (f, f * chi)
 }
@@ -214,11 +251,11 @@ pub fn texel_truth(cube: &Cubemap, frame: &Frame, v: Vec3, mat: &Material) -> Tr
     out
 }
 
-/// Directional albedo ∫ D G2 /(4 n·v) dl of anisotropic GGX by Gauss–Legendre quadrature
-/// over the (u1, u2) square of the D(m)(n·m) sampler (`Microfacet::sample_d`): the integrand
-/// G2 (v·m)/((n·v)(n·m)) is bounded there. Independent of the VNDF route the truth takes.
-pub fn ggx_albedo_quadrature(alpha_t: f32, alpha_b: f32, vl: Vec3, nodes: usize) -> f64 {
-    let g = Ggx::new(alpha_t, alpha_b);
+/// Directional albedo ∫ D G2 /(4 n·v) dl of a microfacet distribution by Gauss–Legendre
+/// quadrature over the (u1, u2) square of its D(m)(n·m) sampler (`Microfacet::sample_d`): the
+/// integrand G2 (v·m)/((n·v)(n·m)) is bounded there. Independent of the VNDF route the truth
+/// takes.
+pub fn albedo_quadrature(g: &dyn Microfacet, vl: Vec3, nodes: usize) -> f64 {
     let gl = ibl_brdf::quadrature::gauss_legendre(nodes);
     let mut sum = 0.0;
     for &(x1, w1) in &gl {
@@ -277,18 +314,35 @@ mod tests {
         let cube = Cubemap::constant(8, [1.0; 3]);
         let f = frame();
         let mut worst: f64 = 0.0;
-        for (r, eta) in [(0.4f32, 0.0f32), (0.5, 0.8), (0.8, 0.5), (1.0, 0.9)] {
-            let mat = Material::ggx_kc(r, eta);
-            let (at, ab) = mat.ggx_alphas().unwrap();
+        let mut mats: Vec<Material> = [(0.4f32, 0.0f32), (0.5, 0.8), (0.8, 0.5), (1.0, 0.9)]
+            .iter()
+            .map(|&(r, eta)| Material::ggx_kc(r, eta))
+            .collect();
+        mats.push(Material::Beckmann {
+            alpha_t: 0.5,
+            alpha_b: 0.2,
+        });
+        mats.push(Material::TransformedGtr {
+            alpha_t: 0.6,
+            alpha_b: 0.3,
+            gamma: 1.5,
+        });
+        mats.push(Material::TransformedGtr {
+            alpha_t: 0.4,
+            alpha_b: 0.2,
+            gamma: 3.0,
+        });
+        for mat in mats {
             for (th, ph) in [(0.0, 0.0), (45.0, 30.0), (75.0, 100.0)] {
                 let v = view(&f, th, ph);
                 let t = mc_truth(&cube, &f, v, &mat, 4096, 7);
-                let q = ggx_albedo_quadrature(at, ab, f.to_local(v), 256);
+                let q =
+                    with_microfacet(&mat, |g| albedo_quadrature(g, f.to_local(v), 256)).unwrap();
                 let err = (t.e0[0] - q).abs();
                 worst = worst.max(err);
                 assert!(
                     err < 2e-3 + 4.0 * t.se0[0],
-                    "r {r} η {eta} θ {th}: MC {} ± {} vs {q}",
+                    "{mat:?} θ {th}: MC {} ± {} vs {q}",
                     t.e0[0],
                     t.se0[0]
                 );
@@ -321,6 +375,21 @@ mod tests {
             (Material::ggx_kc(0.6, 0.5), 20.0),
             (Material::ggx_kc(0.8, -0.7), 60.0),
             (Material::AshikhminShirley { nu: 30.0, nv: 8.0 }, 40.0),
+            (
+                Material::Beckmann {
+                    alpha_t: 0.6,
+                    alpha_b: 0.25,
+                },
+                30.0,
+            ),
+            (
+                Material::TransformedGtr {
+                    alpha_t: 0.7,
+                    alpha_b: 0.35,
+                    gamma: 1.5,
+                },
+                45.0,
+            ),
         ] {
             let v = view(&f, th, 50.0);
             let mc = mc_truth(&cube, &f, v, &mat, 1 << 14, 11);
