@@ -128,6 +128,50 @@ fn evaluates_every_method_and_writes_the_report_folder() {
 }
 
 #[test]
+fn renders_the_plate_with_a_radial_tangent_field() {
+    let dir = tempfile::tempdir().unwrap();
+    let env = dir.path().join("sky.exr");
+    write_env(&env);
+    let out = dir.path().join("plate");
+    let args = [
+        env.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--json",
+        "--scene",
+        "plate",
+        "--tangent",
+        "radial",
+        "--sphere-size",
+        "16",
+        "--roughness",
+        "0.4",
+        "--eta",
+        "0.8",
+        "--views",
+        "0",
+        "--elevations",
+        "40",
+        "--truth-samples",
+        "512",
+        "--methods",
+        "iso,bent-lg18,major-8",
+        "--lookup",
+        "engine",
+    ];
+    let o = BIN.run(&args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let rep = ibl_testkit::read_json(&out.join("report.json"));
+    let c = &rep["cases"][0];
+    assert!(c["pixels"].as_u64().unwrap() > 40, "{c}");
+    assert_eq!(c["scores"].as_array().unwrap().len(), 2 * 3);
+    // Per-pixel views are in the report (perspective: they differ).
+    let meta = ibl_testkit::read_json(&out.join("case000_sky/case.json"));
+    let px = meta["pixels"].as_array().unwrap();
+    assert_ne!(px[0]["v"], px[px.len() - 1]["v"]);
+}
+
+#[test]
 fn reports_are_identical_for_any_thread_count() {
     let dir = tempfile::tempdir().unwrap();
     let env = dir.path().join("sky.exr");

@@ -9,7 +9,7 @@
 
 use crate::material::Material;
 use crate::methods::{evaluate as eval_method, Inputs, Lookup, Method, E01};
-use crate::scene::{camera, sphere_pixels, Pixel};
+use crate::scene::{camera, plate_pixels, sphere_pixels, Pixel};
 use crate::truth::{mc_truth, TruthValue};
 use ibl_core::bordered::BorderedMips;
 use ibl_core::{luminance, CubeMips, Cubemap, Image};
@@ -33,11 +33,25 @@ pub enum LookupChoice {
     Both,
 }
 
+/// The rendered object.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Scene {
+    /// An orthographic unit sphere with ring tangents (turned by --tangent).
+    Sphere,
+    /// A perspective view of a flat disc (the frying pan), base tangent +X (turned by --tangent).
+    Plate,
+}
+
 /// Parameters of the evaluation (CLI flags and RON keys alike).
 #[derive(Clone, Debug, PartialEq, clap::Args, Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct Params {
-    /// Sphere image size in pixels.
+    /// The object: an orthographic sphere, or a perspective plate seen from each azimuth and
+    /// elevation (the view then varies per pixel).
+    #[arg(long, value_enum, default_value_t = Scene::Sphere)]
+    pub scene: Scene,
+    /// Image size in pixels.
     #[arg(long, default_value_t = 32)]
     pub sphere_size: usize,
     /// Perceptual roughness values r (α = r²).
@@ -347,14 +361,17 @@ pub fn evaluate_with(
                 for &az in &params.views {
                     let cam = camera(az, el);
                     let v = cam.2;
-                    let pixels = sphere_pixels(params.sphere_size, cam, preset);
+                    let pixels = match params.scene {
+                        Scene::Sphere => sphere_pixels(params.sphere_size, cam, preset),
+                        Scene::Plate => plate_pixels(params.sphere_size, az, el, preset),
+                    };
                     let truth: Vec<TruthValue> = pixels
                         .par_iter()
                         .map(|p| {
                             mc_truth(
                                 &env.cube,
                                 &p.frame,
-                                v,
+                                p.v,
                                 &mat,
                                 params.truth_samples,
                                 p.idx as u64,
@@ -385,7 +402,7 @@ pub fn evaluate_with(
                             let est: Vec<E01> = pixels
                                 .par_iter()
                                 .map_init(TreeBuffers::default, |buf, p| {
-                                    eval_method(m, &inp, &p.frame, v, &mat, p.idx as u64, buf)
+                                    eval_method(m, &inp, &p.frame, p.v, &mat, p.idx as u64, buf)
                                 })
                                 .collect();
                             let ln = if m.reads_chain() { lk.name() } else { "none" };

@@ -112,6 +112,8 @@ pub struct Pixel {
     pub idx: usize,
     /// The shading frame.
     pub frame: Frame,
+    /// Unit direction towards the eye.
+    pub v: Vec3,
 }
 
 /// The shaded pixels of an s×s sphere image under `cam` with tangent field `preset`.
@@ -130,8 +132,62 @@ pub fn sphere_pixels(s: usize, cam: (Vec3, Vec3, Vec3), preset: &Preset) -> Vec<
                 out.push(Pixel {
                     idx: j * s + i,
                     frame,
+                    v: cam.2,
                 });
             }
+        }
+    }
+    out
+}
+
+/// The plate: the unit disc x² + z² ≤ 1 in the plane y = 0 (normal +Y), seen by a pinhole
+/// camera at distance 3 from the centre, at azimuth φ about +Y (φ = 0 from +Z) and elevation θ
+/// above the plate, with a 50° vertical field of view (Marcolongo 2020's frying pan, Cocco et
+/// al. 2024 Fig. 22). UV = ((x+1)/2, (1−z)/2) on the disc; the base tangent is +X, b₀ = n × t₀
+/// = −Z, turned by `preset` (a `radial` preset gives the pan's concentric grooves). The view
+/// varies per pixel: v = normalize(eye − p).
+pub fn plate_pixels(s: usize, azimuth_deg: f32, elevation_deg: f32, preset: &Preset) -> Vec<Pixel> {
+    let (sp, cp) = azimuth_deg.to_radians().sin_cos();
+    let (st, ct) = elevation_deg.clamp(5.0, 89.0).to_radians().sin_cos();
+    let dir = Vec3::new(sp * ct, st, cp * ct);
+    let eye = 3.0 * dir;
+    let fwd = -dir;
+    let right = fwd.cross(Vec3::Y).normalize();
+    let up = right.cross(fwd);
+    let half = 25f32.to_radians().tan();
+    let n = Vec3::Y;
+    let t0 = Vec3::X;
+    let b0 = n.cross(t0);
+    let mut out = Vec::new();
+    for j in 0..s {
+        for i in 0..s {
+            let x = (2.0 * (i as f32 + 0.5) / s as f32 - 1.0) * half;
+            let y = (1.0 - 2.0 * (j as f32 + 0.5) / s as f32) * half;
+            let ray = (fwd + right * x + up * y).normalize();
+            if ray.y >= -1e-6 {
+                continue;
+            }
+            let p = eye + ray * (-eye.y / ray.y);
+            if p.x * p.x + p.z * p.z > 1.0 {
+                continue;
+            }
+            let (u, v) = (0.5 * (p.x as f64 + 1.0), 0.5 * (1.0 - p.z as f64));
+            let d = preset.field(u, v, [1.0, 1.0], false);
+            let t = t0 * d[0] as f32 + b0 * d[1] as f32;
+            let t = if t.length_squared() > 1e-12 && t.is_finite() {
+                t.normalize()
+            } else {
+                t0
+            };
+            out.push(Pixel {
+                idx: j * s + i,
+                frame: Frame {
+                    t,
+                    b: n.cross(t),
+                    n,
+                },
+                v: (eye - p).normalize(),
+            });
         }
     }
     out
@@ -152,6 +208,12 @@ mod tests {
                 assert!((f.t.length() - 1.0).abs() < 1e-5 && (f.b.length() - 1.0).abs() < 1e-5);
                 assert!(f.t.dot(f.n).abs() < 1e-5 && f.t.cross(f.b).dot(f.n) > 0.999);
             }
+        }
+        let plate = plate_pixels(32, 30.0, 40.0, &"radial".parse().unwrap());
+        assert!(plate.len() > 150, "{}", plate.len());
+        for p in plate {
+            assert!(p.v.dot(p.frame.n) > 0.0 && (p.frame.t.length() - 1.0).abs() < 1e-5);
+            assert!(p.frame.t.y.abs() < 1e-6);
         }
     }
 }
