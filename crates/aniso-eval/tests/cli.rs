@@ -172,6 +172,69 @@ fn renders_the_plate_with_a_radial_tangent_field() {
 }
 
 #[test]
+fn renders_ashikhmin_shirley_lobes_through_the_thesis_route() {
+    let dir = tempfile::tempdir().unwrap();
+    let env = dir.path().join("sky.exr");
+    write_env(&env);
+    let out = dir.path().join("as");
+    let args = [
+        env.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--no-pixels",
+        "--sphere-size",
+        "12",
+        "--roughness",
+        "0.5",
+        "--eta",
+        "0",
+        "--views",
+        "0",
+        "--elevations",
+        "0",
+        "--truth-samples",
+        "512",
+        "--as-lobes",
+        "100x10",
+        "--methods",
+        "iso,as-thesis-16,as-weighted-16",
+    ];
+    let o = BIN.run(&args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let rep = ibl_testkit::read_json(&out.join("report.json"));
+    let cases = rep["cases"].as_array().unwrap();
+    assert_eq!(cases.len(), 2);
+    let as_case = &cases[1];
+    assert!(
+        as_case["material"]["AshikhminShirley"].is_object(),
+        "{as_case}"
+    );
+    let names: Vec<&str> = as_case["scores"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s["method"].as_str().unwrap())
+        .collect();
+    assert_eq!(
+        names,
+        [
+            "as-thesis-16",
+            "as-weighted-16",
+            "as-thesis-16",
+            "as-weighted-16"
+        ]
+    );
+    let r = BIN.run(&[
+        env.to_str().unwrap(),
+        "--as-lobes",
+        "100",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_one_line_error(&r, 2, "--as-lobes");
+}
+
+#[test]
 fn reports_are_identical_for_any_thread_count() {
     let dir = tempfile::tempdir().unwrap();
     let env = dir.path().join("sky.exr");

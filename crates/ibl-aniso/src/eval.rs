@@ -8,7 +8,7 @@
 //! squared error is below 1% of the best method's MSE (`truth_error_share < 0.01`).
 
 use crate::material::Material;
-use crate::methods::{evaluate as eval_method, Inputs, Lookup, Method, E01};
+use crate::methods::{evaluate as eval_method, AsTables, Inputs, Lookup, Method, E01};
 use crate::scene::{camera, plate_pixels, sphere_pixels, Pixel};
 use crate::truth::{mc_truth, TruthValue};
 use ibl_core::bordered::BorderedMips;
@@ -92,6 +92,10 @@ pub struct Params {
         default_value = "iso,bent-lg18,bent-filament,bent-khr,major-16,fis-16"
     )]
     pub methods: Vec<String>,
+    /// Ashikhmin–Shirley lobes NUxNV (e.g. 100x10,20000x70), rendered with the truth and the
+    /// as-thesis-N / as-weighted-N methods.
+    #[arg(long, value_delimiter = ',')]
+    pub as_lobes: Vec<String>,
     /// Lookups the chain-reading methods run with.
     #[arg(long, value_enum, default_value_t = LookupChoice::Both)]
     pub lookup: LookupChoice,
@@ -127,6 +131,26 @@ fn bad<T>(m: String) -> crate::Result<T> {
 }
 
 impl Params {
+    /// The --as-lobes as (n_u, n_v).
+    pub fn parse_as_lobes(&self) -> crate::Result<Vec<(f64, f64)>> {
+        self.as_lobes
+            .iter()
+            .map(|l| {
+                let parts: Vec<&str> = l.trim().split('x').collect();
+                let nums: Option<Vec<f64>> =
+                    parts.iter().map(|p| p.trim().parse::<f64>().ok()).collect();
+                match nums.as_deref() {
+                    Some([nu, nv]) if (1.0..=1e6).contains(nu) && (1.0..=1e6).contains(nv) => {
+                        Ok((*nu, *nv))
+                    }
+                    _ => bad(format!(
+                        "--as-lobes: '{l}' is not NUxNV with exponents in 1..=1e6"
+                    )),
+                }
+            })
+            .collect()
+    }
+
     /// Checks the parameters before any input is read; returns the parsed methods and preset.
     pub fn validate(&self) -> crate::Result<(Vec<Method>, Preset)> {
         if !(4..=512).contains(&self.sphere_size) {
@@ -180,6 +204,7 @@ impl Params {
         if self.methods.is_empty() {
             return bad("--methods needs at least one method".into());
         }
+        self.parse_as_lobes()?;
         let methods = self
             .methods
             .iter()
@@ -354,9 +379,21 @@ pub fn evaluate_with(
     let dfg = Dfg::standard();
     let mut cases = Vec::new();
     let mut images = Vec::new();
+    let mut materials: Vec<(f32, f32, Material)> = Vec::new();
     for &r in &params.roughness {
         for &eta in &params.eta {
-            let mat = Material::ggx_kc(r, eta);
+            materials.push((r, eta, Material::ggx_kc(r, eta)));
+        }
+    }
+    for (nu, nv) in params.parse_as_lobes().unwrap_or_default() {
+        materials.push((0.0, 0.0, Material::AshikhminShirley { nu, nv }));
+    }
+    for &(r, eta, mat) in &materials {
+        {
+            let as_tables = match mat {
+                Material::AshikhminShirley { nu, nv } => Some(AsTables::bake(nu, nv, 128)),
+                _ => None,
+            };
             for &el in &params.elevations {
                 for &az in &params.views {
                     let cam = camera(az, el);
@@ -379,7 +416,7 @@ pub fn evaluate_with(
                         })
                         .collect();
                     let mut runs: Vec<Run> = Vec::new();
-                    for m in methods {
+                    for m in methods.iter().filter(|m| m.applies_to(&mat)) {
                         let oracle = env.oracle.as_ref().filter(|_| use_oracle(m));
                         let lookups: Vec<&Lookup> = if m.reads_chain() {
                             [env.engine.as_ref(), oracle]
@@ -398,6 +435,8 @@ pub fn evaluate_with(
                                 lookup: lk,
                                 dfg,
                                 pyramid: &env.pyramid,
+                                cube: &env.cube,
+                                as_tables: as_tables.as_ref(),
                             };
                             let est: Vec<E01> = pixels
                                 .par_iter()

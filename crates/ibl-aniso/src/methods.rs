@@ -90,6 +90,71 @@ pub enum Method {
         /// Taps.
         taps: usize,
     },
+    /// M4a: Ashikhmin–Shirley as the thesis writes it (Marcolongo 2020 §4.3): N fixed
+    /// Hammersley points through the baked half-vector LUT, the raw cube read bilinearly at
+    /// l = reflect(v, h), the mean times F0·s + b from the baked size/bias table.
+    AsThesis {
+        /// Taps.
+        taps: usize,
+    },
+    /// M4b: the same taps weighted by F(v·h)(n·l)/max(n·v, n·l) (the unbiased estimator of
+    /// exact p_h sampling, docs/ANISOTROPY.md §2.3 of the design): no size/bias table.
+    AsWeighted {
+        /// Taps.
+        taps: usize,
+    },
+}
+
+/// The Ashikhmin–Shirley tables a lobe's runtime reads, baked in memory by `ibl-lut` exactly
+/// as `hv-lut` and `brdf-lut as-size-bias` write them (float).
+pub struct AsTables {
+    /// The half-vector LUT (RGB = h·½+½, A = p_h/p_h(n)).
+    pub hv: ibl_core::Image,
+    /// The size/bias table (R = s, G = b) over (u, v) = (2/π·atan|v_y/v_x|, √(n·v)).
+    pub size_bias: ibl_core::Image,
+}
+
+impl AsTables {
+    /// Bakes both tables for (n_u, n_v): a `hv_size`² LUT, and a 64² size/bias table from 1024
+    /// direct samples (`brdf-lut as-size-bias` at its sampler default).
+    pub fn bake(nu: f64, nv: f64, hv_size: usize) -> AsTables {
+        let a = ibl_brdf::AshikhminShirley::new(nu, nv);
+        let p = ibl_core::progress::NoProgress;
+        let set = ibl_lut::as_size_bias::SampleSet::direct(&a, 1024);
+        AsTables {
+            hv: ibl_lut::hv::hv_table(&a, hv_size, &p),
+            size_bias: ibl_lut::as_size_bias::size_bias_table(&set, 64, &p),
+        }
+    }
+
+    /// (s, b) at a local view, bilinear between texel centres (as a GPU reads the table).
+    pub fn size_bias_at(&self, v: Vec3) -> (f32, f32) {
+        let u = if v.x == 0.0 && v.y == 0.0 {
+            0.0
+        } else {
+            v.y.abs().atan2(v.x.abs()) / std::f32::consts::FRAC_PI_2
+        };
+        let t = v.z.max(0.0).sqrt();
+        let img = &self.size_bias;
+        let (w, h) = (img.width, img.height);
+        let x = (u * w as f32 - 0.5).clamp(0.0, (w - 1) as f32);
+        let y = (t * h as f32 - 0.5).clamp(0.0, (h - 1) as f32);
+        let (x0, y0) = (x.floor() as usize, y.floor() as usize);
+        let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
+        let (fx, fy) = (x - x0 as f32, y - y0 as f32);
+        let mut c = [0.0f32; 2];
+        for (xx, yy, wt) in [
+            (x0, y0, (1.0 - fx) * (1.0 - fy)),
+            (x1, y0, fx * (1.0 - fy)),
+            (x0, y1, (1.0 - fx) * fy),
+            (x1, y1, fx * fy),
+        ] {
+            let tx = img.texel(xx, yy);
+            c[0] += wt * tx[0];
+            c[1] += wt * tx[1];
+        }
+        (c[0], c[1])
+    }
 }
 
 impl Method {
@@ -114,13 +179,15 @@ impl Method {
                 s
             }
             Method::Fis { taps } => format!("fis-{taps}"),
+            Method::AsThesis { taps } => format!("as-thesis-{taps}"),
+            Method::AsWeighted { taps } => format!("as-weighted-{taps}"),
         }
     }
 
     /// Parses `iso`, `bent-lg18`, `bent-filament`, `bent-khr`, `major-N[-bBETA][-kK][-cC]`, `fis-N`.
     pub fn parse(s: &str) -> Result<Method, String> {
         let bad = || {
-            format!("unknown method '{s}' (iso, bent-lg18, bent-filament, bent-khr, major-N[-bBETA][-kK][-cC], fis-N)")
+            format!("unknown method '{s}' (iso, bent-lg18, bent-filament, bent-khr, major-N[-bBETA][-kK][-cC], fis-N, as-thesis-N, as-weighted-N)")
         };
         let taps = |t: &str| -> Result<usize, String> {
             let n: usize = t.parse().map_err(|_| bad())?;
@@ -138,6 +205,12 @@ impl Method {
             _ => {
                 if let Some(rest) = s.strip_prefix("fis-") {
                     return Ok(Method::Fis { taps: taps(rest)? });
+                }
+                if let Some(rest) = s.strip_prefix("as-thesis-") {
+                    return Ok(Method::AsThesis { taps: taps(rest)? });
+                }
+                if let Some(rest) = s.strip_prefix("as-weighted-") {
+                    return Ok(Method::AsWeighted { taps: taps(rest)? });
                 }
                 let rest = s.strip_prefix("major-").ok_or_else(bad)?;
                 let mut parts = rest.split('-');
@@ -173,12 +246,27 @@ impl Method {
             Method::Iso | Method::BentLg18 | Method::BentFilament | Method::BentKhr => (1, 1),
             Method::MajorAxis(p) => (p.taps, 1),
             Method::Fis { taps } => (*taps, 0),
+            Method::AsThesis { taps } => (*taps, *taps + 1),
+            Method::AsWeighted { taps } => (*taps, *taps),
         }
     }
 
     /// Whether the method reads the chain (and so runs with both lookups).
     pub fn reads_chain(&self) -> bool {
-        !matches!(self, Method::Fis { .. })
+        !matches!(
+            self,
+            Method::Fis { .. } | Method::AsThesis { .. } | Method::AsWeighted { .. }
+        )
+    }
+
+    /// Whether the method renders `mat` (the GGX methods GGX, the thesis route AS).
+    pub fn applies_to(&self, mat: &Material) -> bool {
+        match self {
+            Method::AsThesis { .. } | Method::AsWeighted { .. } => {
+                matches!(mat, Material::AshikhminShirley { .. })
+            }
+            _ => matches!(mat, Material::Ggx { .. }),
+        }
     }
 }
 
@@ -190,6 +278,10 @@ pub struct Inputs<'a> {
     pub dfg: &'a Dfg,
     /// The box pyramid of the source, for filtered importance sampling.
     pub pyramid: &'a BorderedMips,
+    /// The raw source cube (the thesis's route reads it bilinearly).
+    pub cube: &'a Cubemap,
+    /// The Ashikhmin–Shirley tables of the case's lobe, if it is one.
+    pub as_tables: Option<&'a AsTables>,
 }
 
 /// (E0, E1) of one pixel.
@@ -233,6 +325,12 @@ pub fn evaluate(
     let nv = n.dot(v);
     if nv <= 0.0 {
         return ([0.0; 3], [0.0; 3]);
+    }
+    if let (Method::AsThesis { taps } | Method::AsWeighted { taps }, Some(tab)) =
+        (method, inp.as_tables)
+    {
+        let weighted = matches!(method, Method::AsWeighted { .. });
+        return as_route(inp.cube, tab, frame, v, *taps, weighted);
     }
     let Some((at, ab)) = mat.ggx_alphas() else {
         return ([0.0; 3], [0.0; 3]);
@@ -301,6 +399,53 @@ pub fn evaluate(
             split(acc.map(|c| c * inv), inp.dfg, nv, r_iso)
         }
         Method::Fis { taps } => fis(inp.pyramid, frame, v, at, ab, *taps, seed),
+        Method::AsThesis { .. } | Method::AsWeighted { .. } => ([0.0; 3], [0.0; 3]),
+    }
+}
+
+/// Marcolongo 2020 §4.3 (`env_bump_aniso.frag`): N fixed Hammersley points, h from the
+/// half-vector LUT (bilinear), l = 2(v·h)h − v, the raw cube read bilinearly; as written the
+/// mean radiance (with the 1/N the thesis omits, README errata) times F0·s + b of the size/bias
+/// table; weighted, each tap times F(v·h)(n·l)/max(n·v, n·l) and no table.
+fn as_route(
+    cube: &Cubemap,
+    tab: &AsTables,
+    frame: &Frame,
+    v: Vec3,
+    taps: usize,
+    weighted: bool,
+) -> E01 {
+    let vl = frame.to_local(v).normalize();
+    let (mut e0, mut e1) = ([0.0f32; 3], [0.0f32; 3]);
+    let n = taps as u32;
+    for i in 0..n {
+        let (x1, x2) = hammersley(i, n);
+        let (h, _) = ibl_lut::hv::lookup(&tab.hv, x1 as f64, x2 as f64);
+        let h = h.as_vec3();
+        let vh = vl.dot(h);
+        let l = 2.0 * vh * h - vl;
+        // The thesis's shader reads every tap, below the horizon too: the size/bias table
+        // holds the horizon's loss. The weighted estimator gives such taps weight 0.
+        if weighted && (vh <= 0.0 || l.z <= 0.0) {
+            continue;
+        }
+        let c = cube.sample_bilinear(frame.to_world(l));
+        let (w, chi) = if weighted {
+            (l.z / vl.z.max(l.z), (1.0 - vh.min(1.0)).powi(5))
+        } else {
+            (1.0, 0.0)
+        };
+        for k in 0..3 {
+            e0[k] += w * c[k];
+            e1[k] += w * chi * c[k];
+        }
+    }
+    let inv = 1.0 / n as f32;
+    if weighted {
+        (e0.map(|c| c * inv), e1.map(|c| c * inv))
+    } else {
+        let (s, b) = tab.size_bias_at(vl);
+        (e0.map(|c| c * inv * (s + b)), e0.map(|c| c * inv * b))
     }
 }
 
@@ -384,10 +529,13 @@ mod tests {
     fn furnace_every_split_sum_method_equals_its_dfg() {
         // Constant environment: every chain method returns exactly its DFG term (A+B, B).
         let (lookup, dfg, pyr) = inputs_const();
+        let cube0 = Cubemap::constant(4, [1.0; 3]);
         let inp = Inputs {
             lookup: &lookup,
             dfg: &dfg,
             pyramid: &pyr,
+            cube: &cube0,
+            as_tables: None,
         };
         let f = frame();
         let v = f.to_world(Vec3::new(0.5, 0.2, 0.8).normalize());
@@ -417,10 +565,13 @@ mod tests {
         };
         let dfg = ibl_shexp::dfg::Dfg::standard().clone();
         let pyr = BorderedMips::new(&CubeMips::build(cube, 1));
+        let cube0 = Cubemap::constant(4, [1.0; 3]);
         let inp = Inputs {
             lookup: &lookup,
             dfg: &dfg,
             pyramid: &pyr,
+            cube: &cube0,
+            as_tables: None,
         };
         let f = frame();
         let v = f.to_world(Vec3::new(0.4, -0.3, 0.7).normalize());
@@ -451,6 +602,62 @@ mod tests {
                     "{m:?} swap {a:?} {c:?}"
                 );
             }
+        }
+    }
+
+    #[test]
+    fn as_routes_agree_with_each_other_and_the_truth_under_a_constant_environment() {
+        let cube = Cubemap::constant(8, [1.0; 3]);
+        let (lookup, dfg, pyr) = inputs_const();
+        let tab = AsTables::bake(100.0, 10.0, 128);
+        let inp = Inputs {
+            lookup: &lookup,
+            dfg: &dfg,
+            pyramid: &pyr,
+            cube: &cube,
+            as_tables: Some(&tab),
+        };
+        let f = frame();
+        let mat = Material::AshikhminShirley {
+            nu: 100.0,
+            nv: 10.0,
+        };
+        let mut buf = TreeBuffers::default();
+        for (x, y) in [(0.0f32, 0.0f32), (0.5, 0.3), (-0.7, 0.5)] {
+            let v = f.to_world(Vec3::new(x, y, 1.0).normalize());
+            let a = evaluate(
+                &Method::AsThesis { taps: 256 },
+                &inp,
+                &f,
+                v,
+                &mat,
+                1,
+                &mut buf,
+            );
+            let b = evaluate(
+                &Method::AsWeighted { taps: 256 },
+                &inp,
+                &f,
+                v,
+                &mat,
+                1,
+                &mut buf,
+            );
+            let t = crate::truth::mc_truth(&cube, &f, v, &mat, 4096, 3);
+            eprintln!(
+                "view ({x}, {y}): thesis {:.4} weighted {:.4} truth {:.4} ± {:.4}",
+                a.0[0], b.0[0], t.e0[0], t.se0[0]
+            );
+            // As written, the thesis's E0 is (s + b): the same expectation as M4b's weight.
+            assert!((a.0[0] - b.0[0]).abs() < 0.01, "{a:?} {b:?}");
+            assert!(
+                (b.0[0] as f64 - t.e0[0]).abs() < 0.02 + 4.0 * t.se0[0],
+                "{b:?} {t:?}"
+            );
+            assert!(
+                (b.1[0] as f64 - t.e1[0]).abs() < 0.01 + 4.0 * t.se1[0],
+                "{b:?} {t:?}"
+            );
         }
     }
 
