@@ -390,7 +390,9 @@ fn main() {
     );
     let _ = writeln!(md, "| method | wins vs bent-lg18 | wins vs iso | wins vs fis-16 | worst MSE / iso at η = 0 | relRMSE | mean rel |");
     let _ = writeln!(md, "|---|---|---|---|---|---|---|");
-    for m in ["major-16", best.as_str(), "fis-16", "bent-lg18"] {
+    let mut rows = vec!["major-16", best.as_str(), "fis-16", "bent-lg18"];
+    rows.dedup();
+    for m in rows {
         let lk = if m.starts_with("fis") {
             "none"
         } else {

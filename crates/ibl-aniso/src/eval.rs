@@ -635,36 +635,48 @@ pub fn markdown(cases: &[Case], summary: &[Summary], chain_sources: &[String]) -
         );
     }
     let _ = writeln!(s, "\n## Cases (F0 = 1, relRMSE / mean relative error)\n");
-    let names: Vec<(String, String)> = cases
-        .first()
-        .map(|c| {
-            c.scores
-                .iter()
-                .filter(|x| x.f0 == 1.0)
-                .map(|x| (x.method.clone(), x.lookup.clone()))
-                .collect()
-        })
-        .unwrap_or_default();
-    let _ = write!(s, "| env | r | η | az | el | truth share |");
+    let mut names: Vec<(String, String)> = Vec::new();
+    for c in cases {
+        for x in c.scores.iter().filter(|x| x.f0 == 1.0) {
+            let k = (x.method.clone(), x.lookup.clone());
+            if !names.contains(&k) {
+                names.push(k);
+            }
+        }
+    }
+    let _ = write!(s, "| env | material | az | el | truth share |");
     for (m, l) in &names {
         let _ = write!(s, " {m} ({l}) |");
     }
     let _ = writeln!(s);
-    let _ = writeln!(s, "|{}", "---|".repeat(6 + names.len()));
+    let _ = writeln!(s, "|{}", "---|".repeat(5 + names.len()));
     for c in cases {
+        let mat = match c.material {
+            Material::AshikhminShirley { nu, nv } => format!("AS {nu}×{nv}"),
+            _ => format!("GGX r {} η {}", c.r, c.eta),
+        };
         let _ = write!(
             s,
-            "| {} | {} | {} | {} | {} | {:.1e}{} |",
+            "| {} | {mat} | {} | {} | {:.1e}{} |",
             c.env,
-            c.r,
-            c.eta,
             c.azimuth,
             c.elevation,
             c.truth_error_share[0],
             if c.scored { "" } else { " (not scored)" }
         );
-        for x in c.scores.iter().filter(|x| x.f0 == 1.0) {
-            let _ = write!(s, " {:.3} / {:.3} |", x.rel_rmse, x.mean_rel);
+        for (m, l) in &names {
+            match c
+                .scores
+                .iter()
+                .find(|x| x.f0 == 1.0 && &x.method == m && &x.lookup == l)
+            {
+                Some(x) => {
+                    let _ = write!(s, " {:.3} / {:.3} |", x.rel_rmse, x.mean_rel);
+                }
+                None => {
+                    let _ = write!(s, " – |");
+                }
+            }
         }
         let _ = writeln!(s);
     }
