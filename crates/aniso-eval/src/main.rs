@@ -55,6 +55,7 @@ fn main() {
         let mut all_cases = Vec::new();
         let mut all_images = Vec::new();
         let mut sources = Vec::new();
+        let mut cubes = Vec::new();
         for (input, env) in cli.inputs.iter().zip(&loaded) {
             let name = input
                 .file_stem()
@@ -103,6 +104,7 @@ fn main() {
                 t0.elapsed().as_secs_f64()
             ));
             sources.push(source);
+            cubes.push((name.clone(), e.cube));
             all_cases.extend(cases);
             all_images.extend(images);
         }
@@ -114,6 +116,10 @@ fn main() {
             &all_images,
             &summary,
             &sources,
+            &cubes
+                .iter()
+                .map(|(n, c)| (n.clone(), c))
+                .collect::<Vec<_>>(),
         )?;
         let outputs = ibl_cli::write_outputs(&files)?;
         if !cli.common.quiet && !cli.common.json {

@@ -714,6 +714,7 @@ pub fn encode_outputs(
     images: &[CaseImages],
     summary: &[Summary],
     chain_sources: &[String],
+    cubes: &[(String, &Cubemap)],
 ) -> crate::Result<Vec<(PathBuf, Vec<u8>)>> {
     use ibl_core::io::{self, WriteOptions};
     let mut files = Vec::new();
@@ -727,6 +728,43 @@ pub fn encode_outputs(
     }
     let s = params.sphere_size;
     let exr = WriteOptions::default();
+    // The truth's environment as a texel list (faces stacked vertically in Face::ALL order):
+    // radiance, texel-centre direction and solid angle, so independent code can recompute any
+    // pixel without our cube conventions; and the DFG table the split-sum methods read.
+    for (name, cube) in cubes {
+        let n = cube.size;
+        let mut rad = Image::new(n, 6 * n, 3);
+        let mut dir = Image::new(n, 6 * n, 3);
+        let mut sa = Image::new(n, 6 * n, 3);
+        for face in ibl_core::cube::Face::ALL {
+            for j in 0..n {
+                for i in 0..n {
+                    let y = face as usize * n + j;
+                    rad.texel_mut(i, y).copy_from_slice(&cube.texel(face, i, j));
+                    let d = ibl_core::cube::texel_direction(face, i, j, n);
+                    dir.texel_mut(i, y).copy_from_slice(&d.to_array());
+                    let w = ibl_core::cube::texel_solid_angle(i, j, n) as f32;
+                    sa.texel_mut(i, y).copy_from_slice(&[w; 3]);
+                }
+            }
+        }
+        for (kind, img) in [("radiance", rad), ("direction", dir), ("solid_angle", sa)] {
+            let p = out_dir.join(format!("env_{name}_{kind}.exr"));
+            let b = io::encode_image(&p, &img, &exr)?;
+            files.push((p, b));
+        }
+    }
+    {
+        let d = Dfg::standard();
+        let mut img = Image::new(d.width, d.height, 3);
+        for (k, ab) in d.data.iter().enumerate() {
+            img.texel_mut(k % d.width, k / d.width)
+                .copy_from_slice(&[ab[0], ab[1], 0.0]);
+        }
+        let p = out_dir.join("dfg.exr");
+        let b = io::encode_image(&p, &img, &exr)?;
+        files.push((p, b));
+    }
     let png = WriteOptions {
         png_bits: 8,
         png_tonemap: false,
