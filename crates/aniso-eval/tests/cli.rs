@@ -1,0 +1,304 @@
+//! End-to-end tests of the `aniso-eval` binary: a tiny grid with every method and both
+//! lookups, the report folder an independent script can recompute pixels from, determinism
+//! across thread counts, and one-line errors on malformed input.
+
+use ibl_core::io::{write_image, WriteOptions};
+use ibl_core::Image;
+use ibl_testkit::{assert_one_line_error, Bin};
+use std::path::Path;
+
+const BIN: Bin = Bin::new(env!("CARGO_BIN_EXE_aniso-eval"), "aniso-eval");
+
+fn write_env(path: &Path) {
+    let (w, h) = (64, 32);
+    let mut img = Image::new(w, h, 3);
+    let sun = glam::Vec3::new(-0.4, 0.7, 0.5).normalize();
+    for j in 0..h {
+        for i in 0..w {
+            let d = ibl_core::equirect::pixel_direction(i, j, w, h);
+            let s = (30.0 * (d.dot(sun) - 1.0)).exp() * 20.0;
+            let sky = if d.y > 0.0 {
+                0.4 + d.y
+            } else {
+                0.1 + 0.05 * d.x.abs()
+            };
+            img.texel_mut(i, j)
+                .copy_from_slice(&[sky + s, sky + 0.9 * s, sky * 1.3 + 0.6 * s]);
+        }
+    }
+    write_image(path, &img, &WriteOptions::default()).unwrap();
+}
+
+const SMALL: [&str; 12] = [
+    "--sphere-size",
+    "16",
+    "--roughness",
+    "0.5",
+    "--eta",
+    "0,0.8,-0.8",
+    "--views",
+    "30",
+    "--elevations",
+    "20",
+    "--truth-samples",
+    "1024",
+];
+
+#[test]
+fn evaluates_every_method_and_writes_the_report_folder() {
+    let dir = tempfile::tempdir().unwrap();
+    let env = dir.path().join("sky.exr");
+    write_env(&env);
+    let out = dir.path().join("report");
+    let mut args = vec![
+        env.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--json",
+    ];
+    args.extend(SMALL);
+    let o = BIN.run(&args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["details"]["cases"], 3);
+    let rep = ibl_testkit::read_json(&out.join("report.json"));
+    let cases = rep["cases"].as_array().unwrap();
+    assert_eq!(cases.len(), 3);
+    for c in cases {
+        // 5 chain methods × 2 lookups + FIS, × 2 F0.
+        let scores = c["scores"].as_array().unwrap();
+        assert_eq!(scores.len(), 2 * 11, "{c}");
+        for s in scores {
+            let (e, m) = (
+                s["rel_rmse"].as_f64().unwrap(),
+                s["mean_rel"].as_f64().unwrap(),
+            );
+            assert!(
+                e.is_finite() && e >= 0.0 && m.is_finite() && m >= 0.0,
+                "{s}"
+            );
+        }
+        // η = 0: every bent normal is the isotropic split sum.
+        if c["eta"].as_f64().unwrap() == 0.0 {
+            let mse = |name: &str| {
+                scores
+                    .iter()
+                    .find(|s| s["method"] == name && s["lookup"] == "engine" && s["f0"] == 1.0)
+                    .unwrap()["mse"]
+                    .as_f64()
+                    .unwrap()
+            };
+            // (up to the rounding of normalize(lerp(n, g, 0))).
+            for m in ["bent-lg18", "bent-filament", "bent-khr"] {
+                assert!((mse("iso") - mse(m)).abs() <= 1e-5 * mse("iso"), "{m}");
+            }
+        }
+    }
+    let case0 = out.join("case000_sky");
+    for f in [
+        "case.json",
+        "frame_n.exr",
+        "frame_t.exr",
+        "truth_e0.exr",
+        "truth_se0.exr",
+        "major-16_engine_e0.exr",
+        "major-16_oracle_e1.exr",
+        "fis-16_none_e0.exr",
+        "montage.png",
+    ] {
+        assert!(case0.join(f).is_file(), "{f}");
+    }
+    // The report is enough to recompute a pixel: its frame, the view and the material.
+    let meta = ibl_testkit::read_json(&case0.join("case.json"));
+    assert_eq!(
+        meta["pixels"].as_array().unwrap().len() as u64,
+        cases[0]["pixels"].as_u64().unwrap()
+    );
+    let truth = ibl_core::io::read_image(
+        &case0.join("truth_e0.exr"),
+        ibl_core::io::ColorSpace::Linear,
+    )
+    .unwrap();
+    assert_eq!((truth.width, truth.height), (16, 16));
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(
+        md.contains("| major-16 | engine |") && md.contains("| fis-16 | none |"),
+        "{md}"
+    );
+}
+
+#[test]
+fn renders_the_plate_with_a_radial_tangent_field() {
+    let dir = tempfile::tempdir().unwrap();
+    let env = dir.path().join("sky.exr");
+    write_env(&env);
+    let out = dir.path().join("plate");
+    let args = [
+        env.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--json",
+        "--scene",
+        "plate",
+        "--tangent",
+        "radial",
+        "--sphere-size",
+        "16",
+        "--roughness",
+        "0.4",
+        "--eta",
+        "0.8",
+        "--views",
+        "0",
+        "--elevations",
+        "40",
+        "--truth-samples",
+        "512",
+        "--methods",
+        "iso,bent-lg18,major-8",
+        "--lookup",
+        "engine",
+    ];
+    let o = BIN.run(&args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let rep = ibl_testkit::read_json(&out.join("report.json"));
+    let c = &rep["cases"][0];
+    assert!(c["pixels"].as_u64().unwrap() > 40, "{c}");
+    assert_eq!(c["scores"].as_array().unwrap().len(), 2 * 3);
+    // Per-pixel views are in the report (perspective: they differ).
+    let meta = ibl_testkit::read_json(&out.join("case000_sky/case.json"));
+    let px = meta["pixels"].as_array().unwrap();
+    assert_ne!(px[0]["v"], px[px.len() - 1]["v"]);
+}
+
+#[test]
+fn renders_ashikhmin_shirley_lobes_through_the_thesis_route() {
+    let dir = tempfile::tempdir().unwrap();
+    let env = dir.path().join("sky.exr");
+    write_env(&env);
+    let out = dir.path().join("as");
+    let args = [
+        env.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--no-pixels",
+        "--sphere-size",
+        "12",
+        "--roughness",
+        "0.5",
+        "--eta",
+        "0",
+        "--views",
+        "0",
+        "--elevations",
+        "0",
+        "--truth-samples",
+        "512",
+        "--as-lobes",
+        "100x10",
+        "--methods",
+        "iso,as-thesis-16,as-weighted-16",
+    ];
+    let o = BIN.run(&args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let rep = ibl_testkit::read_json(&out.join("report.json"));
+    let cases = rep["cases"].as_array().unwrap();
+    assert_eq!(cases.len(), 2);
+    let as_case = &cases[1];
+    assert!(
+        as_case["material"]["AshikhminShirley"].is_object(),
+        "{as_case}"
+    );
+    let names: Vec<&str> = as_case["scores"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s["method"].as_str().unwrap())
+        .collect();
+    assert_eq!(
+        names,
+        [
+            "as-thesis-16",
+            "as-weighted-16",
+            "as-thesis-16",
+            "as-weighted-16"
+        ]
+    );
+    let r = BIN.run(&[
+        env.to_str().unwrap(),
+        "--as-lobes",
+        "100",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_one_line_error(&r, 2, "--as-lobes");
+}
+
+#[test]
+fn reports_are_identical_for_any_thread_count() {
+    let dir = tempfile::tempdir().unwrap();
+    let env = dir.path().join("sky.exr");
+    write_env(&env);
+    let mut texts = Vec::new();
+    for t in ["1", "2"] {
+        let out = dir.path().join(format!("r{t}"));
+        let mut args = vec![
+            env.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--threads",
+            t,
+            "--no-pixels",
+            "--lookup",
+            "engine",
+        ];
+        args.extend(SMALL);
+        let o = BIN.run(&args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        texts.push(std::fs::read_to_string(out.join("report.json")).unwrap());
+    }
+    assert_eq!(texts[0], texts[1]);
+}
+
+#[test]
+fn bad_inputs_fail_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let env = dir.path().join("sky.exr");
+    write_env(&env);
+    let garbage = dir.path().join("garbage.exr");
+    std::fs::write(&garbage, b"not an exr at all").unwrap();
+    let out = dir.path().join("never");
+    let (e, o) = (env.to_str().unwrap(), out.to_str().unwrap());
+    let missing = dir.path().join("none.exr");
+    let cases: Vec<(Vec<&str>, i32, &str)> = vec![
+        (vec![missing.to_str().unwrap(), "--out", o], 4, "none.exr"),
+        (
+            vec![garbage.to_str().unwrap(), "--out", o],
+            2,
+            "garbage.exr",
+        ),
+        (vec![e, "--eta", "1", "--out", o], 2, "--eta"),
+        (vec![e, "--roughness", "0", "--out", o], 2, "--roughness"),
+        (vec![e, "--methods", "major-0", "--out", o], 2, "--methods"),
+        (vec![e, "--methods", "magic", "--out", o], 2, "magic"),
+        (vec![e, "--tangent", "spiral:x", "--out", o], 2, "--tangent"),
+        (vec![e, "--elevations", "90", "--out", o], 2, "--elevations"),
+        (vec![e, "--target", "three", "--out", o], 2, "three"),
+        (
+            vec![e, e, "--prefiltered", e, "--out", o],
+            2,
+            "single environment",
+        ),
+        (
+            vec![e, "--truth-samples", "8", "--out", o],
+            2,
+            "--truth-samples",
+        ),
+    ];
+    for (args, code, needle) in cases {
+        let r = BIN.run(&args);
+        eprintln!("{args:?} → {:?}", r.status.code());
+        assert_one_line_error(&r, code, needle);
+        assert!(!out.exists());
+    }
+}
