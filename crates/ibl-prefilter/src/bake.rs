@@ -315,7 +315,7 @@ impl Params {
     pub fn chain_levels(&self) -> usize {
         let m = max_levels(self.size);
         self.levels.unwrap_or_else(|| match self.target {
-            Target::Gltf => mip_sizes(self.size, GLTF_SMALLEST_FACE).len(),
+            Target::Gltf | Target::Custom => mip_sizes(self.size, GLTF_SMALLEST_FACE).len(),
             Target::Babylon => m,
             t => t.spec().levels.min(m),
         })

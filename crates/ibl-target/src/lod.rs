@@ -63,9 +63,12 @@ pub fn custom_scale(alpha0: f32, levels: usize) -> f32 {
 
 /// Babylon's `lodGenerationScale` (hdrFiltering.ts, `_lodGenerationScale = 0.8`).
 pub(crate) const BABYLON_LOD_SCALE: f32 = 0.8;
-/// α₀ of the `custom` target's lookup, chosen on the design fixtures (bench/runtime.md,
-/// "custom lookup"). Overridden per bake by `prefilter --custom-alpha0`.
-pub const CUSTOM_ALPHA0: f32 = 0.02;
+/// α₀ of the `custom` target's lookup, chosen on the design fixtures only (city_512,
+/// interior_256; `bench-ibl-prefilter -- --custom-design`): worst mean error over r ∈ [0.1, 1]
+/// on 256² × 7 fitted levels, city / interior, α₀ = 0.003: 1.9 / 3.4%, 0.006: 1.7 / 2.9%,
+/// 0.01: 1.5 / 2.5%, 0.015: 1.2 / 2.7%, 0.03: 3.8 / 4.9%, 0.1: 8.6 / 14.6% (6 levels, last
+/// 8²: 0.01 gave 1.9 / 3.4%). Overridden per bake by `prefilter --custom-alpha0`.
+pub const CUSTOM_ALPHA0: f32 = 0.01;
 /// UNITY_SPECCUBE_LOD_STEPS (ImageBasedLighting.hlsl: "the last mip index, we generate 7 mips").
 pub(crate) const UNITY_LOD_STEPS: f32 = 6.0;
 
