@@ -322,9 +322,8 @@ mod tests {
         };
         let (custom, profile) = worst(Target::Custom);
         let (gltf, _) = worst(Target::Gltf);
-        // Measured 2026-11: custom worst 4.6% over r ≥ 0.1 on this 32² × 4 chain (the lobe at
-        // r = 0.1 is a fraction of a texel here), gltf's 5.2%.
-        assert!(custom < 0.06, "custom worst {custom}: {profile:?}");
+        // Measured 2026-11: worst over r ≥ 0.1 on this 32² × 4 chain 1.9% custom, 4.0% gltf.
+        assert!(custom < 0.03, "custom worst {custom}: {profile:?}");
         assert!(custom < gltf, "custom {custom} vs gltf {gltf}");
     }
 
@@ -343,7 +342,8 @@ mod tests {
     }
 
     /// A one-texel 10⁵ sun over a dim sky keeps its power through the custom lookup at
-    /// roughness values between the levels (one trilinear tap of levels that each keep it).
+    /// roughness values between the levels (one trilinear tap of levels that each keep it):
+    /// to 0.1% in every level's texels, to the bilinear read's bound through the lookup.
     #[test]
     fn sun_power_is_kept_between_levels() {
         let n = 32;
@@ -366,6 +366,7 @@ mod tests {
         let b = BorderedMips::new(&chain.mips);
         let lk = p.custom_lookup().unwrap();
         let levels = &chain.report.level_roughness;
+        // Every level's texels keep the source's power (Σ texel·Ω): measured ≤ 0.05%.
         for (l, lv) in chain.mips.levels.iter().enumerate() {
             let m = lv.size;
             let mut t = 0.0f64;
@@ -377,13 +378,7 @@ mod tests {
                     }
                 }
             }
-            let rd = power(96, |d| lv.sample_bilinear(d));
-            eprintln!(
-                "level {l} r {} sum {:.4}% read {:.4}%",
-                levels[l],
-                100.0 * (t - want) / want,
-                100.0 * (rd - want) / want
-            );
+            assert!((t - want).abs() < 1e-3 * want, "level {l}: {t} vs {want}");
         }
         for r in [0.1f32, 0.17, 0.29, 0.41, 0.58, 0.77, 0.93, 1.0] {
             assert!(levels.iter().all(|l| (l - r).abs() > 1e-3) || r == 1.0);
