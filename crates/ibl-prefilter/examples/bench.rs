@@ -89,6 +89,16 @@ fn main() {
         runtime_frontier(&root, quick, false);
         return;
     }
+    // `-- --custom-design`: the custom lookup's α₀ × level-count sweep on the design fixtures
+    // (printed); `-- --custom-only`: just the custom section of bench/runtime.md.
+    if std::env::args().any(|a| a == "--custom-design") {
+        custom_design(&root);
+        return;
+    }
+    if std::env::args().any(|a| a == "--custom-only") {
+        custom_section(&root, quick);
+        return;
+    }
     // `-- --fit-only`: just the lookup-fitted chains against the exact ones (printed).
     if std::env::args().any(|a| a == "--fit-only") {
         runtime_frontier(&root, quick, true);
@@ -535,6 +545,7 @@ fn runtime_frontier(root: &Path, quick: bool, fit_only: bool) {
     std::fs::write(dir.join("runtime.md"), &md).unwrap();
     std::fs::write(dir.join("runtime.svg"), svg).unwrap();
     println!("{md}");
+    custom_section(root, quick);
 }
 
 /// The speed goal with the real binary, plus the error of its levels at probe texels against
@@ -771,4 +782,270 @@ fn floor_section() -> String {
         );
     }
     out
+}
+
+/// The custom target's design fixtures: α₀ and the level count are chosen on these only; the
+/// others are scored ([`custom_section`]).
+const CUSTOM_DESIGN: [&str; 2] = ["city_512.exr", "interior_256.exr"];
+
+/// The custom lookup's α₀ × level-count sweep on the design fixtures, printed: worst mean and
+/// worst 99th percentile over r ∈ [0.1, 1], the profile over r = k/32.
+fn custom_design(root: &Path) {
+    let args: Vec<String> = std::env::args().collect();
+    let get = |k: &str| {
+        args.iter()
+            .position(|a| a == k)
+            .and_then(|i| args.get(i + 1))
+            .map(|v| {
+                v.split(',')
+                    .map(|x| x.parse::<f64>().unwrap())
+                    .collect::<Vec<_>>()
+            })
+    };
+    let a0s = get("--a0").unwrap_or(vec![0.003, 0.01, 0.03, 0.1]);
+    let ns = get("--n").unwrap_or(vec![6.0, 7.0]);
+    let envs: Vec<(String, Environment)> = CUSTOM_DESIGN
+        .iter()
+        .map(|f| {
+            let p = root.join("fixtures/hdri").join(f);
+            (f.to_string(), load_environment(&p, false).unwrap().env)
+        })
+        .collect();
+    for &n in &ns {
+        for &a0 in &a0s {
+            let p = Params {
+                target: Target::Custom,
+                levels: Some(n as usize),
+                custom_alpha0: Some(a0 as f32),
+                ..Default::default()
+            };
+            for (name, env) in &envs {
+                let t = Instant::now();
+                let chain = bake_chain(&p, env, &NoProgress).unwrap();
+                let rt = chain.report.runtime.as_ref().unwrap();
+                let worst = |v: &[f64]| {
+                    rt.roughness
+                        .iter()
+                        .zip(v)
+                        .filter(|(r, _)| **r >= 0.1)
+                        .map(|(_, e)| *e)
+                        .fold(0.0, f64::max)
+                };
+                let prof: Vec<String> = rt
+                    .mean_abs_rel
+                    .iter()
+                    .map(|e| format!("{:.1}", 100.0 * e))
+                    .collect();
+                println!(
+                    "custom N {n} a0 {a0} {name}: worst mean {:.2}% worst p99 {:.1}% r=1 {:.2}% levels r {:?} ({:.1} s)\n   {}",
+                    100.0 * worst(&rt.mean_abs_rel),
+                    100.0 * worst(&rt.p99_abs_rel),
+                    100.0 * rt.mean_abs_rel.last().unwrap(),
+                    chain.report.level_roughness.iter().map(|r| (r * 1000.0).round() / 1000.0).collect::<Vec<_>>(),
+                    t.elapsed().as_secs_f64(),
+                    prof.join(" ")
+                );
+            }
+        }
+    }
+}
+
+/// Where [`custom_section`] starts in bench/runtime.md (everything after it is replaced).
+const CUSTOM_MARKER: &str = "## Custom lookup against every engine's";
+
+/// The fixtures [`custom_section`] scores: the design ones, then the held-out ones (never used
+/// to choose α₀ or the level count). The damaged ones' negative texels are set to 0.
+fn custom_envs(root: &Path, quick: bool) -> Vec<(String, bool, Environment)> {
+    let mut v = Vec::new();
+    for f in CUSTOM_DESIGN {
+        let p = root.join("fixtures/hdri").join(f);
+        v.push((
+            f.to_string(),
+            true,
+            load_environment(&p, false).unwrap().env,
+        ));
+    }
+    let held: &[&str] = if quick {
+        &["hdri/studio_256.exr"]
+    } else {
+        &[
+            "hdri/sunset_256.exr",
+            "hdri/studio_256.exr",
+            "hdri-damaged/esplanade.exr",
+            "hdri-damaged/park.exr",
+        ]
+    };
+    for f in held {
+        let p = root.join("fixtures").join(f);
+        match load_environment(&p, true) {
+            Ok(l) => {
+                let mut cube = l.env.to_cube(256, Filter::Area, 0.0, &NoProgress);
+                for face in &mut cube.faces {
+                    for x in &mut face.data {
+                        *x = x.max(0.0);
+                    }
+                }
+                let name = Path::new(f)
+                    .file_name()
+                    .unwrap()
+                    .to_string_lossy()
+                    .to_string();
+                v.push((name, false, Environment::Cube(cube)));
+            }
+            Err(e) => eprintln!("custom section: {f} skipped: {e}"),
+        }
+    }
+    v
+}
+
+/// A 10⁵ one-texel sun over a dim sky: the largest relative change of the lookup's power
+/// (∫ lookup dω over a 128² grid a face) from the source's, over the 33 roughness values.
+fn sun_power_error(p: &Params) -> f64 {
+    use ibl_core::bordered::BorderedMips;
+    use ibl_core::cube::{texel_solid_angle, Cubemap, Face};
+    let n = 256;
+    let mut src = Cubemap::constant(n, [0.05, 0.05, 0.05]);
+    let k = 3 * (101 * n + 157);
+    src.faces[2].data[k..k + 3].copy_from_slice(&[1e5, 1e5, 1e5]);
+    let power = |m: usize, f: &dyn Fn(Face, usize, usize) -> [f32; 3]| {
+        let mut s = 0.0f64;
+        for face in Face::ALL {
+            for j in 0..m {
+                for i in 0..m {
+                    s += luminance(f(face, i, j)) as f64 * texel_solid_angle(i, j, m);
+                }
+            }
+        }
+        s
+    };
+    let want = power(n, &|f, i, j| src.texel(f, i, j));
+    let chain = bake_chain(p, &Environment::Cube(src), &NoProgress).unwrap();
+    let b = BorderedMips::new(&chain.mips);
+    let m = p.lookup();
+    let (levels, size) = (chain.mips.levels.len(), p.size);
+    (0..=32)
+        .into_par_iter()
+        .map(|k| {
+            let r = k as f32 / 32.0;
+            let lod = m.lod(r, levels, size);
+            let got = power(128, &|f, i, j| b.sample(texel_direction(f, i, j, 128), lod));
+            (got - want).abs() / want
+        })
+        .collect::<Vec<f64>>()
+        .into_iter()
+        .fold(0.0, f64::max)
+}
+
+/// The `custom` target beside every engine target at today's default bytes (256², RGBA16F,
+/// each target's default chain, levels fitted to its lookup): worst mean and worst 99th
+/// percentile over r ∈ [0.1, 1] per fixture, design and held-out, and a sun's power. Appended
+/// to bench/runtime.md (replacing an earlier custom section).
+fn custom_section(root: &Path, quick: bool) {
+    let envs = custom_envs(root, quick);
+    let mut md = String::new();
+    writeln!(md, "{CUSTOM_MARKER} lookup (`--target custom`)\n").unwrap();
+    writeln!(
+        md,
+        "Generated by `cargo run --release -p ibl-prefilter --example bench-ibl-prefilter -- --custom-only{}`. \
+         Each target's default chain at 256² (levels fitted to its lookup, the default), read as its engine reads it, \
+         against the exact GGX kernel at 33 roughness values and {} directions (the `runtime` block of prefilter.json). \
+         Per fixture: the worst over r ∈ [0.1, 1] of the mean absolute relative error of luminance, and of its 99th percentile \
+         over the directions (p99, the worst direction a mean hides). `custom`'s α₀ and level count were chosen on the design fixtures \
+         ({}) only (`-- --custom-design` prints the sweep); the others are held out (hdri-damaged: negative texels set to 0). \
+         `sun power`: a one-texel 10⁵ sun on a dim sky, the largest change of the lookup's power (∫ lookup dω) from the source's over the 33 roughness values.\n",
+        if quick { " --quick" } else { "" },
+        ibl_prefilter::runtime::REPORT_DIRECTIONS,
+        CUSTOM_DESIGN.join(", ")
+    )
+    .unwrap();
+    let names: Vec<String> = envs
+        .iter()
+        .map(|(n, d, _)| {
+            format!(
+                "{}{}",
+                n.trim_end_matches(".exr"),
+                if *d { "*" } else { "" }
+            )
+        })
+        .collect();
+    writeln!(
+        md,
+        "| target | lookup | levels | bytes | worst mean % r ∈ [0.1, 1] ({}) | worst p99 % r ∈ [0.1, 1] | worst mean %, design / held-out | sun power % |",
+        names.join(" / ")
+    )
+    .unwrap();
+    writeln!(md, "|---|---|---:|---:|---|---|---|---:|").unwrap();
+    for target in [
+        Target::Gltf,
+        Target::Filament,
+        Target::Unity,
+        Target::Babylon,
+        Target::Custom,
+    ] {
+        let p = Params {
+            target,
+            ..Default::default()
+        };
+        let (mut means, mut p99s) = (Vec::new(), Vec::new());
+        let (mut design, mut held) = (0.0f64, 0.0f64);
+        let mut levels = 0;
+        for (name, is_design, env) in &envs {
+            let t = Instant::now();
+            let chain = bake_chain(&p, env, &NoProgress).unwrap();
+            levels = chain.mips.levels.len();
+            let rt = chain.report.runtime.as_ref().unwrap();
+            let worst = |v: &[f64]| {
+                rt.roughness
+                    .iter()
+                    .zip(v)
+                    .filter(|(r, _)| **r >= 0.1 - 1e-6)
+                    .map(|(_, e)| *e)
+                    .fold(0.0, f64::max)
+            };
+            let (m, q) = (worst(&rt.mean_abs_rel), worst(&rt.p99_abs_rel));
+            eprintln!(
+                "custom section: {} {name}: mean {:.2}% p99 {:.1}% ({:.1} s)\n   {}",
+                target.name(),
+                100.0 * m,
+                100.0 * q,
+                t.elapsed().as_secs_f64(),
+                rt.mean_abs_rel
+                    .iter()
+                    .map(|e| format!("{:.1}", 100.0 * e))
+                    .collect::<Vec<_>>()
+                    .join(" ")
+            );
+            means.push(format!("{:.1}", 100.0 * m));
+            p99s.push(format!("{:.0}", 100.0 * q));
+            if *is_design {
+                design = design.max(m);
+            } else {
+                held = held.max(m);
+            }
+        }
+        let sun = sun_power_error(&p);
+        let bytes: usize = (0..levels)
+            .map(|l| 6 * 8 * (p.size >> l).max(1).pow(2))
+            .sum();
+        writeln!(
+            md,
+            "| {} | {} | {levels} | {bytes} | {} | {} | {:.1} / {:.1} | {:.3} |",
+            target.name(),
+            p.lookup().name(),
+            means.join(" / "),
+            p99s.join(" / "),
+            100.0 * design,
+            100.0 * held,
+            100.0 * sun
+        )
+        .unwrap();
+    }
+    let path = root.join("bench/runtime.md");
+    let old = std::fs::read_to_string(&path).unwrap_or_default();
+    let keep = match old.find(CUSTOM_MARKER) {
+        Some(i) => old[..i].to_string(),
+        None => format!("{}\n\n", old.trim_end()),
+    };
+    std::fs::write(&path, format!("{keep}{md}")).unwrap();
+    println!("{md}");
 }

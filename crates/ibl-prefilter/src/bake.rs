@@ -1,6 +1,7 @@
 //! The `prefilter` bake: `Params` (CLI flags and RON keys alike) and the pure `run` that turns
 //! a loaded environment into the encoded mip chain plus `prefilter.json`.
 
+use crate::custom::{self, CustomLookup};
 use crate::error::{Error, Result};
 use crate::filter::filter_level;
 use crate::fit;
@@ -18,7 +19,7 @@ use ibl_core::io::texture::LevelEncoding;
 use ibl_core::output::{self, Encoding};
 use ibl_core::progress::Progress;
 use ibl_core::{luminance, CubeMips};
-use ibl_target::Target;
+use ibl_target::{LodMapping, Target};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -178,6 +179,10 @@ pub struct Params {
     /// the exact levels peers write.
     #[arg(long, value_name = "BOOL")]
     pub fit_lookup: Option<bool>,
+    /// With --target custom: α₀ of the lookup lod = s·log2(1 + r²/α₀) (default
+    /// ibl_target::lod::CUSTOM_ALPHA0, chosen on the design fixtures; docs/CUSTOM_LOOKUP.md).
+    #[arg(long, value_name = "A0")]
+    pub custom_alpha0: Option<f32>,
 }
 }
 
@@ -186,6 +191,12 @@ impl Default for Params {
         ibl_core::params::clap_defaults()
     }
 }
+
+/// Range of --custom-alpha0 (below, level 1 is a mirror to half precision; above, the spacing
+/// is linear in α, the levels crowding at high roughness).
+pub const CUSTOM_ALPHA0_MIN: f32 = 1e-4;
+/// See [`CUSTOM_ALPHA0_MIN`].
+pub const CUSTOM_ALPHA0_MAX: f32 = 10.0;
 
 /// Largest level-0 face accepted.
 pub const MAX_SIZE: usize = 4096;
@@ -256,6 +267,19 @@ impl Params {
             }
         }
         ibl_core::params::check_rotate(self.rotate)?;
+        if let Some(a) = self.custom_alpha0 {
+            if self.target != Target::Custom {
+                return Err(Error::param(format!(
+                    "--custom-alpha0 applies to --target custom (--target {} has its engine's fixed lookup)",
+                    self.target.name()
+                )));
+            }
+            if !(CUSTOM_ALPHA0_MIN..=CUSTOM_ALPHA0_MAX).contains(&a) {
+                return Err(Error::param(format!(
+                    "--custom-alpha0 {a} is out of range {CUSTOM_ALPHA0_MIN}..={CUSTOM_ALPHA0_MAX}"
+                )));
+            }
+        }
         if self.target == Target::Babylon
             && (!self.size.is_power_of_two() || self.baked_levels() != max_levels(self.size))
         {
@@ -291,17 +315,33 @@ impl Params {
     pub fn chain_levels(&self) -> usize {
         let m = max_levels(self.size);
         self.levels.unwrap_or_else(|| match self.target {
-            Target::Gltf => mip_sizes(self.size, GLTF_SMALLEST_FACE).len(),
+            Target::Gltf | Target::Custom => mip_sizes(self.size, GLTF_SMALLEST_FACE).len(),
             Target::Babylon => m,
             t => t.spec().levels.min(m),
         })
     }
 
+    /// The lookup the chain is read through: the target's, with --custom-alpha0 applied.
+    pub fn lookup(&self) -> LodMapping {
+        match (self.target.spec().lod, self.custom_alpha0) {
+            (LodMapping::Custom { .. }, Some(alpha0)) => LodMapping::Custom { alpha0 },
+            (m, _) => m,
+        }
+    }
+
+    /// With --target custom, the lookup's constants for this chain.
+    pub fn custom_lookup(&self) -> Option<CustomLookup> {
+        match self.lookup() {
+            LodMapping::Custom { alpha0 } => {
+                Some(CustomLookup::new(alpha0, self.chain_levels(), self.size))
+            }
+            _ => None,
+        }
+    }
+
     /// Roughness of level `l` of the full chain, as the target's lookup reads it.
     pub fn level_roughness(&self, l: usize) -> f32 {
-        self.target
-            .spec()
-            .lod
+        self.lookup()
             .level_roughness(l, self.chain_levels(), self.size)
     }
 
@@ -453,6 +493,9 @@ pub struct Report {
     pub encoding: Option<serde_json::Value>,
     /// The error the target's own lookup sees between levels (see [`crate::runtime`]).
     pub runtime: Option<RuntimeReport>,
+    /// With --target custom: the lookup's constants (also in the KTX2 key/value data and the
+    /// emitted lookup.glsl / .hlsl / .wgsl).
+    pub custom_lookup: Option<CustomLookup>,
 }
 
 /// What one level of `prefilter.json` records.
@@ -550,7 +593,10 @@ pub fn run(
     let mut chain = bake_chain(params, &input.env, progress)?;
     // The engine's orientation: an exact texel permutation of every level.
     let oriented = params.target.spec().orientation.apply_mips(&chain.mips);
-    let metadata = target_metadata(params.target, &chain.mips);
+    let mut metadata = target_metadata(params.target, &chain.mips);
+    if let Some(lk) = &chain.report.custom_lookup {
+        metadata.extend(lk.metadata(&chain.report.level_roughness));
+    }
     let encoded = output::encode_cube(out_dir, &oriented, &enc, params.chain_name(), &metadata)?;
     chain.report.encoding = Some(output::encoding_report(&enc, &encoded.levels));
     chain.warnings.extend(encoded.warnings);
@@ -565,6 +611,11 @@ pub fn run(
         let orientation = params.target.spec().orientation;
         let bytes = ibl_target::babylon::encode_env(&path, &oriented, &irradiance, orientation)?;
         files.push((path, bytes));
+    }
+    if let Some(lk) = &chain.report.custom_lookup {
+        for (name, text) in lk.shaders() {
+            files.push((out_dir.join(name), text.into_bytes()));
+        }
     }
     if params.target != Target::Gltf {
         files.push((
@@ -606,6 +657,9 @@ pub fn output_paths(params: &Params, out_dir: &Path) -> Result<Vec<PathBuf>> {
     p.push(out_dir.join(REPORT_NAME));
     if params.target == Target::Babylon {
         p.push(out_dir.join(BABYLON_ENV_NAME));
+    }
+    if params.custom_lookup().is_some() {
+        p.extend(custom::SHADER_FILES.iter().map(|f| out_dir.join(f)));
     }
     if params.target != Target::Gltf {
         p.push(out_dir.join(ibl_target::NOTE_NAME));
@@ -770,7 +824,7 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
         quality,
         kernel: "D_GGX(n·h, α)·max(n·l, 0), h = normalize(n + l), n = v, α = r², r of each level as the target's lookup reads it, normalised to unit sum",
         target: params.target,
-        lookup: params.target.spec().lod.name(),
+        lookup: params.lookup().name(),
         level_roughness: (0..n_baked).map(|l| params.level_roughness(l)).collect(),
         fit_lookup: params.fits_lookup(),
         source_size: src_size,
@@ -783,6 +837,7 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
         level: reports,
         encoding: None,
         runtime: None,
+        custom_lookup: params.custom_lookup(),
     };
     let mips = CubeMips { levels };
     // The error the target's lookup sees, against the exact kernel (the cell tree at the
@@ -813,9 +868,10 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
             &payload,
         )?)
     };
-    let mut runtime_report = runtime::evaluate(
+    let mut runtime_report = runtime::evaluate_with(
         decoded.as_ref().unwrap_or(&mips),
         params.target,
+        params.lookup(),
         runtime::REPORT_DIRECTIONS,
         &reference,
     );
@@ -852,7 +908,7 @@ fn fit_to_lookup(
     progress: &dyn Progress,
 ) {
     let (size, n_chain) = (params.size, params.chain_levels());
-    let lookup = params.target.spec().lod;
+    let lookup = params.lookup();
     // Small levels fitted to their bilinear read (crate::spatial): a correction of the
     // exact level, later added to what the per-texel fit stores (both are small and the
     // read is linear in the texels).

@@ -7,7 +7,8 @@
 //! importance sampling of Křivánek & Colbert 2008 / Lagarde & de Rousiers 2014 (per-level
 //! sample tables and the per-texel loop, reading the source seamlessly and trilinearly through
 //! `ibl_core::bordered`), kept as `--method fis`; [`kernel`] the exact kernel and the brute-force reference;
-//! [`runtime`] the error an engine's lookup sees, and [`fit`] the levels fitted to that lookup.
+//! [`runtime`] the error an engine's lookup sees, and [`fit`] the levels fitted to that lookup;
+//! [`custom`] our own lookup (`--target custom`) and its emitted shaders.
 
 #![warn(missing_docs)]
 // Index loops read closer to the papers' sums than iterator chains in the numeric kernels.
@@ -15,6 +16,7 @@
 
 pub mod bake;
 mod bake_def;
+pub mod custom;
 pub mod error;
 pub mod filter;
 pub mod fit;

@@ -3,6 +3,8 @@
 //! `ibl_core::bordered`, linear between levels) at continuous roughness and at directions
 //! between texel centres, against the exact GGX-prefiltered radiance at that roughness.
 
+pub use crate::custom::CustomLookup;
+
 use crate::bake::ErrorStats;
 use crate::kernel::SourceTexels;
 use crate::tree::{tree_convolve, CellTree, TreeBuffers, TreeParams};
@@ -101,16 +103,65 @@ pub fn mean_abs_rel(
     dirs: &[Vec3],
     reference: &Reference,
 ) -> Vec<f64> {
+    abs_rel_stats(chain, mapping, roughness, dirs, reference)
+        .into_iter()
+        .map(|s| s.mean)
+        .collect()
+}
+
+/// The lookup's error at one roughness over the directions.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct AbsRel {
+    /// Mean |lookup − exact| / exact of luminance.
+    pub mean: f64,
+    /// Its 99th percentile over the directions (nearest rank): the worst direction a mean
+    /// hides, such as a ring beside a sun.
+    pub p99: f64,
+}
+
+/// Nearest-rank `q` quantile of `v` (sorted in place).
+pub fn quantile(v: &mut [f64], q: f64) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(f64::total_cmp);
+    let k = ((q * v.len() as f64).ceil() as usize).clamp(1, v.len());
+    v[k - 1]
+}
+
+/// Mean and 99th percentile of the absolute relative error of luminance of the lookup against
+/// the reference, per roughness (references below 1e-6 of their mean skipped, as
+/// [`ErrorStats::from_pairs`] does). Parallel over roughness, ordered sums: deterministic.
+pub fn abs_rel_stats(
+    chain: &BorderedMips,
+    mapping: LodMapping,
+    roughness: &[f32],
+    dirs: &[Vec3],
+    reference: &Reference,
+) -> Vec<AbsRel> {
     use rayon::prelude::*;
     roughness
         .par_iter()
         .map_init(TreeBuffers::default, |buf, &r| {
-            let pairs = dirs.iter().map(|&d| {
-                let x = lookup(chain, mapping, d, r);
-                let y = reference.radiance(d, r, buf);
-                (luminance(x) as f64, luminance(y) as f64)
-            });
-            ErrorStats::from_pairs(pairs.collect::<Vec<_>>()).mean_abs_rel
+            let pairs: Vec<(f64, f64)> = dirs
+                .iter()
+                .map(|&d| {
+                    let x = lookup(chain, mapping, d, r);
+                    let y = reference.radiance(d, r, buf);
+                    (luminance(x) as f64, luminance(y) as f64)
+                })
+                .collect();
+            let mean_ref = pairs.iter().map(|p| p.1).sum::<f64>() / pairs.len().max(1) as f64;
+            let floor = 1e-6 * mean_ref.max(1e-30);
+            let mut e: Vec<f64> = pairs
+                .iter()
+                .filter(|p| p.1 > floor)
+                .map(|(x, y)| ((x - y) / y).abs())
+                .collect();
+            AbsRel {
+                mean: ErrorStats::from_pairs(pairs).mean_abs_rel,
+                p99: quantile(&mut e, 0.99),
+            }
         })
         .collect()
 }
@@ -126,6 +177,8 @@ pub struct RuntimeReport {
     pub roughness: Vec<f32>,
     /// Mean |lookup − exact| / exact of luminance at each roughness.
     pub mean_abs_rel: Vec<f64>,
+    /// The 99th percentile of |lookup − exact| / exact over the directions at each roughness.
+    pub p99_abs_rel: Vec<f64>,
     /// Directions per roughness (low-discrepancy, between texel centres).
     pub directions: usize,
     /// What the lookups were compared with.
@@ -143,14 +196,26 @@ pub fn evaluate(
     directions: usize,
     reference: &Reference,
 ) -> RuntimeReport {
-    let spec = target.spec();
+    evaluate_with(mips, target, target.spec().lod, directions, reference)
+}
+
+/// [`evaluate`] through `mapping` (the custom lookup's constants are the bake's).
+pub fn evaluate_with(
+    mips: &CubeMips,
+    target: Target,
+    mapping: LodMapping,
+    directions: usize,
+    reference: &Reference,
+) -> RuntimeReport {
     let chain = BorderedMips::new(mips);
     let roughness = roughness_grid(ROUGHNESS_STEPS);
     let dirs = probe_directions(directions);
+    let stats = abs_rel_stats(&chain, mapping, &roughness, &dirs, reference);
     RuntimeReport {
         target,
-        lookup: spec.lod.name(),
-        mean_abs_rel: mean_abs_rel(&chain, spec.lod, &roughness, &dirs, reference),
+        lookup: mapping.name(),
+        mean_abs_rel: stats.iter().map(|s| s.mean).collect(),
+        p99_abs_rel: stats.iter().map(|s| s.p99).collect(),
         roughness,
         directions,
         reference: reference.name(),

@@ -49,17 +49,22 @@ pub enum Target {
     Babylon,
     /// Unity: DDS cube with Unity's mip mapping, SphericalHarmonicsL2.
     Unity,
+    /// Our own lookup for renderers written by the user: KTX2 RGBA16F chain whose level
+    /// spacing and lookup (lod = s·log2(1 + r²/α₀), one trilinear tap) are designed together,
+    /// the lookup emitted as GLSL / HLSL / WGSL beside it (docs/CUSTOM_LOOKUP.md).
+    Custom,
 }
 
 #[cfg(test)]
 /// Every target, in help order.
-pub(crate) const ALL_TARGETS: [Target; 6] = [
+pub(crate) const ALL_TARGETS: [Target; 7] = [
     Target::Gltf,
     Target::Bevy,
     Target::Filament,
     Target::Three,
     Target::Babylon,
     Target::Unity,
+    Target::Custom,
 ];
 
 /// The diffuse term an engine takes.
@@ -145,6 +150,7 @@ impl Target {
             Target::Three => "three",
             Target::Babylon => "babylon",
             Target::Unity => "unity",
+            Target::Custom => "custom",
         }
     }
 
@@ -304,6 +310,31 @@ impl Target {
                     cube: "cube",
                 },
                 note: "Unity: import specular.dds as a Cubemap (Texture Shape: Cube, keep its mips, no 'Convolution' re-filtering) and assign it as a custom reflection probe / skybox cubemap; mip m holds the roughness Unity's lookup mip = 6 r(1.7 - 0.7 r) lands on (7 mips). SphericalHarmonicsL2.json holds the ambient probe as Unity's sh[rgb, i] (pre-multiplied, Unity's left-handed frame) and the packed unity_SHAr..unity_SHC.",
+            },
+            // Ours: the lookup is emitted beside the chain (lookup.glsl / .hlsl / .wgsl) and its
+            // constants are in prefilter.json and the KTX2 key/value data
+            // (docs/CUSTOM_LOOKUP.md); frame and files as gltf's.
+            Target::Custom => TargetSpec {
+                target: self,
+                engine: "custom renderer (ibl custom lookup)",
+                layout: Layout::Ktx2,
+                format: PixelFormat::Rgba16f,
+                zstd: None,
+                orientation: Orientation::IDENTITY,
+                lod: LodMapping::Custom {
+                    alpha0: lod::CUSTOM_ALPHA0,
+                },
+                levels: 7,
+                size: 256,
+                levels_fixed: false,
+                diffuse: DiffuseForm::IrradianceCube,
+                files: FileNames {
+                    specular: "prefilter",
+                    irradiance: Some("irradiance"),
+                    sh: None,
+                    cube: "cube",
+                },
+                note: "Custom lookup: prefilter.ktx2 is a KTX2 RGBA16F cube chain, our frame (as gltf). Read it with the function in lookup.glsl / lookup.hlsl / lookup.wgsl (written beside it): lod = clamp(s * log2(1 + r*r/a0), 0, N-1), then ONE trilinear textureLod at that lod (the sampler's mipmap filter must be linear). The constants s, a0, N are also in prefilter.json (\"custom_lookup\") and in the KTX2 key/value data (ibl.lookup.*); see docs/CUSTOM_LOOKUP.md. irradiance.ktx2 (irradiance --target custom) is the Lambertian cube (E/pi).",
             },
         }
     }

@@ -37,10 +37,38 @@ pub enum LodMapping {
     /// three.js filters the environment itself at load time (PMREMGenerator): no baked
     /// chain is read, so no level ↔ roughness mapping applies to what we ship.
     Pmrem,
+    /// Our own lookup (`--target custom`, docs/CUSTOM_LOOKUP.md): lod = s·log2(1 + α/α₀),
+    /// α = r², s = (N−1)/log2(1 + 1/α₀) so that r = 1 lands on the last level. Levels are
+    /// geometric in α above α₀ (the lobe's width, hence the texels it needs, goes as α, and the
+    /// level sizes halve) and linear in α below it, down to the mirror at lod 0. The shader
+    /// reads it with one trilinear tap; see [`custom_lod`].
+    Custom {
+        /// α₀, the knee between the linear and the geometric spacing.
+        alpha0: f32,
+    },
+}
+
+/// The custom lookup's lod exactly as its emitted shaders compute it (one f32 expression,
+/// the constants precomputed): clamp(scale·log2(1 + r·r·inv_alpha0), 0, max_lod).
+pub fn custom_lod(r: f32, scale: f32, inv_alpha0: f32, max_lod: f32) -> f32 {
+    let r = r.clamp(0.0, 1.0);
+    (scale * (1.0 + r * r * inv_alpha0).log2()).clamp(0.0, max_lod)
+}
+
+/// The custom lookup's scale s = (N−1)/log2(1 + 1/α₀) for a chain of `levels` levels.
+pub fn custom_scale(alpha0: f32, levels: usize) -> f32 {
+    let last = levels.saturating_sub(1) as f32;
+    last / (1.0 + 1.0 / alpha0).log2()
 }
 
 /// Babylon's `lodGenerationScale` (hdrFiltering.ts, `_lodGenerationScale = 0.8`).
 pub(crate) const BABYLON_LOD_SCALE: f32 = 0.8;
+/// α₀ of the `custom` target's lookup, chosen on the design fixtures only (city_512,
+/// interior_256; `bench-ibl-prefilter -- --custom-design`): worst mean error over r ∈ [0.1, 1]
+/// on 256² × 7 fitted levels, city / interior, α₀ = 0.003: 1.9 / 3.4%, 0.006: 1.7 / 2.9%,
+/// 0.01: 1.5 / 2.5%, 0.015: 1.2 / 2.7%, 0.03: 3.8 / 4.9%, 0.1: 8.6 / 14.6% (6 levels, last
+/// 8²: 0.01 gave 1.9 / 3.4%). Overridden per bake by `prefilter --custom-alpha0`.
+pub const CUSTOM_ALPHA0: f32 = 0.01;
 /// UNITY_SPECCUBE_LOD_STEPS (ImageBasedLighting.hlsl: "the last mip index, we generate 7 mips").
 pub(crate) const UNITY_LOD_STEPS: f32 = 6.0;
 
@@ -53,6 +81,7 @@ impl LodMapping {
             LodMapping::Unity => "lod = 6 r(1.7-0.7r)",
             LodMapping::Babylon { .. } => "lod = 0.8 log2(size r^2)",
             LodMapping::Pmrem => "pmrem (filtered by the engine)",
+            LodMapping::Custom { .. } => "lod = s log2(1 + r^2/a0)",
         }
     }
 
@@ -73,6 +102,9 @@ impl LodMapping {
             LodMapping::Babylon { scale } => {
                 let a = (r * r).max(1e-12);
                 (size as f32 * a).log2() * scale
+            }
+            LodMapping::Custom { alpha0 } => {
+                custom_lod(r, custom_scale(alpha0, levels), 1.0 / alpha0, f32::INFINITY)
             }
         }
     }
@@ -104,6 +136,13 @@ impl LodMapping {
             }
             // log2(size·α)·scale = l  ⇔  α = 2^(l/scale)/size.
             LodMapping::Babylon { scale } => ((t / scale).exp2() / size as f32).sqrt(),
+            // s·log2(1 + α/α₀) = l  ⇔  α = α₀·((1 + 1/α₀)^(l/(N−1)) − 1), in f64 so the
+            // last level is r = 1 to the last bit.
+            LodMapping::Custom { alpha0 } => {
+                let a0 = alpha0 as f64;
+                let a = a0 * ((1.0 + 1.0 / a0).powf(t as f64 / last as f64) - 1.0);
+                a.sqrt() as f32
+            }
         };
         r.clamp(0.0, 1.0)
     }
@@ -120,7 +159,9 @@ impl LodMapping {
 mod tests {
     use super::*;
 
-    const ALL: [LodMapping; 4] = [
+    const ALL: [LodMapping; 6] = [
+        LodMapping::Custom { alpha0: 0.01 },
+        LodMapping::Custom { alpha0: 0.2 },
         LodMapping::Linear,
         LodMapping::Filament,
         LodMapping::Unity,
