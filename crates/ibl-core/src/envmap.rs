@@ -138,8 +138,22 @@ pub(crate) fn read_hdr_image(
     path: &Path,
     sanitize: bool,
 ) -> Result<(Image, TexelReport, Option<String>)> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    read_hdr_image_shaped(path, sanitize, &|_, _| Ok(()))
+}
+
+/// [`read_hdr_image`], with the shape the caller needs checked on the header's size before
+/// anything is decoded (`shape` returns the error for a size it cannot use).
+fn read_hdr_image_shaped(
+    path: &Path,
+    sanitize: bool,
+    shape: &(dyn Fn(u64, u64) -> Result<()> + Sync),
+) -> Result<(Image, TexelReport, Option<String>)> {
+    let bytes = io::budget::read_file(path)?;
+    if let Some((w, h)) = io::declared_size(&bytes) {
+        shape(w, h)?;
+    }
     let mut img = io::decode_image(path, &bytes, ColorSpace::Srgb)?;
+    shape(img.width as u64, img.height as u64)?;
     let report = check_texels(&mut img, path, sanitize)?;
     Ok((img, report, io::content_mismatch(path, &bytes)))
 }
@@ -165,6 +179,30 @@ pub fn load_environment(path: &Path, sanitize: bool) -> Result<LoadedEnvironment
                     })
             })
             .collect::<Result<Vec<PathBuf>>>()?;
+        // Square faces of one size, checked on each header before any face is decoded.
+        let mut first: Option<(u64, u64, PathBuf)> = None;
+        for p in &paths {
+            let bytes = io::budget::read_file(p)?;
+            let Some((w, h)) = io::declared_size(&bytes) else {
+                continue;
+            };
+            if w != h {
+                return Err(Error::invalid(
+                    p,
+                    format!("a cube face must be square, this one is {w}x{h}"),
+                ));
+            }
+            match &first {
+                Some((fw, _, fp)) if *fw != w => {
+                    return Err(Error::invalid(
+                        p,
+                        format!("face of {w}x{h}, but {} is {fw}x{fw}", fp.display()),
+                    ))
+                }
+                Some(_) => {}
+                None => first = Some((w, h, p.clone())),
+            }
+        }
         use rayon::prelude::*;
         let decoded = paths
             .par_iter()
@@ -206,7 +244,13 @@ pub fn load_environment(path: &Path, sanitize: bool) -> Result<LoadedEnvironment
             read_as: note.into_iter().collect(),
         });
     }
-    let (img, report, note) = read_hdr_image(path, sanitize)?;
+    let (img, report, note) = read_hdr_image_shaped(path, sanitize, &|w, h| {
+        if layout_of(w, h).is_some() {
+            Ok(())
+        } else {
+            Err(layout_error(path, w, h))
+        }
+    })?;
     let env = classify_layout(path, img)?;
     Ok(LoadedEnvironment {
         env,
@@ -220,6 +264,28 @@ fn merge(into: &mut TexelReport, r: &TexelReport) {
     into.negative_clamped += r.negative_clamped;
     into.non_finite_zeroed += r.non_finite_zeroed;
     into.most_negative = into.most_negative.min(r.most_negative);
+}
+
+/// The layouts [`classify_layout`] takes, from a size alone: "equirect", "cross" or "strip".
+fn layout_of(w: u64, h: u64) -> Option<&'static str> {
+    if w == 2 * h {
+        Some("equirect")
+    } else if 3 * w == 4 * h || 4 * w == 3 * h {
+        Some("cross")
+    } else if w == 6 * h || h == 6 * w {
+        Some("strip")
+    } else {
+        None
+    }
+}
+
+fn layout_error(path: &Path, w: u64, h: u64) -> Error {
+    Error::unsupported(
+        path,
+        format!(
+            "layout of a {w}x{h} image (expected 2:1 equirect, 4:3 or 3:4 cross, 6:1 or 1:6 strip)"
+        ),
+    )
 }
 
 /// Decides the layout of a single image from its aspect ratio.
@@ -304,7 +370,7 @@ fn read_container_cube(path: &Path) -> Result<Option<(CubeMips, Option<String>)>
         }
         return Ok(None);
     }
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = io::budget::read_file(path)?;
     let tex = io::container::read(path, &bytes)?.expect("sniffed");
     if tex.payload.faces != 6 {
         return Err(Error::unsupported(

@@ -38,6 +38,37 @@ impl Payload {
         self.format.image_bytes(w, h)
     }
 
+    /// Reserves against the run's memory budget what reading `levels` levels of this
+    /// payload's shape takes, before any level is copied or inflated: the encoded bytes twice
+    /// (inflated or copied, then split into faces) and the RGB f32 texels they decode to.
+    pub(crate) fn reserve(
+        &self,
+        path: &Path,
+        container: &str,
+        levels: usize,
+    ) -> Result<super::budget::Reservation> {
+        let (mut encoded, mut texels) = (0u64, 0u64);
+        for l in 0..levels {
+            let (w, h) = self.level_dims(l);
+            encoded = encoded.saturating_add(self.face_bytes(l) as u64 * self.faces as u64);
+            texels = texels.saturating_add(w as u64 * h as u64 * self.faces as u64);
+        }
+        let what = format!(
+            "a {}x{} {container} {} of {levels} level(s) in {}",
+            self.width,
+            self.height,
+            if self.faces == 6 { "cube" } else { "image" },
+            self.format.name()
+        );
+        super::budget::reserve(
+            path,
+            &what,
+            encoded
+                .saturating_mul(2)
+                .saturating_add(texels.saturating_mul(12)),
+        )
+    }
+
     /// Checks that the faces hold exactly the bytes their format and size need.
     pub fn check(&self, path: &Path) -> Result<()> {
         for (l, faces) in self.levels.iter().enumerate() {
