@@ -5,16 +5,16 @@
 //! the system refuses anyway is a one-line error, never an abort.
 //!
 //! One budget per process: `--max-memory` (every tool, `ibl-cli`'s common flags) or the
-//! `IBL_MAX_MEMORY` environment variable (which the tools set for the processes they start)
-//! set it; the default is min(4 GiB, half of the machine's memory). Reservations of readers
+//! `IBL_MAX_MEMORY` environment variable (read by every process, the `bake` runner and the
+//! tools a ninja file starts included) set it; the default is min(4 GiB, half of the machine's memory). Reservations of readers
 //! running at once (the six faces of a folder decode in parallel) add up.
 
 use crate::error::{Error, Result};
 use std::path::Path;
 use std::sync::atomic::{AtomicU64, Ordering};
 
-/// The environment variable that carries the budget to child processes, in the syntax of
-/// [`parse_size`].
+/// The environment variable that sets the budget where no `--max-memory` is given, in the
+/// syntax of [`parse_size`].
 pub const ENV_VAR: &str = "IBL_MAX_MEMORY";
 
 /// The budget in bytes; 0 until set (then [`default_max_memory`] or [`ENV_VAR`] applies).
@@ -67,7 +67,7 @@ pub fn parse_size(text: &str) -> std::result::Result<u64, String> {
     Ok((v * unit as f64) as u64)
 }
 
-/// Sets the budget of this process (and, through [`ENV_VAR`], of the processes it starts).
+/// Sets the budget of this process.
 pub fn set_max_memory(bytes: u64) {
     LIMIT.store(bytes.max(1), Ordering::Relaxed);
 }

@@ -262,24 +262,29 @@ pub fn relative_errors(float: &[Image], decoded: &[Image]) -> (f64, f64) {
 /// Encodes one RGB float image; returns the bytes and how many channel values were clamped.
 pub fn encode_image(img: &Image, format: PixelFormat, quality: Bc6hQuality) -> (Vec<u8>, usize) {
     let max = format.max_value();
-    let clamped = img
-        .data
-        .chunks_exact(img.channels)
-        .map(|px| {
-            px[..3]
-                .iter()
-                .enumerate()
-                .filter(|&(c, &v)| {
-                    let top = if format == PixelFormat::B10g11r11 && c == 2 {
-                        packed::UF10_MAX
-                    } else {
-                        max
-                    };
-                    !(0.0..=top).contains(&v)
-                })
-                .count()
-        })
-        .sum();
+    // rgba32f stores every value as it is (negatives kept by `--negative keep` included):
+    // nothing is clamped, and a warning saying so would send the user to the format in use.
+    let clamped = if format == PixelFormat::Rgba32f {
+        0
+    } else {
+        img.data
+            .chunks_exact(img.channels)
+            .map(|px| {
+                px[..3]
+                    .iter()
+                    .enumerate()
+                    .filter(|&(c, &v)| {
+                        let top = if format == PixelFormat::B10g11r11 && c == 2 {
+                            packed::UF10_MAX
+                        } else {
+                            max
+                        };
+                        !(0.0..=top).contains(&v)
+                    })
+                    .count()
+            })
+            .sum()
+    };
     let mut out = Vec::with_capacity(format.image_bytes(img.width, img.height));
     let texels = img
         .data
