@@ -532,7 +532,7 @@ pub fn run(
     // rather than written as infinity (JSON's null).
     let to_f32 = |v: &[[f64; 3]], what: &str| -> Result<Vec<[f32; 3]>> {
         let big = v.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
-        if !(big <= f32::MAX as f64) {
+        if big.is_nan() || big > f32::MAX as f64 {
             return Err(Error::invalid(
                 &input.path,
                 format!(
