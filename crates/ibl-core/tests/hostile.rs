@@ -102,3 +102,77 @@ fn scan_data_cut_out_is_refused_in_every_mode() {
         );
     }
 }
+
+/// A PNG whose IDAT stream stops early but which still ends in IEND (CRCs recomputed): the
+/// structure check passes, the inflated rows are short, the decoder must fail.
+#[test]
+fn png_with_short_image_data_is_refused() {
+    use ibl_core::io::{encode_image, WriteOptions};
+    let mut img = ibl_core::Image::new(64, 32, 3);
+    for (k, v) in img.data.iter_mut().enumerate() {
+        *v = ((k * 7919) % 1000) as f32 / 1000.0;
+    }
+    let png = encode_image(Path::new("a.png"), &img, &WriteOptions::default()).unwrap();
+    let idat = png.windows(4).position(|w| w == b"IDAT").unwrap() - 4;
+    let len = u32::from_be_bytes(png[idat..idat + 4].try_into().unwrap()) as usize;
+    for keep in [len / 4, len / 2, len - 8] {
+        let mut b = png[..idat].to_vec();
+        let mut chunk = b"IDAT".to_vec();
+        chunk.extend(&png[idat + 8..idat + 8 + keep]);
+        b.extend((keep as u32).to_be_bytes());
+        b.extend(&chunk);
+        b.extend(crc32(&chunk).to_be_bytes());
+        b.extend(&png[idat + 12 + len..]); // the chunks after it, IEND included
+        let e = decode_image(Path::new("a.png"), &b, ColorSpace::Linear);
+        assert!(e.is_err(), "IDAT cut to {keep} of {len} bytes decoded");
+    }
+}
+
+fn crc32(data: &[u8]) -> u32 {
+    let mut c = 0xFFFF_FFFFu32;
+    for &b in data {
+        c ^= b as u32;
+        for _ in 0..8 {
+            c = if c & 1 != 0 {
+                0xEDB8_8320 ^ (c >> 1)
+            } else {
+                c >> 1
+            };
+        }
+    }
+    !c
+}
+
+/// Radiance HDR run-length scan lines whose runs stop short of the width, or a file whose
+/// last lines are missing: refused, never filled.
+#[test]
+fn hdr_with_short_scan_lines_is_refused() {
+    let w = 16u16;
+    let line = |runs: &[(u8, u8)]| {
+        let mut l = vec![2, 2, (w >> 8) as u8, w as u8];
+        for _ in 0..4 {
+            for &(n, v) in runs {
+                l.extend([128 + n, v]);
+            }
+        }
+        l
+    };
+    let head =
+        |h: usize| format!("#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y {h} +X {w}\n").into_bytes();
+    let whole = line(&[(16, 100)]);
+    let mut ok = head(2);
+    ok.extend(&whole);
+    ok.extend(&whole);
+    let img = decode_image(Path::new("a.hdr"), &ok, ColorSpace::Linear).unwrap();
+    assert_eq!((img.width, img.height), (16, 2));
+    // Runs covering 12 of 16 texels, the next line's header read as data.
+    let mut short = head(2);
+    short.extend(line(&[(12, 100)]));
+    short.extend(&whole);
+    assert!(decode_image(Path::new("a.hdr"), &short, ColorSpace::Linear).is_err());
+    // Three lines declared, two present.
+    let mut missing = head(3);
+    missing.extend(&whole);
+    missing.extend(&whole);
+    assert!(decode_image(Path::new("a.hdr"), &missing, ColorSpace::Linear).is_err());
+}
