@@ -14,7 +14,7 @@ use std::path::Path;
 /// Names of the image targets, as in `fuzz/fuzz_targets/` and `fuzz/corpus/`. `zstd` is the
 /// KTX2 reader again, seeded with zstd-supercompressed files so the fuzzer works on the
 /// inflation path.
-pub const IMAGE_TARGETS: [&str; 7] = ["exr", "hdr", "png", "ktx2", "zstd", "dds", "ktx1"];
+pub const IMAGE_TARGETS: [&str; 8] = ["exr", "hdr", "png", "jpeg", "ktx2", "zstd", "dds", "ktx1"];
 
 /// The file name a target's inputs are read under (errors must name it).
 pub fn target_path(name: &str) -> &'static Path {
@@ -22,6 +22,7 @@ pub fn target_path(name: &str) -> &'static Path {
         "exr" => "f.exr",
         "hdr" => "f.hdr",
         "png" => "f.png",
+        "jpeg" => "f.jpg",
         "ktx2" | "zstd" => "f.ktx2",
         "dds" => "f.dds",
         "ktx1" => "f.ktx",
@@ -55,14 +56,45 @@ fn container_cube(path: &Path, data: &[u8]) -> Result<Option<CubeMips>, ibl_core
 
 fn check_image(img: &Image) {
     assert!(img.width > 0 && img.height > 0, "decoded an empty image");
+    assert!(
+        img.width as u64 * img.height as u64 <= ibl_core::image::MAX_TEXELS,
+        "decoded past the size limit"
+    );
     assert!((1..=4).contains(&img.channels), "{} channels", img.channels);
     assert_eq!(img.data.len(), img.width * img.height * img.channels);
+}
+
+/// The size the header declares (what the budget and the shape checks are computed from)
+/// is the size decoded: a decoder that returns another size has read past or short of what
+/// was checked.
+fn check_declared(data: &[u8], img: &Image) {
+    if let Some((w, h)) = ibl_core::io::declared_size(data) {
+        assert_eq!(
+            (w, h),
+            (img.width as u64, img.height as u64),
+            "the header declares another size than was decoded"
+        );
+    }
 }
 
 /// `exr` target: OpenEXR through the extension dispatch.
 pub fn exr(data: &[u8]) {
     if let Ok(img) = decode_image(Path::new("f.exr"), data, ColorSpace::Linear) {
         check_image(&img);
+        check_declared(data, &img);
+    }
+}
+
+/// `jpeg` target: the strict JPEG reader with its scan walk (every block the frame header
+/// declares must be in the entropy-coded data), seeded with libjpeg-turbo's files in every
+/// mode it reads. A JPEG that decodes is as large as its header says.
+pub fn jpeg(data: &[u8]) {
+    for color in [ColorSpace::Linear, ColorSpace::Srgb] {
+        if let Ok(img) = decode_image(Path::new("f.jpg"), data, color) {
+            check_image(&img);
+            check_declared(data, &img);
+            assert!(matches!(img.channels, 1 | 3), "{} channels", img.channels);
+        }
     }
 }
 
@@ -70,6 +102,7 @@ pub fn exr(data: &[u8]) {
 pub fn hdr(data: &[u8]) {
     if let Ok(img) = decode_image(Path::new("f.hdr"), data, ColorSpace::Linear) {
         check_image(&img);
+        check_declared(data, &img);
         assert_eq!(img.channels, 3);
     }
 }
@@ -81,6 +114,7 @@ pub fn png(data: &[u8]) {
     for color in [ColorSpace::Linear, ColorSpace::Srgb] {
         if let Ok(img) = decode_image(Path::new("f.png"), data, color) {
             check_image(&img);
+            check_declared(data, &img);
             assert!(img
                 .data
                 .iter()
@@ -109,6 +143,7 @@ pub fn run_image_target(name: &str, data: &[u8]) {
         "exr" => exr(data),
         "hdr" => hdr(data),
         "png" => png(data),
+        "jpeg" => jpeg(data),
         "ktx2" | "zstd" | "dds" | "ktx1" => container(name, data),
         other => panic!("unknown image fuzz target '{other}'"),
     }

@@ -6,12 +6,12 @@ pub mod mutate;
 #[cfg(feature = "pipeline")]
 mod pipeline;
 
-pub use images::{exr, hdr, ktx2, png, run_image_target, IMAGE_TARGETS};
+pub use images::{exr, hdr, jpeg, ktx2, png, run_image_target, IMAGE_TARGETS};
 #[cfg(feature = "pipeline")]
 pub use pipeline::pipeline;
 
 /// Every target, in the order `scripts/fuzz.sh` runs them.
-pub const TARGETS: [&str; 5] = ["exr", "hdr", "png", "ktx2", "pipeline"];
+pub const TARGETS: [&str; 6] = ["exr", "hdr", "png", "jpeg", "ktx2", "pipeline"];
 
 /// Runs the target called `name` on `data` (the pipeline target only with that feature).
 pub fn run_target(name: &str, data: &[u8]) {

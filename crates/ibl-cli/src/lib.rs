@@ -27,6 +27,11 @@ pub struct CommonArgs {
     /// Print a machine-readable JSON summary on stdout.
     #[arg(long)]
     pub json: bool,
+    /// Memory the inputs may take once decoded (512M, 8G, ...): a file whose header declares
+    /// more is refused before it is decoded [default: min(4 GiB, half the machine's memory),
+    /// or $IBL_MAX_MEMORY].
+    #[arg(long, value_name = "SIZE", value_parser = ibl_core::io::budget::parse_size)]
+    pub max_memory: Option<u64>,
 }
 
 /// Exit codes: 0 success, 2 invalid input or parameters (also clap's usage errors),
@@ -163,6 +168,9 @@ where
         let _ = rayon::ThreadPoolBuilder::new()
             .num_threads(n)
             .build_global();
+    }
+    if let Some(bytes) = common.max_memory {
+        ibl_core::io::budget::set_max_memory(bytes);
     }
     let show = !common.quiet && std::io::stderr().is_terminal();
     let ctx = Ctx {

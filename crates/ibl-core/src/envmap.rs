@@ -20,6 +20,157 @@ pub enum Environment {
     Cube(Cubemap),
 }
 
+/// What to do with negative texel values (the ringing of lossy codecs such as DWAB, or
+/// over-subtracted HDR merges): a flag (`--negative`) and a RON key (`negative`).
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    clap::ValueEnum,
+    serde::Serialize,
+    serde::Deserialize,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum Negative {
+    /// Set them to 0, saying how much power that adds (the default).
+    #[default]
+    Clamp,
+    /// Keep them as they are (linear bakes such as an SH projection integrate them
+    /// meaningfully; a cube written as rgba32f keeps them).
+    Keep,
+    /// Refuse the input.
+    Refuse,
+}
+
+/// How an environment is read: NaN/Inf refused or zeroed, negatives clamped, kept or refused.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct EnvPolicy {
+    /// Set NaN/Inf texels to 0 instead of refusing the input.
+    pub sanitize: bool,
+    /// What to do with negative texels.
+    pub negative: Negative,
+}
+
+/// Negative texels an environment held, weighed by solid angle.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct NegativeReport {
+    /// Channel values below 0.
+    pub count: usize,
+    /// The most negative value (0 when none).
+    pub most_negative: f32,
+    /// Σ over channels of ∫ max(−L, 0) dω: the power clamping adds.
+    pub negative_power: f64,
+    /// Σ over channels of ∫ L dω as read, negatives included.
+    pub power: f64,
+    /// What was done.
+    pub policy: Negative,
+}
+
+impl NegativeReport {
+    /// The negative power as a share of the environment's power as read, in percent, in
+    /// words ("12.7% of the environment's power").
+    fn share(&self) -> String {
+        if self.power > 0.0 {
+            format!(
+                "{:.3}% of the environment's power",
+                100.0 * self.negative_power / self.power
+            )
+        } else {
+            "more than the environment's whole power (its power as read is not positive)".into()
+        }
+    }
+
+    /// The one-line warning (or refusal) for `path`; `None` when there were no negatives.
+    pub fn message(&self, path: &Path) -> Option<String> {
+        if self.count == 0 {
+            return None;
+        }
+        let (p, n, m) = (path.display(), self.count, self.most_negative);
+        Some(match self.policy {
+            Negative::Clamp => format!(
+                "{p}: clamped {n} negative texel values to 0 (most negative {m}), adding +{} \
+                 (--negative keep keeps them, --negative refuse refuses the input)",
+                self.share()
+            ),
+            Negative::Keep => format!(
+                "{p}: kept {n} negative texel values (most negative {m}), which take away {} \
+                 (--negative keep)",
+                self.share()
+            ),
+            Negative::Refuse => format!(
+                "{p}: {n} negative texel values (most negative {m}, {}): refused by \
+                 --negative refuse (clamp sets them to 0, keep keeps them)",
+                self.share()
+            ),
+        })
+    }
+}
+
+/// Measures the negative texels of `env` (solid-angle weighted) and applies `policy`.
+pub fn apply_negative_policy(
+    env: &mut Environment,
+    path: &Path,
+    policy: Negative,
+) -> Result<NegativeReport> {
+    let mut r = NegativeReport {
+        policy,
+        ..Default::default()
+    };
+    // Colour channels are weighed (all of them, or the first three of RGBA); a negative alpha
+    // is clamped under `Clamp` as before, but carries no power.
+    let mut visit = |data: &mut [f32], channels: usize, sa: &dyn Fn(usize) -> f64| {
+        for (k, px) in data.chunks_exact_mut(channels).enumerate() {
+            let w = sa(k);
+            let (colour, alpha) = px.split_at_mut(channels.min(3));
+            for v in alpha.iter_mut().filter(|v| **v < 0.0) {
+                if policy == Negative::Clamp {
+                    *v = 0.0;
+                }
+            }
+            for v in colour {
+                r.power += *v as f64 * w;
+                if *v < 0.0 {
+                    r.count += 1;
+                    r.most_negative = r.most_negative.min(*v);
+                    r.negative_power -= *v as f64 * w;
+                    if policy == Negative::Clamp {
+                        *v = 0.0;
+                    }
+                }
+            }
+        }
+    };
+    match env {
+        Environment::Equirect(img) => {
+            let (w, h, c) = (img.width, img.height, img.channels);
+            let rows: Vec<f64> = (0..h)
+                .map(|j| crate::equirect::row_solid_angle(j, w, h))
+                .collect();
+            visit(&mut img.data, c, &|k| rows[k / w]);
+        }
+        Environment::Cube(cube) => {
+            let sa = crate::cube::solid_angle_table(cube.size);
+            for face in &mut cube.faces {
+                let c = face.channels;
+                visit(&mut face.data, c, &|k| sa[k] as f64);
+            }
+        }
+    }
+    if policy == Negative::Refuse && r.count > 0 {
+        return Err(Error::invalid(
+            path,
+            r.message(path)
+                .expect("negatives")
+                .trim_start_matches(&format!("{}: ", path.display()))
+                .to_string(),
+        ));
+    }
+    Ok(r)
+}
+
 /// An environment plus what the input checks found.
 #[derive(Clone, Debug)]
 pub struct LoadedEnvironment {
@@ -32,14 +183,21 @@ pub struct LoadedEnvironment {
     /// How files whose content and name disagree were read ([`io::content_mismatch`]), one
     /// line each.
     pub read_as: Vec<String>,
+    /// The negative texels, their power and what was done with them.
+    pub negative: NegativeReport,
 }
 
 impl LoadedEnvironment {
     /// Warnings to print: files read by content against their name, then negative texels
-    /// clamped and NaN/Inf zeroed.
+    /// (with the power clamping added or keeping took away) and NaN/Inf zeroed.
     pub fn warnings(&self) -> Vec<String> {
         let mut w = self.read_as.clone();
-        w.extend(self.report.warnings(&self.path));
+        w.extend(self.negative.message(&self.path));
+        let zeroed = TexelReport {
+            negative_clamped: 0,
+            ..self.report.clone()
+        };
+        w.extend(zeroed.warnings(&self.path));
         w
     }
 }
@@ -138,14 +296,74 @@ pub(crate) fn read_hdr_image(
     path: &Path,
     sanitize: bool,
 ) -> Result<(Image, TexelReport, Option<String>)> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    read_hdr_image_shaped(path, sanitize, &|_, _| Ok(()))
+}
+
+/// [`read_hdr_image`], with the shape the caller needs checked on the header's size before
+/// anything is decoded (`shape` returns the error for a size it cannot use).
+fn read_hdr_image_shaped(
+    path: &Path,
+    sanitize: bool,
+    shape: &(dyn Fn(u64, u64) -> Result<()> + Sync),
+) -> Result<(Image, TexelReport, Option<String>)> {
+    let bytes = io::budget::read_file(path)?;
+    if let Some((w, h)) = io::declared_size(&bytes) {
+        shape(w, h)?;
+    }
     let mut img = io::decode_image(path, &bytes, ColorSpace::Srgb)?;
-    let report = check_texels(&mut img, path, sanitize)?;
+    shape(img.width as u64, img.height as u64)?;
+    let report = check_finite(&mut img, path, sanitize)?;
     Ok((img, report, io::content_mismatch(path, &bytes)))
 }
 
-/// Loads an environment from a file or a folder of faces.
+/// The NaN/Inf half of [`check_texels`]: refused unless `sanitize` (then 0). Negative values
+/// are left for [`apply_negative_policy`], which needs the layout to weigh them.
+fn check_finite(img: &mut Image, path: &Path, sanitize: bool) -> Result<TexelReport> {
+    let mut report = TexelReport::default();
+    let bad = img.data.iter().filter(|v| !v.is_finite()).count();
+    if bad > 0 {
+        if !sanitize {
+            return Err(Error::NonFinite {
+                path: path.to_path_buf(),
+                count: bad,
+            });
+        }
+        img.data
+            .iter_mut()
+            .filter(|v| !v.is_finite())
+            .for_each(|v| *v = 0.0);
+        report.non_finite_zeroed = bad;
+    }
+    Ok(report)
+}
+
+/// Loads an environment from a file or a folder of faces, negatives clamped (see
+/// [`load_environment_with`]).
 pub fn load_environment(path: &Path, sanitize: bool) -> Result<LoadedEnvironment> {
+    load_environment_with(
+        path,
+        EnvPolicy {
+            sanitize,
+            negative: Negative::Clamp,
+        },
+    )
+}
+
+/// Loads an environment from a file or a folder of faces under `policy`; the report says
+/// what the negative texels weighed and what was done with them.
+pub fn load_environment_with(path: &Path, policy: EnvPolicy) -> Result<LoadedEnvironment> {
+    let mut loaded = load_unchecked(path, policy.sanitize)?;
+    let r = apply_negative_policy(&mut loaded.env, path, policy.negative)?;
+    if policy.negative == Negative::Clamp {
+        loaded.report.negative_clamped = r.count;
+        loaded.report.most_negative = r.most_negative;
+    }
+    loaded.negative = r;
+    Ok(loaded)
+}
+
+/// Reads an environment, NaN/Inf handled, negatives as read.
+fn load_unchecked(path: &Path, sanitize: bool) -> Result<LoadedEnvironment> {
     if path.is_dir() {
         // Find all six first (a missing face is reported before any decoding), then decode
         // them in parallel: the decoders themselves run on one thread each.
@@ -165,6 +383,30 @@ pub fn load_environment(path: &Path, sanitize: bool) -> Result<LoadedEnvironment
                     })
             })
             .collect::<Result<Vec<PathBuf>>>()?;
+        // Square faces of one size, checked on each header before any face is decoded.
+        let mut first: Option<(u64, u64, PathBuf)> = None;
+        for p in &paths {
+            let bytes = io::budget::read_file(p)?;
+            let Some((w, h)) = io::declared_size(&bytes) else {
+                continue;
+            };
+            if w != h {
+                return Err(Error::invalid(
+                    p,
+                    format!("a cube face must be square, this one is {w}x{h}"),
+                ));
+            }
+            match &first {
+                Some((fw, _, fp)) if *fw != w => {
+                    return Err(Error::invalid(
+                        p,
+                        format!("face of {w}x{h}, but {} is {fw}x{fw}", fp.display()),
+                    ))
+                }
+                Some(_) => {}
+                None => first = Some((w, h, p.clone())),
+            }
+        }
         use rayon::prelude::*;
         let decoded = paths
             .par_iter()
@@ -185,6 +427,7 @@ pub fn load_environment(path: &Path, sanitize: bool) -> Result<LoadedEnvironment
             path: path.to_path_buf(),
             report,
             read_as,
+            negative: NegativeReport::default(),
         });
     }
     if !path.exists() {
@@ -197,22 +440,30 @@ pub fn load_environment(path: &Path, sanitize: bool) -> Result<LoadedEnvironment
         let mut cube = mips.levels.swap_remove(0);
         let mut report = TexelReport::default();
         for face in &mut cube.faces {
-            merge(&mut report, &check_texels(face, path, sanitize)?);
+            merge(&mut report, &check_finite(face, path, sanitize)?);
         }
         return Ok(LoadedEnvironment {
             env: Environment::Cube(cube),
             path: path.to_path_buf(),
             report,
             read_as: note.into_iter().collect(),
+            negative: NegativeReport::default(),
         });
     }
-    let (img, report, note) = read_hdr_image(path, sanitize)?;
+    let (img, report, note) = read_hdr_image_shaped(path, sanitize, &|w, h| {
+        if layout_of(w, h).is_some() {
+            Ok(())
+        } else {
+            Err(layout_error(path, w, h))
+        }
+    })?;
     let env = classify_layout(path, img)?;
     Ok(LoadedEnvironment {
         env,
         path: path.to_path_buf(),
         report,
         read_as: note.into_iter().collect(),
+        negative: NegativeReport::default(),
     })
 }
 
@@ -220,6 +471,28 @@ fn merge(into: &mut TexelReport, r: &TexelReport) {
     into.negative_clamped += r.negative_clamped;
     into.non_finite_zeroed += r.non_finite_zeroed;
     into.most_negative = into.most_negative.min(r.most_negative);
+}
+
+/// The layouts [`classify_layout`] takes, from a size alone: "equirect", "cross" or "strip".
+fn layout_of(w: u64, h: u64) -> Option<&'static str> {
+    if w == 2 * h {
+        Some("equirect")
+    } else if 3 * w == 4 * h || 4 * w == 3 * h {
+        Some("cross")
+    } else if w == 6 * h || h == 6 * w {
+        Some("strip")
+    } else {
+        None
+    }
+}
+
+fn layout_error(path: &Path, w: u64, h: u64) -> Error {
+    Error::unsupported(
+        path,
+        format!(
+            "layout of a {w}x{h} image (expected 2:1 equirect, 4:3 or 3:4 cross, 6:1 or 1:6 strip)"
+        ),
+    )
 }
 
 /// Decides the layout of a single image from its aspect ratio.
@@ -304,7 +577,7 @@ fn read_container_cube(path: &Path) -> Result<Option<(CubeMips, Option<String>)>
         }
         return Ok(None);
     }
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = io::budget::read_file(path)?;
     let tex = io::container::read(path, &bytes)?.expect("sniffed");
     if tex.payload.faces != 6 {
         return Err(Error::unsupported(

@@ -33,6 +33,15 @@ pub enum Error {
         /// What is not supported.
         what: String,
     },
+    /// Decoding the input would need more memory than the run's budget allows, or an
+    /// allocation failed: refused before (or instead of) aborting.
+    #[error("{}: {reason}", path_or_param(.path))]
+    Memory {
+        /// The file being read, or `None`.
+        path: Option<PathBuf>,
+        /// What was needed and what the budget is.
+        reason: String,
+    },
     /// Reading or writing a file failed.
     #[error("{}: {source}", .path.display())]
     Io {
@@ -56,7 +65,7 @@ fn path_or_param(p: &Option<PathBuf>) -> String {
 pub enum ErrorClass {
     /// Bad data or parameters: exit code 2.
     InvalidInput,
-    /// Valid input the tools do not handle: exit code 3.
+    /// Valid input the tools do not handle, or more than the memory budget: exit code 3.
     Unsupported,
     /// A file-system failure: exit code 4.
     Io,
@@ -95,7 +104,8 @@ impl Error {
     pub fn class(&self) -> ErrorClass {
         match self {
             Error::InvalidInput { .. } | Error::NonFinite { .. } => ErrorClass::InvalidInput,
-            Error::Unsupported { .. } => ErrorClass::Unsupported,
+            // Exit 3 with unsupported input: the data may be valid, this run cannot hold it.
+            Error::Unsupported { .. } | Error::Memory { .. } => ErrorClass::Unsupported,
             Error::Io { .. } => ErrorClass::Io,
         }
     }

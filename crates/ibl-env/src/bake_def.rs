@@ -78,7 +78,10 @@ impl Bake for EquirectToCube {
         out: &Path,
         progress: &dyn Progress,
     ) -> Result<Baked, BakeError> {
-        let env = ibl_bake::environment(Self::NAME, inputs, p.sanitize)?;
+        let env = ibl_core::envmap::load_environment_with(
+            ibl_bake::one_input(Self::NAME, inputs)?,
+            p.env_policy(),
+        )?;
         let baked = e2c::run(p, &env, out, progress)?;
         let mut warnings = env.warnings();
         warnings.extend(baked.warnings);
@@ -93,7 +96,7 @@ impl Bake for EquirectToCube {
         })
     }
     fn example(&self) -> e2c::Params {
-        ibl_bake::example("(size: 16, rotate: -12.5, layout: ktx2, half: true, zstd: 19, filter: bilinear, to_equirect: true, sanitize: true)")
+        ibl_bake::example("(size: 16, rotate: -12.5, layout: ktx2, half: true, zstd: 19, filter: bilinear, to_equirect: true, sanitize: true, negative: keep)")
     }
 }
 
@@ -136,7 +139,10 @@ impl Bake for Irradiance {
         out: &Path,
         progress: &dyn Progress,
     ) -> Result<Baked, BakeError> {
-        let env = ibl_bake::environment(Self::NAME, inputs, p.sanitize)?;
+        let env = ibl_core::envmap::load_environment_with(
+            ibl_bake::one_input(Self::NAME, inputs)?,
+            p.env_policy(),
+        )?;
         let baked = irr::run(p, &env, out, progress)?;
         let mut warnings = env.warnings();
         if baked.negative_clamped > 0 {
@@ -155,12 +161,13 @@ impl Bake for Irradiance {
             details: serde_json::json!({
                 "coefficients": baked.coefficients,
                 "input_negative_clamped": env.report.negative_clamped,
+                "input_negative": env.negative,
                 "ringing_negative_clamped": baked.negative_clamped,
                 "encoding": ibl_bake::encoding_details(&baked.encoding),
             }),
         })
     }
     fn example(&self) -> irr::Params {
-        ibl_bake::example("(bands: 5, size: 8, exact: true, exact_source_width: 64, window: true, sh_file: \"coeffs.ron\", rotate: 90, layout: dds, format: bc6h, bc6h_quality: fast, sanitize: true)")
+        ibl_bake::example("(bands: 5, size: 8, exact: true, exact_source_width: 64, window: true, sh_file: \"coeffs.ron\", rotate: 90, layout: dds, format: bc6h, bc6h_quality: fast, sanitize: true, negative: refuse)")
     }
 }

@@ -38,6 +38,11 @@ pub struct Params {
     /// Set NaN/Inf input texels to 0 instead of refusing the input.
     #[arg(long)]
     pub sanitize: bool,
+    /// Negative input texels: clamp them to 0 (saying how much power that adds), keep them
+    /// (resampling is linear; rgba32f and EXR outputs keep them, packed formats clamp with a
+    /// warning) or refuse the input.
+    #[arg(long, value_enum, default_value_t = ibl_core::envmap::Negative::Clamp)]
+    pub negative: ibl_core::envmap::Negative,
     /// Engine the cube is made for: its orientation (an exact face permutation with flips).
     #[arg(long, value_enum, default_value_t = ibl_target::Target::Gltf)]
     pub target: ibl_target::Target,
@@ -55,6 +60,14 @@ impl Default for Params {
 pub(crate) const MAX_FACE_SIZE: usize = 6688;
 
 impl Params {
+    /// How the input environment is read (`--sanitize`, `--negative`).
+    pub fn env_policy(&self) -> ibl_core::envmap::EnvPolicy {
+        ibl_core::envmap::EnvPolicy {
+            sanitize: self.sanitize,
+            negative: self.negative,
+        }
+    }
+
     /// Checks the parameters before any input is read (face size within 1..=MAX_FACE_SIZE, ...).
     pub fn validate(&self) -> Result<()> {
         if let Some(n) = self.size {

@@ -57,6 +57,11 @@ pub struct Params {
     /// Set NaN/Inf input texels to 0 instead of refusing the input.
     #[arg(long)]
     pub sanitize: bool,
+    /// Negative input texels: clamp them to 0 (saying how much power that adds), keep them
+    /// (the SH projection is linear and integrates them as they are; so does `--exact`) or
+    /// refuse the input.
+    #[arg(long, value_enum, default_value_t = ibl_core::envmap::Negative::Clamp)]
+    pub negative: ibl_core::envmap::Negative,
     /// Engine the outputs are made for: the cube's orientation and its SH form as an extra
     /// file (Filament sh.txt, three.js LightProbe.json, Unity SphericalHarmonicsL2.json).
     #[arg(long, value_enum, default_value_t = Target::Gltf)]
@@ -71,6 +76,14 @@ impl Default for Params {
 }
 
 impl Params {
+    /// How the input environment is read (`--sanitize`, `--negative`).
+    pub fn env_policy(&self) -> ibl_core::envmap::EnvPolicy {
+        ibl_core::envmap::EnvPolicy {
+            sanitize: self.sanitize,
+            negative: self.negative,
+        }
+    }
+
     /// Checks the parameters before any input is read (bands within 1..=MAX_BANDS, ...).
     pub fn validate(&self) -> Result<()> {
         if self.bands == 0 || self.bands > MAX_BANDS {
@@ -243,14 +256,15 @@ pub(crate) fn project_equirect(img: &Image, bands: usize, rotate_deg: f32) -> Ve
 }
 
 /// ∫ L Y_lm dω over a cube's texels with their exact solid angles (turned by `rotate_deg`).
-/// Each face row is summed in f32 (at most a few thousand terms) and rows in f64, in order.
+/// Summed in f64: radiance near the f32 limit (10³⁸) times a row's solid angles overflows
+/// f32 partial sums, and finite input must give finite coefficients.
 pub fn project_cube(cube: &Cubemap, bands: usize, rotate_deg: f32) -> Vec<[f64; 3]> {
     let n = num_coeffs(bands);
     let size = cube.size;
     let sa = solid_angle_table(size);
     let row = |r: usize| {
         let (face, j) = (Face::from_index(r / size), r % size);
-        let mut acc = vec![[0.0f32; 3]; n];
+        let mut acc = vec![[0.0f64; 3]; n];
         let mut y = vec![0.0f32; n];
         let texels = &cube.faces[face as usize].data[j * size * 3..(j + 1) * size * 3];
         for (i, (c, s)) in texels
@@ -263,14 +277,16 @@ pub fn project_cube(cube: &Cubemap, bands: usize, rotate_deg: f32) -> Vec<[f64; 
                 bands,
                 &mut y,
             );
-            let (r_, g_, b_) = (c[0] * s, c[1] * s, c[2] * s);
+            let s = *s as f64;
+            let (r_, g_, b_) = (c[0] as f64 * s, c[1] as f64 * s, c[2] as f64 * s);
             for (a, yi) in acc.iter_mut().zip(&y) {
+                let yi = *yi as f64;
                 a[0] += r_ * yi;
                 a[1] += g_ * yi;
                 a[2] += b_ * yi;
             }
         }
-        acc.iter().map(|a| a.map(|v| v as f64)).collect::<Vec<_>>()
+        acc
     };
     ordered_row_reduce(6 * size, row, vec![[0.0f64; 3]; n], add_coeffs)
 }
@@ -415,7 +431,24 @@ pub fn convolve_cosine_exact(
     rotate_deg: f32,
     progress: &dyn Progress,
 ) -> Cubemap {
-    let src = weighted_texels(env, exact_source_width, rotate_deg);
+    let mut src = weighted_texels(env, exact_source_width, rotate_deg);
+    // The blocks below sum 256 terms in f32: radiance near the f32 limit would overflow them.
+    // Scale by a power of two (exact) so that a block cannot, and undo it in f64.
+    let top = src
+        .radiance_times_sa
+        .iter()
+        .flat_map(|v| v[..3].iter())
+        .fold(0.0f32, |m, v| m.max(v.abs()));
+    let unscale = if top > 1e30 {
+        let k = (top as f64 / 1e30).log2().ceil() as i32;
+        let f = 2f32.powi(-k);
+        src.radiance_times_sa
+            .iter_mut()
+            .for_each(|v| v[..3].iter_mut().for_each(|x| *x *= f));
+        2f64.powi(k)
+    } else {
+        1.0
+    };
     map_cube_texels(size, progress, |face, i, j| {
         let n = texel_direction(face, i, j, size);
         let mut acc = [0.0f64; 4];
@@ -432,16 +465,30 @@ pub fn convolve_cosine_exact(
                 acc[k] += block[k] as f64;
             }
         }
-        let norm = if acc[3] > 0.0 { 1.0 / acc[3] } else { 0.0 };
+        let norm = if acc[3] > 0.0 { unscale / acc[3] } else { 0.0 };
         [acc[0], acc[1], acc[2]].map(|a| (a * norm) as f32)
     })
 }
 
-/// The irradiance cube E/π evaluated from SH coefficients; negative values (ringing under
-/// strong suns) are clamped to 0 and counted.
-pub fn cube_from_sh(coeffs: &[[f32; 3]], size: usize, progress: &dyn Progress) -> (Cubemap, usize) {
+/// The irradiance cube E/π evaluated from SH coefficients (f32 or f64), summed in f64;
+/// negative values (ringing under strong suns) are clamped to 0 and counted. A value beyond
+/// the f32 range comes out infinite ([`run`] refuses it).
+pub fn cube_from_sh<C: Copy + Into<f64> + Sync>(
+    coeffs: &[[C; 3]],
+    size: usize,
+    progress: &dyn Progress,
+) -> (Cubemap, usize) {
+    let bands = (coeffs.len() as f64).sqrt() as usize;
     let cube = map_cube_texels(size, progress, |face, i, j| {
-        sh::eval_rgb(coeffs, texel_direction(face, i, j, size))
+        let mut y = vec![0.0f32; num_coeffs(bands)];
+        sh::eval_basis(texel_direction(face, i, j, size), bands, &mut y);
+        let mut out = [0.0f64; 3];
+        for (c, yi) in coeffs.iter().zip(&y) {
+            for k in 0..3 {
+                out[k] += c[k].into() * *yi as f64;
+            }
+        }
+        out.map(|v| v as f32)
     });
     let mut clamped = 0;
     let mut cube = cube;
@@ -480,11 +527,28 @@ pub fn run(
     params.validate()?;
     let radiance = project(&input.env, params.bands, params.rotate);
     let irr = irradiance_coefficients(&radiance, params.bands, params.window);
-    let to_f32 = |v: &[[f64; 3]]| v.iter().map(|c| c.map(|x| x as f32)).collect::<Vec<_>>();
+    // The coefficients file holds 32-bit floats, as every engine reading SH takes them: a
+    // coefficient beyond their range (a constant 10³⁸ sky has L00 = 3.5·10³⁸) is refused
+    // rather than written as infinity (JSON's null).
+    let to_f32 = |v: &[[f64; 3]], what: &str| -> Result<Vec<[f32; 3]>> {
+        let big = v.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
+        if big.is_nan() || big > f32::MAX as f64 {
+            return Err(Error::invalid(
+                &input.path,
+                format!(
+                    "the {what} SH coefficients reach {big:.3e}, beyond the largest 32-bit float \
+                     ({:.3e}) that {} and engines store: scale the environment down",
+                    f32::MAX,
+                    params.sh_file
+                ),
+            ));
+        }
+        Ok(v.iter().map(|c| c.map(|x| x as f32)).collect())
+    };
     let coefficients = ShCoefficients {
         bands: params.bands,
-        radiance: to_f32(&radiance),
-        irradiance: to_f32(&irr),
+        radiance: to_f32(&radiance, "radiance")?,
+        irradiance: to_f32(&irr, "irradiance")?,
         windowed: params.window,
     };
     let (cube, negative_clamped) = if params.exact {
@@ -499,8 +563,25 @@ pub fn run(
             0,
         )
     } else {
-        cube_from_sh(&coefficients.irradiance, params.size, progress)
+        cube_from_sh(&irr, params.size, progress)
     };
+    // Finite input, finite output: E/π is at most the largest radiance, so only input within
+    // a factor of the f32 limit can get here; no pixel format holds more than rgba32f.
+    if let Some(v) = cube
+        .faces
+        .iter()
+        .flat_map(|f| f.data.iter())
+        .find(|v| !v.is_finite())
+    {
+        return Err(Error::invalid(
+            &input.path,
+            format!(
+                "the irradiance reaches {v}, beyond the largest 32-bit float ({:.3e}) that any \
+                 output format holds: scale the environment down",
+                f32::MAX
+            ),
+        ));
+    }
     let sh_path = out_dir.join(&params.sh_file);
     let mut files = vec![(sh_path.clone(), io::data::encode(&sh_path, &coefficients)?)];
     let enc = params.encoding()?;

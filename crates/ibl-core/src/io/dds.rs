@@ -181,6 +181,7 @@ pub fn decode(path: &Path, b: &[u8]) -> Result<Payload> {
             b.len() - data_off
         )));
     }
+    let _budget = p.reserve(path, "DDS", levels as usize)?;
     let mut o = data_off;
     for _ in 0..faces {
         for l in 0..levels as usize {

@@ -32,10 +32,85 @@ fn role(name: &str) -> String {
     name.rsplit('.').next().unwrap_or(name).to_ascii_uppercase()
 }
 
+/// Checks the chunk offset tables before anything is decoded: every chunk the header's size
+/// needs must be in the file, each once, whole: the decoder leaves the texels of a missing
+/// chunk at zero (a truncated or damaged file would read as an image with black bands), and a
+/// small file declaring a huge image cannot even hold the table of its chunks. Scan-line
+/// chunks must also start at the line their index says (OpenEXR file layout, "Offset
+/// Tables" and "Scan Line Chunks").
+fn check_chunks<R: std::io::Read>(
+    path: &Path,
+    bytes: &[u8],
+    meta: &exr::meta::MetaData,
+    read: &mut exr::io::PeekRead<R>,
+) -> Result<()> {
+    let count: usize = meta.headers.iter().map(|h| h.chunk_count).sum();
+    if (count as u64).saturating_mul(8) > bytes.len() as u64 {
+        return Err(Error::invalid(
+            path,
+            format!(
+                "truncated EXR: {} bytes cannot hold the offsets of the {count} chunks its header declares",
+                bytes.len()
+            ),
+        ));
+    }
+    let tables = exr::meta::MetaData::read_offset_tables(read, &meta.headers)
+        .map_err(|e| Error::invalid(path, format!("not a readable EXR file: {e}")))?;
+    let multipart = meta.requirements.has_multiple_layers;
+    let mut seen = std::collections::HashSet::with_capacity(count);
+    let le_i32 = |at: usize| -> Option<i64> {
+        bytes
+            .get(at..at + 4)
+            .map(|b| i32::from_le_bytes(b.try_into().expect("4 bytes")) as i64)
+    };
+    for (part, (header, table)) in meta.headers.iter().zip(&tables).enumerate() {
+        let tiled = matches!(header.blocks, exr::meta::BlockDescription::Tiles(_));
+        let lines = header.compression.scan_lines_per_block() as i64;
+        let y0 = header.own_attributes.layer_position.1 as i64;
+        for (k, &off) in table.iter().enumerate() {
+            let missing = || {
+                Error::invalid(
+                    path,
+                    format!(
+                        "truncated or damaged EXR: chunk {k} of {} is missing (offset {off} of a {}-byte file)",
+                        table.len(),
+                        bytes.len()
+                    ),
+                )
+            };
+            let mut at = usize::try_from(off).map_err(|_| missing())?;
+            if multipart {
+                at = at.checked_add(4).ok_or_else(missing)?;
+            }
+            // Scan lines: y, then the data size; tiles: four coordinates, then the size.
+            let head = if tiled { 16 } else { 4 };
+            let len = le_i32(at + head).ok_or_else(missing)?;
+            let end = (at + head + 4) as i64 + len;
+            if len < 0 || end > bytes.len() as i64 || !seen.insert(off) {
+                return Err(missing());
+            }
+            if !tiled && !multipart && part == 0 {
+                let y = le_i32(at).ok_or_else(missing)?;
+                if y != y0 + k as i64 * lines {
+                    return Err(Error::invalid(
+                        path,
+                        format!(
+                            "damaged EXR: chunk {k} holds line {y}, expected {}",
+                            y0 + k as i64 * lines
+                        ),
+                    ));
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
 pub fn decode(path: &Path, bytes: &[u8]) -> Result<Image> {
     let bad = |e: exr::error::Error| Error::invalid(path, format!("not a readable EXR file: {e}"));
     // Header first: refuse absurd sizes before the decoder allocates.
-    let meta = exr::meta::MetaData::read_from_buffered(Cursor::new(bytes), false).map_err(bad)?;
+    let mut cursor = exr::io::PeekRead::new(Cursor::new(bytes));
+    let meta = exr::meta::MetaData::read_from_buffered(&mut cursor, false).map_err(bad)?;
     let header = meta
         .headers
         .first()
@@ -45,6 +120,21 @@ pub fn decode(path: &Path, bytes: &[u8]) -> Result<Image> {
     }
     let size = header.layer_size;
     Image::check_size(path, size.0 as u64, size.1 as u64)?;
+    check_chunks(path, bytes, &meta, &mut cursor)?;
+    // What decoding allocates: the crate's planes (every channel at its sample size) and our
+    // interleaved f32 copy of at most four of them.
+    let texels = size.0 as u64 * size.1 as u64;
+    let plane_bytes: u64 = header
+        .channels
+        .list
+        .iter()
+        .map(|c| c.sample_type.bytes_per_sample() as u64)
+        .sum();
+    let _budget = super::budget::reserve(
+        path,
+        &format!("a {}x{} EXR image", size.0, size.1),
+        texels.saturating_mul(plane_bytes + 16),
+    )?;
 
     let image = read()
         .no_deep_data()
@@ -110,7 +200,7 @@ pub fn decode(path: &Path, bytes: &[u8]) -> Result<Image> {
         ));
     }
     let channels = picked.len();
-    let mut data = vec![0.0f32; n * channels];
+    let mut data = super::budget::try_zeroed::<f32>(path, n * channels)?;
     for (k, &c) in picked.iter().enumerate() {
         interleave(&list[c].sample_data, &mut data[k..], channels);
     }

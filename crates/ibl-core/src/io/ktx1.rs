@@ -100,6 +100,7 @@ pub fn decode(path: &Path, b: &[u8]) -> Result<(Payload, super::ktx2::Metadata)>
         faces: faces as usize,
         levels: Vec::with_capacity(levels as usize),
     };
+    let _budget = p.reserve(path, "KTX", levels as usize)?;
     let mut o = HEADER_LEN + kvd_len;
     for l in 0..levels as usize {
         let n = p.face_bytes(l);

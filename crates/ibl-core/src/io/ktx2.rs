@@ -163,7 +163,7 @@ pub fn encode(p: &Payload, zstd: Option<i32>, metadata: &[(String, Vec<u8>)]) ->
             use rayon::prelude::*;
             raw.par_iter()
                 .map(|b| {
-                    zstd::bulk::compress(b, level)
+                    deflate(b, level)
                         .map_err(|e| Error::param(format!("zstd compression failed: {e}")))
                 })
                 .collect::<Result<_>>()?
@@ -213,6 +213,35 @@ pub fn encode(p: &Payload, zstd: Option<i32>, metadata: &[(String, Vec<u8>)]) ->
         out.resize(offsets[l], 0);
         out.extend(&stored[l]);
     }
+    Ok(out)
+}
+
+/// zstd-compresses one level with the frame's content checksum (RFC 8878 §3.1.1.1.1:
+/// Content_Checksum_Flag, an XXH64 of the content's low 32 bits after the last block), so
+/// that bit rot in a stored file is found when it is read, not baked into a result.
+fn deflate(raw: &[u8], level: i32) -> std::io::Result<Vec<u8>> {
+    let mut c = zstd::bulk::Compressor::new(level)?;
+    c.set_parameter(zstd::stream::raw::CParameter::ChecksumFlag(true))?;
+    c.compress(raw)
+}
+
+/// Inflates one zstd level into exactly `size` bytes (allocated fallibly), verifying the
+/// frame's content checksum where it has one (files of other writers may not: libktx writes
+/// none).
+fn inflate(path: &Path, data: &[u8], size: usize) -> std::result::Result<Vec<u8>, String> {
+    let mut out: Vec<u8> = Vec::new();
+    out.try_reserve_exact(size)
+        .map_err(|_| super::budget::out_of_memory(path, size as u64).to_string())?;
+    let mut d = zstd::bulk::Decompressor::new().map_err(|e| format!("zstd: {e}"))?;
+    let n = d.decompress_to_buffer(data, &mut out).map_err(|e| {
+        let e = e.to_string();
+        if e.to_ascii_lowercase().contains("checksum") {
+            "zstd content checksum mismatch: the level's bytes are damaged".to_string()
+        } else {
+            format!("zstd stream: {e}")
+        }
+    })?;
+    out.truncate(n);
     Ok(out)
 }
 
@@ -300,6 +329,7 @@ pub fn decode(path: &Path, b: &[u8]) -> Result<(Payload, Metadata)> {
         faces: faces as usize,
         levels: Vec::with_capacity(levels as usize),
     };
+    let _budget = payload.reserve(path, "KTX2", levels as usize)?;
     for l in 0..levels as usize {
         let o = HEADER_LEN + 24 * l;
         let (off, len, raw_len) = (
@@ -329,8 +359,8 @@ pub fn decode(path: &Path, b: &[u8]) -> Result<(Payload, Metadata)> {
                     "level {l}: {len} zstd bytes cannot inflate to {expect}"
                 )));
             }
-            let out = zstd::bulk::decompress(data, expect as usize)
-                .map_err(|e| bad(format!("level {l}: zstd stream: {e}")))?;
+            let out =
+                inflate(path, data, expect as usize).map_err(|e| bad(format!("level {l}: {e}")))?;
             if out.len() as u64 != expect {
                 return Err(bad(format!(
                     "level {l} inflates to {} bytes, expected {expect}",
@@ -339,9 +369,15 @@ pub fn decode(path: &Path, b: &[u8]) -> Result<(Payload, Metadata)> {
             }
             out
         } else {
-            if len != expect || (raw_len != expect && raw_len != 0) {
+            if len != expect {
                 return Err(bad(format!(
                     "level {l} holds {len} bytes, expected {expect}"
+                )));
+            }
+            if raw_len != expect && raw_len != 0 {
+                return Err(bad(format!(
+                    "level {l}: uncompressedByteLength says {raw_len} bytes, but the level \
+                     holds {expect}"
                 )));
             }
             data.to_vec()

@@ -33,11 +33,20 @@ pub(crate) fn linear_to_srgb(c: f32) -> f32 {
 /// `fuzz/regressions/png/`; `io::guard` would catch the panic, but not before its message
 /// reached stderr), and a file that ends before its IEND chunk: the decoder returns the image
 /// once the pixel data is complete, so a file cut after its last IDAT would pass as whole.
-fn check_png_structure(path: &Path, bytes: &[u8]) -> Result<()> {
+///
+/// It also refuses, before anything is inflated, image data too short for the header's size:
+/// deflate inflates at most 1032:1 (a 258-byte match per 2 bits, RFC 1951 §3.2.5; zlib's
+/// `deflateBound` documents the same limit), so IDAT chunks holding fewer than 1/1032 of the
+/// filtered rows the IHDR declares are a bomb or a truncated file. Returns the IHDR's width,
+/// height and bytes per texel as decoded (palette expanded to RGB(A), at least 1 byte a
+/// sample) for the memory budget.
+fn check_png_structure(path: &Path, bytes: &[u8]) -> Result<Option<(u64, u64, u64)>> {
     if !bytes.starts_with(b"\x89PNG\r\n\x1a\n") {
-        return Ok(());
+        return Ok(None);
     }
     let mut at = 8usize;
+    let mut ihdr: Option<(u64, u64, u64, u64)> = None; // width, height, bits a pixel, decoded bytes
+    let mut idat = 0u64;
     while let Some(head) = bytes.get(at..at.saturating_add(8)) {
         let len = u32::from_be_bytes([head[0], head[1], head[2], head[3]]) as usize;
         if &head[4..8] == b"PLTE" && !len.is_multiple_of(3) {
@@ -46,12 +55,47 @@ fn check_png_structure(path: &Path, bytes: &[u8]) -> Result<()> {
                 format!("PNG palette of {len} bytes is not whole RGB entries"),
             ));
         }
+        if &head[4..8] == b"IHDR" {
+            if let Some(d) = bytes.get(at + 8..at + 8 + 13) {
+                let be = |o: usize| u32::from_be_bytes([d[o], d[o + 1], d[o + 2], d[o + 3]]) as u64;
+                let (depth, colour) = (d[8] as u64, d[9]);
+                let samples = match colour {
+                    0 => 1,
+                    2 => 3,
+                    3 => 1,
+                    4 => 2,
+                    _ => 4,
+                };
+                // Decoded: palette to RGBA8, everything else at max(depth, 8) bits.
+                let decoded = if colour == 3 {
+                    4
+                } else {
+                    samples * depth.max(8) / 8
+                };
+                ihdr = Some((be(0), be(4), samples * depth, decoded));
+            }
+        }
+        if &head[4..8] == b"IDAT" {
+            idat += len as u64;
+        }
         let end = at.saturating_add(12).saturating_add(len);
         if end > bytes.len() {
             break;
         }
         if &head[4..8] == b"IEND" {
-            return Ok(());
+            let Some((w, h, bits, decoded)) = ihdr else {
+                return Err(Error::invalid(path, "PNG without an IHDR chunk"));
+            };
+            let rows = h.saturating_mul(1 + w.saturating_mul(bits).div_ceil(8));
+            if idat.saturating_mul(1032).saturating_add(1032) < rows {
+                return Err(Error::invalid(
+                    path,
+                    format!(
+                        "truncated PNG: {idat} bytes of image data cannot inflate to the {rows} bytes of a {w}x{h} image"
+                    ),
+                ));
+            }
+            return Ok(Some((w, h, decoded)));
         }
         at = end;
     }
@@ -132,6 +176,13 @@ fn decode_jpeg(path: &Path, bytes: &[u8]) -> Result<(usize, usize, usize, Vec<u8
     Image::check_size(path, w as u64, h as u64)?;
     let grey = matches!(d.input_colorspace(), Some(Zcs::Luma | Zcs::LumaA));
     let (out, channels) = if grey { (Zcs::Luma, 1) } else { (Zcs::RGB, 3) };
+    super::jpeg_scan::check(path, bytes)?;
+    // The decoder's component planes and output (a few bytes a sample) and our f32 image.
+    let _budget = super::budget::reserve(
+        path,
+        &format!("a {w}x{h} JPEG image"),
+        (w as u64 * h as u64 * channels as u64).saturating_mul(4 + 4),
+    )?;
     d.set_options(options.jpeg_set_out_colorspace(out));
     let data = d.decode().map_err(bad)?;
     if data.len() != w * h * channels {
@@ -146,7 +197,7 @@ pub fn decode(path: &Path, bytes: &[u8], color: ColorSpace) -> Result<Image> {
         let data = data.into_iter().map(|v| v as f32 / 255.0).collect();
         return finish(Image::from_data(w, h, channels, data)?, color);
     }
-    check_png_structure(path, bytes)?;
+    let png = check_png_structure(path, bytes)?;
     let bad = |e: image::ImageError| Error::invalid(path, format!("not a readable image: {e}"));
     let reader = image::ImageReader::new(Cursor::new(bytes))
         .with_guessed_format()
@@ -166,6 +217,13 @@ pub fn decode(path: &Path, bytes: &[u8], color: ColorSpace) -> Result<Image> {
     }
     let (w, h) = reader.into_dimensions().map_err(bad)?;
     Image::check_size(path, w as u64, h as u64)?;
+    // The decoder's buffer, its 16-bit copy (up to 4 channels) and our f32 image.
+    let decoded = png.map_or(8, |(_, _, d)| d);
+    let _budget = super::budget::reserve(
+        path,
+        &format!("a {w}x{h} image"),
+        (w as u64 * h as u64).saturating_mul(decoded + 8 + 16),
+    )?;
     let mut reader = image::ImageReader::new(Cursor::new(bytes))
         .with_guessed_format()
         .map_err(|e| Error::io(path, e))?;

@@ -3,11 +3,13 @@
 
 pub mod atomic;
 mod bc6h;
+pub mod budget;
 pub mod container;
 pub mod data;
 pub mod dds;
 mod exr_io;
 pub mod format;
+mod jpeg_scan;
 pub mod ktx1;
 pub mod ktx2;
 mod ldr;
@@ -85,7 +87,7 @@ pub fn extension(path: &Path) -> String {
 /// Reads `.exr`, `.hdr`, `.png`, `.jpg`/`.jpeg` into a linear float image.
 /// Checks sizes before allocating; never panics on malformed bytes.
 pub fn read_image(path: &Path, color: ColorSpace) -> Result<Image> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = budget::read_file(path)?;
     decode_image(path, &bytes, color)
 }
 
@@ -111,6 +113,55 @@ pub fn decode_image(path: &Path, bytes: &[u8], color: ColorSpace) -> Result<Imag
             path,
             "not an EXR, HDR, PNG or JPEG image",
         )),
+    }
+}
+
+/// The width and height an image file's header declares, read without decoding anything (so
+/// a caller can refuse a shape it cannot use before the decode allocates); `None` when the
+/// format is not one [`decode_image`] reads or the header is unreadable (the decode then
+/// reports why).
+pub fn declared_size(bytes: &[u8]) -> Option<(u64, u64)> {
+    match image_signature(bytes)? {
+        "exr" => {
+            let meta =
+                exr::meta::MetaData::read_from_buffered(std::io::Cursor::new(bytes), false).ok()?;
+            let s = meta.headers.first()?.layer_size;
+            Some((s.0 as u64, s.1 as u64))
+        }
+        "hdr" => {
+            let d = image::codecs::hdr::HdrDecoder::new(std::io::Cursor::new(bytes)).ok()?;
+            let m = d.metadata();
+            Some((m.width as u64, m.height as u64))
+        }
+        "png" => {
+            let be = |o: usize| -> Option<u64> {
+                Some(u32::from_be_bytes(bytes.get(o..o + 4)?.try_into().ok()?) as u64)
+            };
+            (bytes.get(12..16)? == b"IHDR").then_some(())?;
+            Some((be(16)?, be(20)?))
+        }
+        _ => {
+            // JPEG: the first SOFn segment (T.81 B.2.2: P, Y, X).
+            let mut at = 2usize;
+            loop {
+                while bytes.get(at) == Some(&0xFF) && bytes.get(at + 1) == Some(&0xFF) {
+                    at += 1;
+                }
+                let (0xFF, m) = (*bytes.get(at)?, *bytes.get(at + 1)?) else {
+                    return None;
+                };
+                let len = u16::from_be_bytes([*bytes.get(at + 2)?, *bytes.get(at + 3)?]) as usize;
+                if matches!(m, 0xC0..=0xCF) && !matches!(m, 0xC4 | 0xC8 | 0xCC) {
+                    let h = u16::from_be_bytes([*bytes.get(at + 5)?, *bytes.get(at + 6)?]);
+                    let w = u16::from_be_bytes([*bytes.get(at + 7)?, *bytes.get(at + 8)?]);
+                    return Some((w as u64, h as u64));
+                }
+                if m == 0xDA || m == 0xD9 {
+                    return None;
+                }
+                at += 2 + len;
+            }
+        }
     }
 }
 

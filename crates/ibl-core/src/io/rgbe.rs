@@ -13,9 +13,39 @@ pub fn decode(path: &Path, bytes: &[u8]) -> Result<Image> {
     let meta = decoder.metadata();
     Image::check_size(path, meta.width as u64, meta.height as u64)?;
     let (w, h) = (meta.width as usize, meta.height as usize);
+    // Every scan line takes at least 4 bytes (one flat or run-length pixel, or the 4-byte
+    // header of a run-length line): a header declaring more lines than the data can hold
+    // is refused before the decoder allocates the whole image.
+    let data = data_len(bytes);
+    if data < 4 * h as u64 {
+        return Err(Error::invalid(
+            path,
+            format!(
+                "truncated Radiance HDR: {data} bytes of pixel data cannot hold the {h} scan lines of its {w}x{h} header"
+            ),
+        ));
+    }
+    // The decoder's RGB f32 buffer (which becomes the image without a copy).
+    let _budget = super::budget::reserve(
+        path,
+        &format!("a {w}x{h} Radiance HDR image"),
+        (w as u64 * h as u64).saturating_mul(12),
+    )?;
     let dynimg = image::DynamicImage::from_decoder(decoder).map_err(bad)?;
     let rgb = dynimg.into_rgb32f();
     Image::from_data(w, h, 3, rgb.into_raw())
+}
+
+/// Bytes after the header and its resolution line (the header ends with an empty line, the
+/// resolution line follows).
+fn data_len(bytes: &[u8]) -> u64 {
+    let Some(blank) = bytes.windows(2).position(|w| w == b"\n\n") else {
+        return 0;
+    };
+    let rest = &bytes[blank + 2..];
+    rest.iter()
+        .position(|&c| c == b'\n')
+        .map_or(0, |eol| (rest.len() - eol - 1) as u64)
 }
 
 pub fn encode(path: &Path, img: &Image) -> Result<Vec<u8>> {

@@ -38,6 +38,37 @@ impl Payload {
         self.format.image_bytes(w, h)
     }
 
+    /// Reserves against the run's memory budget what reading `levels` levels of this
+    /// payload's shape takes, before any level is copied or inflated: the encoded bytes twice
+    /// (inflated or copied, then split into faces) and the RGB f32 texels they decode to.
+    pub(crate) fn reserve(
+        &self,
+        path: &Path,
+        container: &str,
+        levels: usize,
+    ) -> Result<super::budget::Reservation> {
+        let (mut encoded, mut texels) = (0u64, 0u64);
+        for l in 0..levels {
+            let (w, h) = self.level_dims(l);
+            encoded = encoded.saturating_add(self.face_bytes(l) as u64 * self.faces as u64);
+            texels = texels.saturating_add(w as u64 * h as u64 * self.faces as u64);
+        }
+        let what = format!(
+            "a {}x{} {container} {} of {levels} level(s) in {}",
+            self.width,
+            self.height,
+            if self.faces == 6 { "cube" } else { "image" },
+            self.format.name()
+        );
+        super::budget::reserve(
+            path,
+            &what,
+            encoded
+                .saturating_mul(2)
+                .saturating_add(texels.saturating_mul(12)),
+        )
+    }
+
     /// Checks that the faces hold exactly the bytes their format and size need.
     pub fn check(&self, path: &Path) -> Result<()> {
         for (l, faces) in self.levels.iter().enumerate() {
@@ -231,24 +262,29 @@ pub fn relative_errors(float: &[Image], decoded: &[Image]) -> (f64, f64) {
 /// Encodes one RGB float image; returns the bytes and how many channel values were clamped.
 pub fn encode_image(img: &Image, format: PixelFormat, quality: Bc6hQuality) -> (Vec<u8>, usize) {
     let max = format.max_value();
-    let clamped = img
-        .data
-        .chunks_exact(img.channels)
-        .map(|px| {
-            px[..3]
-                .iter()
-                .enumerate()
-                .filter(|&(c, &v)| {
-                    let top = if format == PixelFormat::B10g11r11 && c == 2 {
-                        packed::UF10_MAX
-                    } else {
-                        max
-                    };
-                    !(0.0..=top).contains(&v)
-                })
-                .count()
-        })
-        .sum();
+    // rgba32f stores every value as it is (negatives kept by `--negative keep` included):
+    // nothing is clamped, and a warning saying so would send the user to the format in use.
+    let clamped = if format == PixelFormat::Rgba32f {
+        0
+    } else {
+        img.data
+            .chunks_exact(img.channels)
+            .map(|px| {
+                px[..3]
+                    .iter()
+                    .enumerate()
+                    .filter(|&(c, &v)| {
+                        let top = if format == PixelFormat::B10g11r11 && c == 2 {
+                            packed::UF10_MAX
+                        } else {
+                            max
+                        };
+                        !(0.0..=top).contains(&v)
+                    })
+                    .count()
+            })
+            .sum()
+    };
     let mut out = Vec::with_capacity(format.image_bytes(img.width, img.height));
     let texels = img
         .data

@@ -1,0 +1,406 @@
+//! Checks that a JPEG's entropy-coded data covers every block its frame header declares,
+//! without decoding a texel: zune-jpeg (strict mode included) pads a scan that ends early
+//! with zero bits and returns success, so a 64x32 JPEG whose SOF is patched to 128x64 would
+//! read as a 128x64 image whose missing three quarters are made up. A decoder that fills in
+//! missing data has failed; this walk finds it.
+//!
+//! The walk follows ITU-T T.81: markers (B.1), frame and scan headers (B.2), Huffman tables
+//! (B.2.4.2, C), the sequential block coding (F.1.2: a DC difference category and its bits,
+//! then run/size AC symbols to EOB) and progressive first scans (G.1.2: DC first, DC
+//! refinement at one bit a block, AC first with end-of-band runs); restart intervals (B.2.4.4)
+//! reset the bit reader. AC refinement scans (G.1.2.3) depend on which coefficients earlier
+//! scans made non-zero, so they are skipped here (the marker walk still requires them
+//! whole). It also refuses, before decoding, a sequential file too short for its header: a
+//! block costs at least 2 bits (a DC code and an EOB code), so a 662-byte file cannot hold the
+//! 4 million blocks of 16384².
+
+use crate::error::{Error, Result};
+use std::path::Path;
+
+/// A Huffman table: for each code length 1..=16, the first code, how many codes, and the
+/// index of its first symbol (T.81 Annex C, F.2.2.3's MINCODE/MAXCODE/VALPTR).
+#[derive(Clone, Default)]
+struct Huffman {
+    mincode: [u32; 17],
+    count: [u32; 17],
+    valptr: [usize; 17],
+    symbols: Vec<u8>,
+}
+
+impl Huffman {
+    fn new(counts: &[u8; 16], symbols: &[u8]) -> Self {
+        let mut h = Huffman {
+            symbols: symbols.to_vec(),
+            ..Default::default()
+        };
+        let (mut code, mut k) = (0u32, 0usize);
+        for l in 1..=16 {
+            h.mincode[l] = code;
+            h.count[l] = counts[l - 1] as u32;
+            h.valptr[l] = k;
+            code += h.count[l];
+            k += h.count[l] as usize;
+            code <<= 1;
+        }
+        h
+    }
+}
+
+/// Bits of one entropy-coded segment (between markers), stuffed zeros removed.
+struct Bits<'a> {
+    data: &'a [u8],
+    at: usize,
+    acc: u64,
+    n: u32,
+    /// Bits read past the segment's end (padding the reader made up).
+    over: u32,
+}
+
+impl<'a> Bits<'a> {
+    fn new(data: &'a [u8], at: usize) -> Self {
+        Bits {
+            data,
+            at,
+            acc: 0,
+            n: 0,
+            over: 0,
+        }
+    }
+    /// Next byte of the segment, or `None` at a marker or the end of the file.
+    fn byte(&mut self) -> Option<u8> {
+        let b = *self.data.get(self.at)?;
+        if b == 0xFF {
+            match self.data.get(self.at + 1) {
+                Some(0x00) => {
+                    self.at += 2;
+                    return Some(0xFF);
+                }
+                _ => return None,
+            }
+        }
+        self.at += 1;
+        Some(b)
+    }
+    fn bit(&mut self) -> u32 {
+        if self.n == 0 {
+            match self.byte() {
+                Some(b) => {
+                    self.acc = b as u64;
+                    self.n = 8;
+                }
+                None => {
+                    // Made-up 1 bits (what encoders pad with): counted, refused by the caller.
+                    self.over += 1;
+                    return 1;
+                }
+            }
+        }
+        self.n -= 1;
+        ((self.acc >> self.n) & 1) as u32
+    }
+    fn bits(&mut self, k: u32) -> u32 {
+        (0..k).fold(0, |v, _| (v << 1) | self.bit())
+    }
+    /// One Huffman symbol; `None` for a code no table entry has (corrupt data).
+    fn decode(&mut self, h: &Huffman) -> Option<u8> {
+        let mut code = 0u32;
+        for l in 1..=16 {
+            code = (code << 1) | self.bit();
+            if code.wrapping_sub(h.mincode[l]) < h.count[l] {
+                return h
+                    .symbols
+                    .get(h.valptr[l] + (code - h.mincode[l]) as usize)
+                    .copied();
+            }
+            if self.over > 16 {
+                return None;
+            }
+        }
+        None
+    }
+    /// Drops the bits left in the current byte and skips a restart marker if one is next.
+    fn restart(&mut self) -> bool {
+        self.n = 0;
+        if self.over > 0 {
+            return false;
+        }
+        match (self.data.get(self.at), self.data.get(self.at + 1)) {
+            (Some(0xFF), Some(0xD0..=0xD7)) => {
+                self.at += 2;
+                true
+            }
+            _ => false,
+        }
+    }
+}
+
+#[derive(Clone, Copy, Default)]
+struct Component {
+    id: u8,
+    h: usize,
+    v: usize,
+}
+
+/// Refuses a JPEG whose scans hold fewer blocks than its frame header declares (see the
+/// module comment). Files this walk does not understand are left to the decoder.
+pub(crate) fn check(path: &Path, b: &[u8]) -> Result<()> {
+    let bad = |why: String| Error::invalid(path, why);
+    let mut at = 2usize;
+    let mut dc: Vec<Huffman> = vec![Huffman::default(); 4];
+    let mut ac: Vec<Huffman> = vec![Huffman::default(); 4];
+    let mut comps: Vec<Component> = Vec::new();
+    let (mut width, mut height, mut progressive) = (0usize, 0usize, false);
+    let mut restart = 0usize;
+    let be16 = |o: usize| -> Option<usize> {
+        Some(u16::from_be_bytes([*b.get(o)?, *b.get(o + 1)?]) as usize)
+    };
+    loop {
+        while b.get(at) == Some(&0xFF) && b.get(at + 1) == Some(&0xFF) {
+            at += 1;
+        }
+        let (Some(0xFF), Some(&m)) = (b.get(at), b.get(at + 1)) else {
+            return Ok(()); // the marker walk (`ldr::jpeg_end`) reports structure errors
+        };
+        if m == 0xD9 {
+            return Ok(());
+        }
+        if m == 0x01 || (0xD0..=0xD7).contains(&m) {
+            at += 2;
+            continue;
+        }
+        let Some(len) = be16(at + 2) else {
+            return Ok(());
+        };
+        let seg = b.get(at + 4..at + 2 + len).unwrap_or(&[]);
+        match m {
+            // Huffman-coded frames: baseline, extended, progressive.
+            0xC0..=0xC2 if seg.len() >= 6 => {
+                progressive = m == 0xC2;
+                height = u16::from_be_bytes([seg[1], seg[2]]) as usize;
+                width = u16::from_be_bytes([seg[3], seg[4]]) as usize;
+                comps = seg[6..]
+                    .chunks_exact(3)
+                    .take(seg[5] as usize)
+                    .map(|c| Component {
+                        id: c[0],
+                        h: (c[1] >> 4).max(1) as usize,
+                        v: (c[1] & 15).max(1) as usize,
+                    })
+                    .collect();
+                if comps.is_empty() || width == 0 || height == 0 {
+                    return Ok(());
+                }
+                if !progressive {
+                    // At least 2 bits a block (B.2 / F.1.2: a DC code and an EOB code).
+                    let blocks = frame_blocks(width, height, &comps);
+                    let room = (b.len() as u64).saturating_mul(8);
+                    if blocks.saturating_mul(2) > room {
+                        return Err(bad(format!(
+                            "truncated JPEG: {} bytes cannot hold the {blocks} blocks of a {width}x{height} image",
+                            b.len()
+                        )));
+                    }
+                }
+            }
+            0xC4 => {
+                let mut o = 0usize;
+                while o + 17 <= seg.len() {
+                    let (class, id) = (seg[o] >> 4, (seg[o] & 15) as usize);
+                    let counts: [u8; 16] = seg[o + 1..o + 17].try_into().expect("16");
+                    let n: usize = counts.iter().map(|&c| c as usize).sum();
+                    let Some(symbols) = seg.get(o + 17..o + 17 + n) else {
+                        return Ok(());
+                    };
+                    if id < 4 {
+                        let t = Huffman::new(&counts, symbols);
+                        if class == 0 {
+                            dc[id] = t;
+                        } else {
+                            ac[id] = t;
+                        }
+                    }
+                    o += 17 + n;
+                }
+            }
+            0xDD if seg.len() >= 2 => restart = u16::from_be_bytes([seg[0], seg[1]]) as usize,
+            0xDA => {
+                let ns = *seg.first().unwrap_or(&0) as usize;
+                let Some(spec) = seg.get(1..1 + 2 * ns) else {
+                    return Ok(());
+                };
+                let tail = seg.get(1 + 2 * ns..1 + 2 * ns + 3).unwrap_or(&[0, 63, 0]);
+                let (ss, se, ah) = (tail[0] as usize, tail[1] as usize, tail[2] >> 4);
+                let mut scan = Vec::new();
+                for s in spec.chunks_exact(2) {
+                    let Some(k) = comps.iter().position(|c| c.id == s[0]) else {
+                        return Ok(());
+                    };
+                    scan.push((k, (s[1] >> 4) as usize & 3, (s[1] & 15) as usize & 3));
+                }
+                at = at + 2 + len;
+                let refine_ac = progressive && ss > 0 && ah > 0;
+                if !refine_ac && !comps.is_empty() {
+                    let walk = Scan {
+                        comps: &comps,
+                        scan: &scan,
+                        width,
+                        height,
+                        restart,
+                        progressive,
+                        ss,
+                        se: se.min(63),
+                        dc_refine: progressive && ss == 0 && ah > 0,
+                    };
+                    let (done, total, end) = walk.run(b, at, &dc, &ac);
+                    if done < total {
+                        return Err(bad(format!(
+                            "truncated or corrupt JPEG: its scan data ends after {done} of the {total} {} its {width}x{height} header declares",
+                            if scan.len() > 1 { "MCUs" } else { "blocks" }
+                        )));
+                    }
+                    at = end;
+                }
+                // Skip the rest of the entropy-coded data to the next real marker.
+                while at + 1 < b.len() {
+                    if b[at] == 0xFF && b[at + 1] != 0 && !(0xD0..=0xD7).contains(&b[at + 1]) {
+                        break;
+                    }
+                    at += 1;
+                }
+                continue;
+            }
+            _ => {}
+        }
+        at = at + 2 + len;
+    }
+}
+
+/// Blocks of every component of a frame (T.81 A.1.1: component c has ⌈X·Hc/Hmax⌉ columns).
+fn frame_blocks(width: usize, height: usize, comps: &[Component]) -> u64 {
+    let hmax = comps.iter().map(|c| c.h).max().unwrap_or(1);
+    let vmax = comps.iter().map(|c| c.v).max().unwrap_or(1);
+    comps
+        .iter()
+        .map(|c| {
+            let bw = (width * c.h).div_ceil(hmax).div_ceil(8) as u64;
+            let bh = (height * c.v).div_ceil(vmax).div_ceil(8) as u64;
+            bw * bh
+        })
+        .sum()
+}
+
+struct Scan<'a> {
+    comps: &'a [Component],
+    /// (component index, DC table, AC table) of each scan component.
+    scan: &'a [(usize, usize, usize)],
+    width: usize,
+    height: usize,
+    restart: usize,
+    progressive: bool,
+    ss: usize,
+    se: usize,
+    dc_refine: bool,
+}
+
+impl Scan<'_> {
+    /// Walks the scan's MCUs; returns (MCUs whose bits were all in the data, MCUs declared,
+    /// where the data ended).
+    fn run(&self, b: &[u8], at: usize, dc: &[Huffman], ac: &[Huffman]) -> (u64, u64, usize) {
+        let hmax = self.comps.iter().map(|c| c.h).max().unwrap_or(1);
+        let vmax = self.comps.iter().map(|c| c.v).max().unwrap_or(1);
+        // Blocks per MCU of each scan component, and the MCU count (A.2.2, A.2.3).
+        let (total, per_mcu): (u64, Vec<usize>) = if self.scan.len() == 1 {
+            let c = self.comps[self.scan[0].0];
+            let bw = (self.width * c.h).div_ceil(hmax).div_ceil(8) as u64;
+            let bh = (self.height * c.v).div_ceil(vmax).div_ceil(8) as u64;
+            (bw * bh, vec![1])
+        } else {
+            let mx = self.width.div_ceil(8 * hmax) as u64;
+            let my = self.height.div_ceil(8 * vmax) as u64;
+            (
+                mx * my,
+                self.scan
+                    .iter()
+                    .map(|&(k, _, _)| self.comps[k].h * self.comps[k].v)
+                    .collect(),
+            )
+        };
+        let mut bits = Bits::new(b, at);
+        let mut eobrun = 0u32;
+        let mut done = 0u64;
+        while done < total {
+            if self.restart > 0 && done > 0 && done.is_multiple_of(self.restart as u64) {
+                if !bits.restart() {
+                    break;
+                }
+                eobrun = 0;
+            }
+            let mut ok = true;
+            'mcu: for (s, &(_, td, ta)) in self.scan.iter().enumerate() {
+                for _ in 0..per_mcu[s] {
+                    if !self.block(&mut bits, &dc[td], &ac[ta], &mut eobrun) {
+                        ok = false;
+                        break 'mcu;
+                    }
+                }
+            }
+            if !ok || bits.over > 0 {
+                break;
+            }
+            done += 1;
+        }
+        (done, total, bits.at)
+    }
+
+    /// One block's bits (F.1.2.1, F.1.2.2; G.1.2.1, G.1.2.2); false on a corrupt code.
+    fn block(&self, bits: &mut Bits, dc: &Huffman, ac: &Huffman, eobrun: &mut u32) -> bool {
+        if !self.progressive || self.ss == 0 {
+            if self.dc_refine {
+                bits.bit();
+                return true;
+            }
+            let Some(s) = bits.decode(dc) else {
+                return false;
+            };
+            if s > 16 {
+                return false;
+            }
+            bits.bits(s as u32);
+            if self.progressive {
+                return true;
+            }
+        }
+        let (mut k, end) = if self.progressive {
+            if *eobrun > 0 {
+                *eobrun -= 1;
+                return true;
+            }
+            (self.ss, self.se)
+        } else {
+            (1, 63)
+        };
+        while k <= end {
+            let Some(rs) = bits.decode(ac) else {
+                return false;
+            };
+            let (r, s) = ((rs >> 4) as usize, (rs & 15) as u32);
+            if s == 0 {
+                if r == 15 {
+                    k += 16;
+                    continue;
+                }
+                if self.progressive {
+                    *eobrun = (1u32 << r) - 1;
+                    if r > 0 {
+                        *eobrun += bits.bits(r as u32);
+                    }
+                }
+                return true;
+            }
+            k += r;
+            bits.bits(s);
+            k += 1;
+        }
+        k <= end + 1
+    }
+}
