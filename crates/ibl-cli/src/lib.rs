@@ -27,6 +27,10 @@ pub struct CommonArgs {
     /// Print a machine-readable JSON summary on stdout.
     #[arg(long)]
     pub json: bool,
+    /// Replace output files this tool did not write, or that changed since it wrote them
+    /// (otherwise refused before any work; see the `.ibl-outputs.json` beside the outputs).
+    #[arg(long)]
+    pub overwrite: bool,
 }
 
 /// Exit codes: 0 success, 2 invalid input or parameters (also clap's usage errors),
@@ -118,26 +122,64 @@ pub fn write_outputs(
     Ok(files.iter().map(|f| f.0.display().to_string()).collect())
 }
 
-/// Writes a cube bake's files as one atomic set, then removes what an earlier run of the same
-/// bake left in `dir` that this one did not write (another layout's container or faces, levels
-/// of a longer chain; see [`ibl_core::output::stale_cube_files`]), each with a warning, so the
-/// folder holds exactly this run's result.
-pub fn write_cube_outputs(
+/// After a cube bake wrote `files`, removes what an earlier run of the same bake left in `dir`
+/// that this one did not write (another layout's container or faces, levels of a longer
+/// chain; see [`ibl_core::output::stale_cube_files`]), each with a warning, so the folder holds
+/// exactly this run's result. Only files the folder's record
+/// ([`ibl_core::ownership::Record`]) says a tool wrote, bytes unchanged, are removed; any other
+/// file of such a name is left in place with a warning.
+pub fn stale_cleanup(
     ctx: &Ctx,
     dir: &std::path::Path,
     name: &str,
     files: &[(std::path::PathBuf, Vec<u8>)],
-) -> Result<Vec<String>, ibl_core::Error> {
-    let outputs = write_outputs(files)?;
+) -> Result<(), ibl_core::Error> {
     let written: Vec<std::path::PathBuf> = files.iter().map(|f| f.0.clone()).collect();
-    for stale in ibl_core::output::stale_cube_files(dir, name, &written) {
-        std::fs::remove_file(&stale).map_err(|e| ibl_core::Error::io(&stale, e))?;
+    let stale = ibl_core::output::stale_cube_files(dir, name, &written);
+    let (ours, not_ours) = ibl_core::ownership::split_owned(dir, stale);
+    let mut record = ibl_core::ownership::Record::load(dir);
+    for stale in &ours {
+        std::fs::remove_file(stale).map_err(|e| ibl_core::Error::io(stale, e))?;
+        record.remove(dir, stale);
         ctx.warn(format!(
-            "removed {} (left by an earlier run with another layout or a longer chain)",
+            "removed {} (written by an earlier run with another layout or a longer chain)",
             stale.display()
         ));
     }
-    Ok(outputs)
+    if !ours.is_empty() {
+        record.save(dir)?;
+    }
+    for kept in not_ours {
+        ctx.warn(format!(
+            "left {} in place: named like an output of another layout, but not written by this \
+             tool or changed since (remove it yourself if it is stale)",
+            kept.display()
+        ));
+    }
+    Ok(())
+}
+
+/// The folder whose record lists the outputs of a run writing to `out`: `out` itself, or the
+/// folder of the one output file.
+pub fn record_dir(out: &std::path::Path, kind: OutputKind) -> std::path::PathBuf {
+    match kind {
+        OutputKind::Folder => out.to_path_buf(),
+        OutputKind::File => match out.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => std::path::PathBuf::from("."),
+        },
+    }
+}
+
+/// Records `files` as written by `tool` in `dir`'s record (after they were written).
+pub fn record_outputs(
+    tool: &str,
+    dir: &std::path::Path,
+    files: &[(std::path::PathBuf, Vec<u8>)],
+) -> Result<(), ibl_core::Error> {
+    let mut record = ibl_core::ownership::Record::load(dir);
+    record.add(dir, tool, files);
+    record.save(dir)
 }
 
 /// Runs a binary's body: builds the thread pool, times it, prints the summary or the error
