@@ -57,6 +57,10 @@ enum Cmd {
         /// Re-run every needed stage even if up to date.
         #[arg(long)]
         force: bool,
+        /// Replace files in the stages' folders that bake did not write, or that changed
+        /// since it wrote them (otherwise refused before any stage runs).
+        #[arg(long)]
+        overwrite: bool,
         /// Print the summary as JSON on stdout.
         #[arg(long)]
         json: bool,
@@ -212,12 +216,15 @@ fn run(cli: Cli) -> Result<i32, Error> {
             file,
             jobs,
             force,
+            overwrite,
             json,
             quiet,
         } => {
             let graph = ibl_pipeline::load(&file)?;
             let session = exec::Session::open(&graph)?;
             let plan = ibl_pipeline::plan::plan(&graph, force)?;
+            // Before any stage runs: nothing of the user's is in the way.
+            ibl_pipeline::owned::check_writes(&graph, &plan, overwrite)?;
             let jobs = jobs.unwrap_or_else(|| {
                 std::thread::available_parallelism()
                     .map(|n| n.get())
@@ -318,6 +325,12 @@ fn run(cli: Cli) -> Result<i32, Error> {
                     },
                     output.display()
                 );
+                for k in &report.kept {
+                    eprintln!(
+                        "bake: kept {}: not written by bake, or changed since (remove it yourself)",
+                        k.display()
+                    );
+                }
             }
             Ok(0)
         }

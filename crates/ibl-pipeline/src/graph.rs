@@ -274,7 +274,7 @@ fn check_stage_folders(p: &Pipeline, stages: &[Stage], diags: &mut Vec<Diagnosti
     let output = paths::normalize(&p.output);
     for s in stages {
         if !paths::is_within(&s.dir, &output)
-            || s.dir == output
+            || paths::absolute(&s.dir) == paths::absolute(&output)
             || paths::is_within(&s.dir, &output.join(".bake"))
         {
             diags.push(p.diag(

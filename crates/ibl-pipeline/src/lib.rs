@@ -19,6 +19,7 @@ pub mod graph;
 pub mod kinds;
 pub mod need;
 pub mod ninja;
+pub mod owned;
 pub mod paths;
 pub mod plan;
 pub mod remote;

@@ -481,6 +481,20 @@ pub fn commit(graph: &Graph, results: &[PathBuf], restore: &[String]) -> Result<
             done.push(result_of(i, Status::UpToDate, "up to date".into()));
             continue;
         }
+        // Nothing of the user's is replaced (as `bake run` checks before it starts).
+        let targets: Vec<PathBuf> = files.iter().map(|(rel, _)| s.dir.join(rel)).collect();
+        let in_the_way = crate::owned::not_ours(
+            graph,
+            &exec::commit::manifest_guard(&manifest),
+            i,
+            targets,
+            false,
+        )
+        .and_then(|theirs| crate::owned::refuse(&theirs));
+        if let Err(e) = in_the_way {
+            done.push(result_of(i, Status::Failed, e.to_string()));
+            continue;
+        }
         let staging = session.staging_dir(i, &s.id);
         let staged = {
             let _g = session.commit_lock();
