@@ -222,7 +222,11 @@ fn bad_entries_inputs_and_results_fail_with_one_line_and_write_nothing() {
     std::fs::write(&sky, &bytes).unwrap();
     let extra = inputs.join("0/extra.exr");
     std::fs::write(&extra, b"x").unwrap();
-    one_error(&stage(&cube, &inputs, &out), 2, "not one of the files the plan lists");
+    one_error(
+        &stage(&cube, &inputs, &out),
+        2,
+        "not one of the files the plan lists",
+    );
     std::fs::remove_file(&extra).unwrap();
     #[cfg(unix)]
     {
@@ -276,15 +280,22 @@ fn bad_entries_inputs_and_results_fail_with_one_line_and_write_nothing() {
     let report_path = out.join("stage.json");
     let mut report: Value = serde_json::from_slice(&std::fs::read(&report_path).unwrap()).unwrap();
     std::fs::write(out.join("files/extra.bin"), b"x").unwrap();
-    report["outputs"].as_array_mut().unwrap().push(serde_json::json!({
-        "rel": "extra.bin", "size": 1, "hash": blake3::hash(b"x").to_hex().to_string()
-    }));
+    report["outputs"]
+        .as_array_mut()
+        .unwrap()
+        .push(serde_json::json!({
+            "rel": "extra.bin", "size": 1, "hash": blake3::hash(b"x").to_hex().to_string()
+        }));
     std::fs::write(&report_path, serde_json::to_vec(&report).unwrap()).unwrap();
     let o = bake(
         d,
         &["commit", pipeline.to_str().unwrap(), out.to_str().unwrap()],
     );
     assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
-    assert!(stderr(&o).contains("not those the stage writes"), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("not those the stage writes"),
+        "{}",
+        stderr(&o)
+    );
     assert!(!d.join("out/p/cube/extra.bin").exists());
 }

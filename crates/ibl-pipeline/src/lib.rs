@@ -13,6 +13,7 @@
 #![warn(missing_docs)]
 
 pub(crate) mod cache;
+pub mod cli;
 pub mod error;
 pub mod exec;
 pub mod graph;

@@ -422,7 +422,9 @@ fn verify_inputs(entry: &StageEntry, inputs: &Path) -> std::result::Result<(), B
             };
             for e in rd.flatten() {
                 let p = e.path();
-                let t = e.file_type().map_err(|err| invalid(format!("{}: {err}", p.display())))?;
+                let t = e
+                    .file_type()
+                    .map_err(|err| invalid(format!("{}: {err}", p.display())))?;
                 if t.is_dir() {
                     stack.push(p);
                 } else if !listed.contains(&p) {

@@ -313,8 +313,8 @@ pub fn clean_output(session: Session, graph: Option<&Graph>) -> Result<CleanRepo
         if std::fs::symlink_metadata(&f).is_err() {
             continue;
         }
-        let inside = paths::is_within(&f, &output)
-            && ibl_core::ownership::check_inside(&f, &output).is_ok();
+        let inside =
+            paths::is_within(&f, &output) && ibl_core::ownership::check_inside(&f, &output).is_ok();
         if !(ours && inside) {
             report.kept.push(f);
             continue;
