@@ -398,7 +398,12 @@ pub fn negative_values(cmd: clap::Command) -> clap::Command {
         if !a.get_action().takes_values() || a.is_positional() {
             return a;
         }
-        if a.get_value_delimiter().is_some() {
+        // A list, split by clap or parsed whole (`--roughness RX,RY`): `-0.1,0.5` is no number,
+        // and clap would read `-0` as a flag.
+        let list = a.get_value_delimiter().is_some()
+            || a.get_value_names()
+                .is_some_and(|n| n.iter().any(|s| s.contains(',')));
+        if list {
             a.allow_hyphen_values(true)
         } else {
             a.allow_negative_numbers(true)
@@ -466,6 +471,8 @@ mod tests {
         x: Option<f32>,
         #[arg(long, value_delimiter = ',')]
         list: Vec<f32>,
+        #[arg(long, value_name = "A,B")]
+        pair: Option<String>,
         #[arg(long)]
         flag: bool,
         #[command(subcommand)]
@@ -484,6 +491,9 @@ mod tests {
         let t: T = try_parse_from(["t", "--x", "-0.5", "--list", "-0.1,0.5", "--flag"]).unwrap();
         assert_eq!(t.x, Some(-0.5));
         assert_eq!(t.list, vec![-0.1, 0.5]);
+        // A pair parsed whole (tpr-map's --roughness RX,RY) takes a leading minus too.
+        let t: T = try_parse_from(["t", "--pair", "-0.1,0.5"]).unwrap();
+        assert_eq!(t.pair.as_deref(), Some("-0.1,0.5"));
         assert!(t.flag);
         let t: T = try_parse_from(["t", "s", "--n", "-1"]).unwrap();
         assert!(matches!(t.sub, Some(Sub::S { n: Some(-1) })));

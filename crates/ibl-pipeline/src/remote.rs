@@ -414,7 +414,11 @@ fn verify_inputs(entry: &StageEntry, inputs: &Path) -> std::result::Result<(), B
             }
             listed.insert(p);
         }
-        // Nothing else: a folder read would bake an extra file too.
+        // Nothing else: a folder read would bake an extra file too. (A read stage's folder is
+        // what its task returned, checked by hash where the plan knew it.)
+        if r.stage.is_some() {
+            continue;
+        }
         let mut stack = vec![root.clone()];
         while let Some(d) = stack.pop() {
             let Ok(rd) = std::fs::read_dir(&d) else {
