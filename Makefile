@@ -10,19 +10,18 @@ all: build
 build:
 	$(CARGO) build --release --workspace --bins
 
-# Bakes the embedded default fixture into out/ and says where the results are.
+# Where cargo puts the binaries: $(CARGO_TARGET_DIR)/release when it is set, else target/release.
+BIN_DIR = $(if $(CARGO_TARGET_DIR),$(CARGO_TARGET_DIR),target)/release
+
+# Bakes the embedded default fixture into out/ and says where the results are. No fallback:
+# a missing binary or a failing bake is said as it is.
 demo: build
-	@if [ -x target/release/bake ] && [ -f pipelines/probe.ron ]; then \
-		target/release/bake run pipelines/probe.ron && \
-		target/release/contact-sheet --quiet out/probe -o out/probe/contact-sheet.png && \
-		echo "demo outputs are in $(OUT)/probe/: cube/ (faces), prefiltered/ (GGX chain + prefilter.json)," && \
-		echo "  irradiance/ (sh.json + E/pi cube), dfg/dfg.exr, shexp/shexp.json; run it again: all up to date" && \
-		echo "contact sheet of all of it: out/probe/contact-sheet.png"; \
-	else \
-		target/release/equirect-to-cube $(DEMO_INPUT) -o $(OUT)/cube --size 128 && \
-		target/release/irradiance $(DEMO_INPUT) -o $(OUT)/irradiance && \
-		echo "demo outputs are in $(OUT)/"; \
-	fi
+	@test -x $(BIN_DIR)/bake || { echo "make demo: no bake binary in $(BIN_DIR) after the build (CARGO_TARGET_DIR=$(CARGO_TARGET_DIR))" >&2; exit 1; }
+	$(BIN_DIR)/bake run pipelines/probe.ron
+	$(BIN_DIR)/contact-sheet --quiet out/probe -o out/probe/contact-sheet.png
+	@echo "demo outputs are in out/probe/: cube/ (faces), prefiltered/ (GGX chain + prefilter.json),"
+	@echo "  irradiance/ (sh.json + E/pi cube), dfg/dfg.exr, shexp/shexp.json; run it again: all up to date"
+	@echo "contact sheet of all of it: out/probe/contact-sheet.png"
 
 # Workspace tests (unit, stress and end-to-end), then clippy and rustfmt. Tests run in the
 # release profile so that `make test`, `make demo` and `make bench-quick` share one build of
@@ -58,7 +57,7 @@ conformance: build
 # if needed, installs ray, pytest and bake-ray (scripts/setup-ray.sh), runs python/tests.
 ray-test: build
 	scripts/setup-ray.sh
-	cd python && BAKE_RAY_BIN_DIR=$(CURDIR)/target/release python3 -m pytest -q tests
+	cd python && BAKE_RAY_BIN_DIR=$(abspath $(BIN_DIR)) python3 -m pytest -q tests
 
 # Coverage-guided fuzzing of every parser for a bounded time (FUZZ_SECONDS per target).
 fuzz:

@@ -5,14 +5,16 @@ stage with `bake commit` as soon as it is done: the same commit code, journal an
 `bake run`, so an interrupted run keeps every committed stage and the next run resumes.
 """
 
+import ipaddress
 import json
 import os
 import shutil
+import socket
 import subprocess
 import tempfile
 import time
 
-from .task import KILL_ONCE_ENV, find_bake, run_stage
+from .task import find_bake, run_stage
 
 #: Stage statuses, as `bake run --json` words them.
 RAN, RESTORED, UP_TO_DATE, SKIPPED, FAILED, BLOCKED = (
@@ -80,21 +82,71 @@ def commit(bake, pipeline, results=(), restore=()):
     return {r["id"]: r for r in json.loads(out)}
 
 
+def _safe_rel(rel):
+    """A plain relative path with `/` separators: no absolute path, no `.` or `..`, no empty or
+    backslashed part (what the worker accepts for its inputs, and `bake` for its outputs)."""
+    if not isinstance(rel, str) or not rel or rel.startswith("/") or "\\" in rel or "\0" in rel:
+        return False
+    return all(p not in ("", ".", "..") for p in rel.split("/"))
+
+
 def _write_result(folder, result):
-    """Writes a task's result as a result folder (`stage.json` and `files/`)."""
+    """Writes a task's result as a result folder (`stage.json` and `files/`), each file's name
+    checked as the worker checks its inputs' (a plain relative path), and every write kept
+    inside the folder (no symlink followed: the folder is new and only this function writes
+    it). The report must list exactly the files returned."""
+    files = result["files"]
+    listed = [o.get("rel") for o in result["report"].get("outputs", [])]
+    for rel in list(files) + listed:
+        if not _safe_rel(rel):
+            raise BakeRayError("stage '%s' returned an unsafe file name %r" % (result.get("id"), rel), 2)
+    if sorted(listed) != sorted(files):
+        raise BakeRayError("stage '%s' returned files its report does not list" % result.get("id"), 2)
     os.makedirs(folder)
-    for rel, data in result["files"].items():
+    root = os.path.realpath(os.path.join(folder, "files"))
+    for rel, data in files.items():
         path = os.path.join(folder, "files", *rel.split("/"))
         os.makedirs(os.path.dirname(path), exist_ok=True)
-        with open(path, "wb") as f:
+        if not os.path.realpath(path).startswith(root + os.sep):
+            raise BakeRayError("stage '%s': %r leads out of its result folder" % (result.get("id"), rel), 2)
+        # O_EXCL | O_NOFOLLOW: never through a link, never over a file already written.
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0), 0o644)
+        with os.fdopen(fd, "wb") as f:
             f.write(data)
     with open(os.path.join(folder, "stage.json"), "w") as f:
         json.dump(result["report"], f)
 
 
+def _host_of(address):
+    """The host part of a Ray address: `ray://host:port`, `host:port`, `[v6]:port`, `host`."""
+    rest = address.split("://")[-1].strip()
+    if rest.startswith("["):
+        return rest[1:].split("]", 1)[0]
+    if rest.count(":") > 1:  # a bare IPv6 address
+        return rest
+    return rest.rsplit(":", 1)[0] if ":" in rest else rest
+
+
 def _is_loopback(address):
-    host = address.split("://")[-1].rsplit(":", 1)[0].strip("[]")
-    return host in ("localhost", "::1") or host.startswith("127.")
+    """Whether `address` names this machine's loopback interface: by address (ipaddress), a name
+    resolved first, and every address it resolves to must be loopback (`127.evil.example` is a
+    name like any other, not 127.x.y.z)."""
+    host = _host_of(address)
+    if not host:
+        return False
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        pass
+    try:
+        infos = socket.getaddrinfo(host, None)
+    except (socket.gaierror, UnicodeError, OSError):
+        return False
+    addrs = {info[4][0].split("%", 1)[0] for info in infos}
+    try:
+        return bool(addrs) and all(ipaddress.ip_address(a).is_loopback for a in addrs)
+    except ValueError:
+        return False
 
 
 def _first_line(e):
@@ -174,7 +226,6 @@ def run(
         if spread:
             options["scheduling_strategy"] = "SPREAD"
         remote = ray.remote(run_stage).options(**options)
-        kill_once = os.environ.get(KILL_ONCE_ENV)
         refs = {}
         shipped = {}
 
@@ -206,7 +257,7 @@ def run(
             if blocked_by is not None:
                 report[s["id"]].update(status=BLOCKED, reason="not run: '%s' failed" % blocked_by)
                 continue
-            spec = {"entry": entry, "bake": bake, "slots": slots, "kill_once": kill_once}
+            spec = {"entry": entry, "bake": bake, "slots": slots}
             refs[s["id"]] = remote.remote(spec, *blobs)
             submitted += 1
             log("bake-ray: submitted %s (%s)" % (s["id"], s["reason"]))
@@ -242,7 +293,13 @@ def run(
                         log("bake-ray: error: stage '%s': %s" % (sid, st["reason"]))
                     else:
                         folder = os.path.join(work, "%d" % len(os.listdir(work)))
-                        _write_result(folder, res)
+                        try:
+                            _write_result(folder, res)
+                        except BakeRayError as e:
+                            shutil.rmtree(folder, ignore_errors=True)
+                            st.update(status=FAILED, reason=str(e))
+                            log("bake-ray: error: stage '%s': %s" % (sid, st["reason"]))
+                            continue
                         batch.append((sid, folder))
                 if batch:
                     done = commit(bake, pipeline, results=[f for _, f in batch])

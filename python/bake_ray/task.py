@@ -19,11 +19,6 @@ import sys
 import tempfile
 import time
 
-# Test hook: the first task to create this file kills its own worker process mid-stage (while
-# `bake stage` runs), to exercise Ray's retry of a crashed worker.
-KILL_ONCE_ENV = "BAKE_RAY_TEST_KILL_ONCE"
-
-
 def _die_with_parent():
     """Runs in the `bake stage` child: the kernel kills it when the worker dies (Linux only), so
     a killed worker leaves no orphan bake behind."""
@@ -111,14 +106,6 @@ def run_stage(spec, *blobs):
             stderr=subprocess.PIPE,
             preexec_fn=_die_with_parent if sys.platform.startswith("linux") else None,
         )
-        marker = spec.get("kill_once")
-        if marker:
-            try:
-                os.close(os.open(marker, os.O_CREAT | os.O_EXCL | os.O_WRONLY))
-                time.sleep(0.05)  # the bake is running: this is "killed during a task"
-                os.kill(os.getpid(), signal.SIGKILL)
-            except FileExistsError:
-                pass
         stdout, stderr = proc.communicate()
         if proc.returncode != 0:
             lines = [ln for ln in stderr.decode("utf-8", "replace").splitlines() if ln.strip()]

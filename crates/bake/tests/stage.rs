@@ -210,6 +210,35 @@ fn bad_entries_inputs_and_results_fail_with_one_line_and_write_nothing() {
     assert!(!out.exists(), "nothing written");
     std::fs::write(&sky, &bytes).unwrap();
 
+    // A wrong but valid file under the input's name (another HDRI): refused by its hash,
+    // before the bake; so is a file the plan does not list, and a symlink.
+    std::fs::copy(root().join("fixtures/hdri/studio_256.exr"), &sky).unwrap();
+    one_error(
+        &stage(&cube, &inputs, &out),
+        2,
+        "is not the file the plan recorded",
+    );
+    assert!(!out.exists(), "nothing written");
+    std::fs::write(&sky, &bytes).unwrap();
+    let extra = inputs.join("0/extra.exr");
+    std::fs::write(&extra, b"x").unwrap();
+    one_error(
+        &stage(&cube, &inputs, &out),
+        2,
+        "not one of the files the plan lists",
+    );
+    std::fs::remove_file(&extra).unwrap();
+    #[cfg(unix)]
+    {
+        let moved = scratch.join("sky-elsewhere.exr");
+        std::fs::rename(&sky, &moved).unwrap();
+        std::os::unix::fs::symlink(&moved, &sky).unwrap();
+        one_error(&stage(&cube, &inputs, &out), 2, "not a regular file");
+        std::fs::remove_file(&sky).unwrap();
+        std::fs::rename(&moved, &sky).unwrap();
+    }
+    assert!(!out.exists(), "nothing written");
+
     // Another build's plan, parameters that do not read back, an unknown kind.
     let mut other = cube.clone();
     other["tool"] = "0.0.0+elsewhere".into();
@@ -243,4 +272,30 @@ fn bad_entries_inputs_and_results_fail_with_one_line_and_write_nothing() {
     );
     assert!(String::from_utf8_lossy(&o.stderr).contains("px.exr"));
     assert!(!d.join("out/p/cube").exists());
+
+    // A result holding a file the stage does not write (reported consistently in its
+    // stage.json) is not committed either.
+    let _ = std::fs::remove_dir_all(&out);
+    ok(stage(&cube, &inputs, &out));
+    let report_path = out.join("stage.json");
+    let mut report: Value = serde_json::from_slice(&std::fs::read(&report_path).unwrap()).unwrap();
+    std::fs::write(out.join("files/extra.bin"), b"x").unwrap();
+    report["outputs"]
+        .as_array_mut()
+        .unwrap()
+        .push(serde_json::json!({
+            "rel": "extra.bin", "size": 1, "hash": blake3::hash(b"x").to_hex().to_string()
+        }));
+    std::fs::write(&report_path, serde_json::to_vec(&report).unwrap()).unwrap();
+    let o = bake(
+        d,
+        &["commit", pipeline.to_str().unwrap(), out.to_str().unwrap()],
+    );
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("not those the stage writes"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!d.join("out/p/cube/extra.bin").exists());
 }

@@ -96,11 +96,12 @@ pub struct Reads {
 }
 
 /// An environment input: an equirect image, a cross or strip, a folder of faces, a KTX2 cube.
-pub const ENVIRONMENT: &str = "an environment: equirect, cross, face folder or KTX2 cube";
+pub const ENVIRONMENT: &str =
+    "an environment: equirect, cross, face folder or KTX2, DDS or KTX1 cube";
 
 /// The command-line help of an environment bake's input.
 pub const ENVIRONMENT_HELP: &str =
-    "Input environment: .exr/.hdr equirect or cross, a folder of faces, or a .ktx2 cube";
+    "Input environment: .exr/.hdr equirect or cross, a folder of faces, or a .ktx2, .dds or .ktx cube";
 
 impl Reads {
     /// An environment bake: one environment, the command line's positional input.

@@ -4,11 +4,13 @@
 //! files, and the warnings, information lines and `--json` summary.
 
 use crate::{
-    check_output, negative_values, run_body, usage_exit, write_cube_outputs, write_outputs,
+    check_output, negative_values, record_dir, record_outputs, run_body, stale_cleanup, usage_exit,
+    write_outputs, OutputKind,
 };
 use crate::{CommonArgs, Ctx};
 use clap::{Args, FromArgMatches};
 use ibl_bake::{Bake, BakeError};
+use ibl_core::ownership;
 use std::path::{Path, PathBuf};
 
 /// The clap command of `bake` as its binary (or subcommand) takes it: [`ibl_bake::command`]
@@ -125,8 +127,9 @@ fn parsed<B: Bake>(tool: &str, m: &clap::ArgMatches) -> (B::Params, CommonArgs) 
     (params, common)
 }
 
-/// One run as a command line does it: validate, check `-o`, bake, warn, write (removing what
-/// an earlier run left), inform.
+/// One run as a command line does it: validate, check `-o` and that every output it will
+/// write is ours to write (inside `-o`, not a user's file: `ibl_core::ownership`), bake, warn,
+/// write (removing what an earlier run left), record what was written, inform.
 fn bake_once<B: Bake>(
     bake: &B,
     params: &B::Params,
@@ -135,13 +138,23 @@ fn bake_once<B: Bake>(
     ctx: &Ctx,
 ) -> Outcome {
     bake.validate(params, out)?;
-    check_output(out, bake.output_kind(params, out))?;
+    let kind = bake.output_kind(params, out);
+    check_output(out, kind)?;
+    let dir = record_dir(out, kind);
+    ownership::check_output_folder(&dir, "-o", kind == OutputKind::Folder)?;
+    let overwrite = ctx.common.overwrite;
+    let planned = bake.outputs(params, inputs, out)?;
+    ownership::check_writes(&dir, &planned, overwrite)?;
     let baked = bake.run(params, inputs, out, ctx.progress())?;
+    // What the bake encoded, checked again (a file `outputs` did not foresee).
+    let paths: Vec<PathBuf> = baked.files.iter().map(|f| f.0.clone()).collect();
+    ownership::check_writes(&dir, &paths, overwrite)?;
     baked.warnings.into_iter().for_each(|w| ctx.warn(w));
-    let outputs = match bake.stale_cube(params) {
-        Some(name) => write_cube_outputs(ctx, out, name, &baked.files)?,
-        None => write_outputs(&baked.files)?,
-    };
+    let outputs = write_outputs(&baked.files)?;
+    record_outputs(B::COMMAND[0], &dir, &baked.files)?;
+    if let Some(name) = bake.stale_cube(params) {
+        stale_cleanup(ctx, &dir, name, &baked.files)?;
+    }
     baked.info.iter().for_each(|i| ctx.info(i));
     Ok((outputs, baked.details))
 }

@@ -32,6 +32,10 @@ pub struct CommonArgs {
     /// or $IBL_MAX_MEMORY].
     #[arg(long, value_name = "SIZE", value_parser = ibl_core::io::budget::parse_size)]
     pub max_memory: Option<u64>,
+    /// Replace output files this tool did not write, or that changed since it wrote them
+    /// (otherwise refused before any work; see the `.ibl-outputs.json` beside the outputs).
+    #[arg(long)]
+    pub overwrite: bool,
 }
 
 /// Exit codes: 0 success, 2 invalid input or parameters (also clap's usage errors),
@@ -123,26 +127,64 @@ pub fn write_outputs(
     Ok(files.iter().map(|f| f.0.display().to_string()).collect())
 }
 
-/// Writes a cube bake's files as one atomic set, then removes what an earlier run of the same
-/// bake left in `dir` that this one did not write (another layout's container or faces, levels
-/// of a longer chain; see [`ibl_core::output::stale_cube_files`]), each with a warning, so the
-/// folder holds exactly this run's result.
-pub fn write_cube_outputs(
+/// After a cube bake wrote `files`, removes what an earlier run of the same bake left in `dir`
+/// that this one did not write (another layout's container or faces, levels of a longer
+/// chain; see [`ibl_core::output::stale_cube_files`]), each with a warning, so the folder holds
+/// exactly this run's result. Only files the folder's record
+/// ([`ibl_core::ownership::Record`]) says a tool wrote, bytes unchanged, are removed; any other
+/// file of such a name is left in place with a warning.
+pub fn stale_cleanup(
     ctx: &Ctx,
     dir: &std::path::Path,
     name: &str,
     files: &[(std::path::PathBuf, Vec<u8>)],
-) -> Result<Vec<String>, ibl_core::Error> {
-    let outputs = write_outputs(files)?;
+) -> Result<(), ibl_core::Error> {
     let written: Vec<std::path::PathBuf> = files.iter().map(|f| f.0.clone()).collect();
-    for stale in ibl_core::output::stale_cube_files(dir, name, &written) {
-        std::fs::remove_file(&stale).map_err(|e| ibl_core::Error::io(&stale, e))?;
+    let stale = ibl_core::output::stale_cube_files(dir, name, &written);
+    let (ours, not_ours) = ibl_core::ownership::split_owned(dir, stale);
+    let mut record = ibl_core::ownership::Record::load(dir);
+    for stale in &ours {
+        std::fs::remove_file(stale).map_err(|e| ibl_core::Error::io(stale, e))?;
+        record.remove(dir, stale);
         ctx.warn(format!(
-            "removed {} (left by an earlier run with another layout or a longer chain)",
+            "removed {} (written by an earlier run with another layout or a longer chain)",
             stale.display()
         ));
     }
-    Ok(outputs)
+    if !ours.is_empty() {
+        record.save(dir)?;
+    }
+    for kept in not_ours {
+        ctx.warn(format!(
+            "left {} in place: named like an output of another layout, but not written by this \
+             tool or changed since (remove it yourself if it is stale)",
+            kept.display()
+        ));
+    }
+    Ok(())
+}
+
+/// The folder whose record lists the outputs of a run writing to `out`: `out` itself, or the
+/// folder of the one output file.
+pub fn record_dir(out: &std::path::Path, kind: OutputKind) -> std::path::PathBuf {
+    match kind {
+        OutputKind::Folder => out.to_path_buf(),
+        OutputKind::File => match out.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => std::path::PathBuf::from("."),
+        },
+    }
+}
+
+/// Records `files` as written by `tool` in `dir`'s record (after they were written).
+pub fn record_outputs(
+    tool: &str,
+    dir: &std::path::Path,
+    files: &[(std::path::PathBuf, Vec<u8>)],
+) -> Result<(), ibl_core::Error> {
+    let mut record = ibl_core::ownership::Record::load(dir);
+    record.add(dir, tool, files);
+    record.save(dir)
 }
 
 /// Runs a binary's body: builds the thread pool, times it, prints the summary or the error
@@ -364,7 +406,12 @@ pub fn negative_values(cmd: clap::Command) -> clap::Command {
         if !a.get_action().takes_values() || a.is_positional() {
             return a;
         }
-        if a.get_value_delimiter().is_some() {
+        // A list, split by clap or parsed whole (`--roughness RX,RY`): `-0.1,0.5` is no number,
+        // and clap would read `-0` as a flag.
+        let list = a.get_value_delimiter().is_some()
+            || a.get_value_names()
+                .is_some_and(|n| n.iter().any(|s| s.contains(',')));
+        if list {
             a.allow_hyphen_values(true)
         } else {
             a.allow_negative_numbers(true)
@@ -432,6 +479,8 @@ mod tests {
         x: Option<f32>,
         #[arg(long, value_delimiter = ',')]
         list: Vec<f32>,
+        #[arg(long, value_name = "A,B")]
+        pair: Option<String>,
         #[arg(long)]
         flag: bool,
         #[command(subcommand)]
@@ -450,6 +499,9 @@ mod tests {
         let t: T = try_parse_from(["t", "--x", "-0.5", "--list", "-0.1,0.5", "--flag"]).unwrap();
         assert_eq!(t.x, Some(-0.5));
         assert_eq!(t.list, vec![-0.1, 0.5]);
+        // A pair parsed whole (tpr-map's --roughness RX,RY) takes a leading minus too.
+        let t: T = try_parse_from(["t", "--pair", "-0.1,0.5"]).unwrap();
+        assert_eq!(t.pair.as_deref(), Some("-0.1,0.5"));
         assert!(t.flag);
         let t: T = try_parse_from(["t", "s", "--n", "-1"]).unwrap();
         assert!(matches!(t.sub, Some(Sub::S { n: Some(-1) })));

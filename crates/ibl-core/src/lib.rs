@@ -18,6 +18,7 @@ pub mod image;
 pub mod io;
 pub mod linalg;
 pub mod output;
+pub mod ownership;
 pub mod params;
 pub mod progress;
 pub mod sampling;

@@ -27,13 +27,13 @@ impl Bake for EquirectToCube {
     const NAME: &'static str = "equirect-to-cube";
     const SUMMARY: &'static str = "environment to an area-filtered cubemap (faces or KTX2)";
     const ABOUT: &'static str =
-        "Latitude-longitude HDR (or a cross, strip, face folder or KTX2 cube) to an area-filtered \
+        "Latitude-longitude HDR (or a cross, strip, face folder or KTX2, DDS or KTX1 cube) to an area-filtered \
          cubemap: DIR/px.exr … DIR/nz.exr, or DIR/cube.ktx2 with --layout ktx2.";
     const COMMAND: &'static [&'static str] = &["equirect-to-cube"];
     const LIBRARY: &'static str = "ibl-env";
     const READS: Reads = Reads {
         cli_input: Some(
-            "Input environment: .exr/.hdr/.png equirect or cross, a folder of faces, or a .ktx2 cube",
+            "Input environment: .exr/.hdr/.png equirect or cross, a folder of faces, or a .ktx2, .dds or .ktx cube",
         ),
         ..Reads::ENVIRONMENT
     };

@@ -8,7 +8,9 @@
 //! is read, so a file replaced during a conversion converts again) and the output's length.
 //! An output is skipped only when the sidecar matches all of them and the output is not
 //! older than its input; anything else (no sidecar, other options, a replaced input, an
-//! output edited or truncated by someone else) converts again. The sidecar is written after
+//! output edited or truncated by someone else) converts again, except over a file that is not
+//! the one quat-map wrote (a user's file of the same name, an output edited since: its sidecar
+//! records the bytes written), which is refused unless `--force`. The sidecar is written after
 //! the output, so an interrupted conversion is redone.
 
 use crate::normal;
@@ -150,6 +152,28 @@ pub struct Sidecar {
     pub input_modified_ns: u128,
     /// Output size in bytes as written (a changed size marks it edited).
     pub output_len: u64,
+    /// BLAKE3 of the output's bytes as written: the output is replaced only while it still
+    /// holds them (absent in sidecars of older versions: the size decides).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub output_hash: Option<String>,
+}
+
+/// Whether `output` is a file this tool wrote and nobody changed since: its sidecar is
+/// quat-map's and records these bytes. A user's file of the same name is not replaced.
+fn written_by_us(output: &Path) -> bool {
+    let Ok(m) = std::fs::symlink_metadata(output) else {
+        return true;
+    };
+    let Ok(side) = io::data::read::<Sidecar>(&sidecar_path(output)) else {
+        return false;
+    };
+    m.is_file()
+        && side.tool == "quat-map"
+        && side.output_len == m.len()
+        && side
+            .output_hash
+            .as_ref()
+            .is_none_or(|h| ibl_core::ownership::hash_file(output).is_ok_and(|got| &got == h))
 }
 
 /// `.NAME.opts` beside `output`.
@@ -383,6 +407,17 @@ fn convert_one_with(
     let baked = quat_map::run(params, &normal, output, &NoProgress)?;
     drop(normal);
     let output_len = baked.files[0].1.len() as u64;
+    let output_hash = Some(ibl_core::ownership::hash_bytes(&baked.files[0].1));
+    // Never over a user's file of the same name (or an output edited since): `--force` is
+    // the user saying so.
+    if !params.force && !written_by_us(output) {
+        return Err(Error::invalid(
+            output,
+            "exists and was not written by quat-map, or changed since (its sidecar does not \
+             match): move it away, or pass --force to replace it",
+        )
+        .into());
+    }
     io::write_many_atomic(&baked.files)?;
     let side = Sidecar {
         tool: "quat-map".into(),
@@ -396,6 +431,7 @@ fn convert_one_with(
         input_len: in_meta.len(),
         input_modified_ns: modified_ns(&in_meta),
         output_len,
+        output_hash,
     };
     io::data::write(&sidecar_path(output), &side)?;
     let mut warnings = baked.stats.warnings(input);
@@ -630,19 +666,27 @@ mod tests {
         );
         // Two candidate inputs in one folder: that folder fails, the rest runs.
         write_normal(&root.join("nested/c/normal.exr"), 4, 1.0);
+        // The damaged output is no longer the one quat-map wrote: refused and kept, not
+        // replaced (`--force` replaces it).
         let r = run(&p, root, &NoProgress).unwrap();
         assert_eq!(
             (r.converted.len(), r.skipped.len(), r.failed.len()),
-            (2, 0, 1)
+            (1, 0, 2)
+        );
+        let errors: Vec<&str> = r.failed.iter().map(|f| f.error.as_str()).collect();
+        assert!(
+            errors.iter().any(|e| e.contains("2 files match")),
+            "{errors:?}"
         );
         assert!(
-            r.failed[0].error.contains("2 files match"),
-            "{}",
-            r.failed[0].error
+            errors
+                .iter()
+                .any(|e| e.contains("quaternion.png") && e.contains("--force")),
+            "{errors:?}"
         );
+        assert_eq!(fs::read(root.join("b/quaternion.png")).unwrap(), b"oops");
         let e = r.error().unwrap();
-        eprintln!("{e}");
-        assert!(e.to_string().contains("1 of 3 material(s) failed"));
+        assert!(e.to_string().contains("2 of 3 material(s) failed"), "{e}");
     }
 
     #[test]

@@ -288,7 +288,11 @@ impl Manifest {
                 .collect();
             for o in &old.outputs {
                 let p = output.join(&old.dir).join(&o.rel);
-                if !new_files.contains(&p) {
+                // Only a file that still holds the bytes recorded, reached without a symlink
+                // out of the output folder: anything else is not ours to remove.
+                let ours = crate::owned::matches_stamp(&p, &o.stamp, false)
+                    && ibl_core::ownership::check_inside(&p, output).is_ok();
+                if ours && !new_files.contains(&p) {
                     let _ = std::fs::remove_file(&p);
                     crate::paths::remove_empty_parents(&p, output);
                 }

@@ -132,9 +132,20 @@ impl Graph {
 }
 
 /// Checks a stage id: non-empty segments of `[A-Za-z0-9_.-]` separated by `/`, none `.`/`..`.
+/// The longest stage id, in bytes (a file name holds 255; the slug of an id names a file).
+const MAX_ID: usize = 128;
+
 fn check_id(id: &str) -> std::result::Result<(), String> {
     if id.is_empty() {
         return Err("a stage id cannot be empty".into());
+    }
+    // An id names a folder, a journal and table columns: a few path segments, not a file.
+    if id.len() > MAX_ID {
+        let head: String = id.chars().take(24).collect();
+        return Err(format!(
+            "stage id '{head}…' is {} bytes long, more than {MAX_ID}",
+            id.len()
+        ));
     }
     for seg in id.split('/') {
         if seg.is_empty() || seg == "." || seg == ".." || seg.starts_with(".bake") {
@@ -274,7 +285,7 @@ fn check_stage_folders(p: &Pipeline, stages: &[Stage], diags: &mut Vec<Diagnosti
     let output = paths::normalize(&p.output);
     for s in stages {
         if !paths::is_within(&s.dir, &output)
-            || s.dir == output
+            || paths::absolute(&s.dir) == paths::absolute(&output)
             || paths::is_within(&s.dir, &output.join(".bake"))
         {
             diags.push(p.diag(
@@ -799,6 +810,11 @@ mod tests {
         for bad in ["", "a//b", "../x", "a b", ".bake"] {
             assert!(check_id(bad).is_err(), "{bad}");
         }
+        // 65,536 characters once panicked in the table's column width: now refused, briefly.
+        let long = "a".repeat(65_536);
+        let e = check_id(&long).unwrap_err();
+        assert!(e.contains("65536 bytes long") && e.len() < 120, "{e}");
+        assert!(check_id(&"a".repeat(MAX_ID)).is_ok());
         for good in ["cube", "lobby/cube", "hv-lut/100x10", "a.b_c"] {
             assert!(check_id(good).is_ok(), "{good}");
         }

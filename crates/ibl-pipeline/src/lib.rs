@@ -13,12 +13,14 @@
 #![warn(missing_docs)]
 
 pub(crate) mod cache;
+pub mod cli;
 pub mod error;
 pub mod exec;
 pub mod graph;
 pub mod kinds;
 pub mod need;
 pub mod ninja;
+pub mod owned;
 pub mod paths;
 pub mod plan;
 pub mod remote;

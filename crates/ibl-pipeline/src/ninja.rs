@@ -18,6 +18,11 @@ fn esc_path(p: &Path) -> String {
         .replace(':', "$:")
 }
 
+/// Whether `t` holds a line break (which no ninja escape can carry).
+fn has_line_break(t: &str) -> bool {
+    t.contains(['\n', '\r'])
+}
+
 /// Quotes one argument for `/bin/sh`.
 pub(crate) fn shell_quote(s: &str) -> String {
     if !s.is_empty()
@@ -39,6 +44,17 @@ pub fn emit(graph: &Graph, ninja_file: &Path, bin_dir: &Path) -> Result<String> 
         .unwrap_or(Path::new("."));
     let rel = |p: &Path| relative_to(p, base);
     let mut diags = Vec::new();
+    for p in [&graph.pipeline.file, bin_dir, ninja_file] {
+        if has_line_break(&p.to_string_lossy()) {
+            diags.push(Diagnostic::global(
+                &graph.pipeline.file,
+                format!(
+                    "{:?} holds a line break, which a ninja file cannot hold: rename it",
+                    p
+                ),
+            ));
+        }
+    }
     let mut outputs_of: Vec<Vec<PathBuf>> = vec![vec![]; graph.stages.len()];
     let mut out = String::new();
     let _ = writeln!(
@@ -93,6 +109,24 @@ pub fn emit(graph: &Graph, ninja_file: &Path, bin_dir: &Path) -> Result<String> 
                 continue;
             }
         };
+        // Ninja has no escape for a line break (`$` + newline continues the line): refused.
+        let broken = outs
+            .iter()
+            .chain(&ins)
+            .map(|p| p.to_string_lossy().into_owned())
+            .chain(commands.iter().flatten().cloned())
+            .find(|t| has_line_break(t));
+        if let Some(t) = broken {
+            diags.push(Diagnostic::global(
+                &graph.pipeline.file,
+                format!(
+                    "stage '{}': {:?} holds a line break, which a ninja file cannot hold: \
+                     rename it (or use `bake run`)",
+                    s.id, t
+                ),
+            ));
+            continue;
+        }
         let cmd = commands
             .iter()
             .map(|argv| {

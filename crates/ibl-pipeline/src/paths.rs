@@ -53,9 +53,9 @@ pub(crate) fn relative_to(p: &Path, base: &Path) -> PathBuf {
     }
 }
 
-/// True when `p` is `dir` or inside it (lexically).
+/// True when `p` is `dir` or inside it (lexically, both made absolute: `a` is inside `.`).
 pub(crate) fn is_within(p: &Path, dir: &Path) -> bool {
-    normalize(p).starts_with(normalize(dir))
+    absolute(p).starts_with(absolute(dir))
 }
 
 /// A file-name-safe form of a stage id (`lobby/cube` → `lobby_cube`).

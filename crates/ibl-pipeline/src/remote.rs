@@ -69,6 +69,11 @@ pub struct ShippedFile {
     pub rel: String,
     /// Its absolute path here.
     pub path: PathBuf,
+    /// The blake3 hash of its bytes as the plan hashed them (every input file; a read stage's
+    /// file when that stage was built when the plan was made). `bake stage` refuses a file
+    /// whose bytes differ: a wrong file under `--inputs`, or bytes damaged on the way.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hash: Option<String>,
 }
 
 /// One produced file.
@@ -140,20 +145,30 @@ pub fn entries(graph: &Graph, plan: &Plan) -> Result<Vec<Option<StageEntry>>> {
         let mut reads = Vec::new();
         for (name, src) in &s.reads {
             reads.push(match src {
-                Source::Input(n) => input_read(name, &graph.inputs[n])?,
+                Source::Input(n) => input_read(name, &graph.inputs[n], &plan.manifest)?,
                 Source::Stage(j) => {
                     let up = &graph.stages[*j];
                     let (uk, up_params) = up.runnable().expect("a read stage is runnable");
                     let prefix = rel_dir(&up.dir)?;
                     let product = uk.product(up_params, &up.dir);
+                    // Hashes of the read stage's files when it is built and will not change.
+                    let built = (plan.stages[*j].decision == Decision::UpToDate)
+                        .then(|| plan.manifest.stages.get(&up.id))
+                        .flatten();
                     let files = uk
                         .outputs(up_params, &graph.input_args(*j), &up.dir)
                         .map_err(|e| Error::Core(ibl_core::Error::invalid(&up.dir, e.message)))?
                         .into_iter()
                         .filter_map(|f| {
+                            let hash = built.and_then(|r| {
+                                let rel = rel_text(&f, &up.dir)?;
+                                let o = r.outputs.iter().find(|o| o.rel == rel)?;
+                                Some(o.stamp.hash.clone())
+                            });
                             rel_text(&f, output).map(|rel| ShippedFile {
                                 rel,
                                 path: crate::paths::absolute(&f),
+                                hash,
                             })
                         })
                         .collect();
@@ -182,7 +197,11 @@ pub fn entries(graph: &Graph, plan: &Plan) -> Result<Vec<Option<StageEntry>>> {
 
 /// A read of an input: a file and a folder keep their own name, glob matches their paths
 /// below the folder they share, so the bake sees the names it would see in place.
-fn input_read(name: &str, r: &crate::graph::ResolvedInput) -> Result<ReadEntry> {
+fn input_read(
+    name: &str,
+    r: &crate::graph::ResolvedInput,
+    manifest: &crate::cache::Manifest,
+) -> Result<ReadEntry> {
     let root = match r.input {
         crate::schema::Input::File(_) | crate::schema::Input::Folder(_) => {
             let path = crate::paths::absolute(&r.path);
@@ -214,9 +233,16 @@ fn input_read(name: &str, r: &crate::graph::ResolvedInput) -> Result<ReadEntry> 
             .files
             .iter()
             .map(|f| {
+                let path = crate::paths::absolute(f);
+                // The plan hashed every input it reads (its stamps are in the manifest).
+                let hash = manifest
+                    .files
+                    .get(path.to_string_lossy().as_ref())
+                    .map(|st| st.hash.clone());
                 Ok(ShippedFile {
                     rel: rel(f)?,
-                    path: crate::paths::absolute(f),
+                    path,
+                    hash,
                 })
             })
             .collect::<Result<_>>()?,
@@ -281,6 +307,7 @@ pub fn run_entry(
     })?;
     let params = entry_params(kind, entry)?;
     kind.validate(&params)?;
+    verify_inputs(entry, inputs)?;
     let mut args = Vec::new();
     for (k, r) in entry.reads.iter().enumerate() {
         for a in &r.args {
@@ -332,6 +359,91 @@ pub fn run_entry(
     Ok(report)
 }
 
+/// Checks the inputs materialised under `inputs` against `entry` before anything is baked:
+/// each read's folder holds exactly the files the entry lists (regular files, no symlink, no
+/// other file a folder read would pick up), and every file whose hash the plan recorded holds
+/// those bytes; an input file must have one.
+fn verify_inputs(entry: &StageEntry, inputs: &Path) -> std::result::Result<(), BakeError> {
+    for (k, r) in entry.reads.iter().enumerate() {
+        let root = inputs.join(k.to_string());
+        let mut listed = std::collections::BTreeSet::new();
+        for f in &r.files {
+            if !cache::is_inside_rel(&f.rel) {
+                return Err(invalid(format!(
+                    "read '{}': file '{}' is not a plain relative path",
+                    r.name, f.rel
+                )));
+            }
+            let p = root.join(&f.rel);
+            match std::fs::symlink_metadata(&p) {
+                Ok(m) if m.is_file() => {}
+                Ok(_) => {
+                    return Err(invalid(format!(
+                        "read '{}': {} is not a regular file (a symlink or a folder)",
+                        r.name,
+                        p.display()
+                    )))
+                }
+                Err(e) => return Err(invalid(format!("read '{}': {}: {e}", r.name, p.display()))),
+            }
+            let want = match (&f.hash, &r.stage) {
+                (Some(h), _) => h,
+                (None, None) => {
+                    return Err(invalid(format!(
+                        "read '{}': the entry records no hash for input file '{}' (plan it with \
+                         this build of bake)",
+                        r.name, f.rel
+                    )))
+                }
+                (None, Some(_)) => {
+                    listed.insert(p);
+                    continue;
+                }
+            };
+            let got = ibl_core::ownership::hash_file(&p)
+                .map_err(|e| invalid(format!("read '{}': {}: {e}", r.name, p.display())))?;
+            if &got != want {
+                return Err(invalid(format!(
+                    "read '{}': {} is not the file the plan recorded (blake3 {}…, planned {}…): \
+                     a wrong file under --inputs, or damaged on the way",
+                    r.name,
+                    p.display(),
+                    &got[..12],
+                    &want[..want.len().min(12)]
+                )));
+            }
+            listed.insert(p);
+        }
+        // Nothing else: a folder read would bake an extra file too. (A read stage's folder is
+        // what its task returned, checked by hash where the plan knew it.)
+        if r.stage.is_some() {
+            continue;
+        }
+        let mut stack = vec![root.clone()];
+        while let Some(d) = stack.pop() {
+            let Ok(rd) = std::fs::read_dir(&d) else {
+                continue;
+            };
+            for e in rd.flatten() {
+                let p = e.path();
+                let t = e
+                    .file_type()
+                    .map_err(|err| invalid(format!("{}: {err}", p.display())))?;
+                if t.is_dir() {
+                    stack.push(p);
+                } else if !listed.contains(&p) {
+                    return Err(invalid(format!(
+                        "read '{}': {} is not one of the files the plan lists for it",
+                        r.name,
+                        p.display()
+                    )));
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
 /// A result folder's files: path relative to the stage's folder, bytes.
 type ResultFiles = Vec<(String, Vec<u8>)>;
 
@@ -352,6 +464,21 @@ fn read_result(dir: &Path) -> std::result::Result<(StageOutput, ResultFiles), St
             ));
         }
         let p = dir.join(FILES).join(&o.rel);
+        // Read no further than a regular file of the size reported: a symlink could lead
+        // anywhere, a larger file is not what the stage wrote.
+        match std::fs::symlink_metadata(&p) {
+            Ok(m) if m.is_file() && m.len() == o.size => {}
+            Ok(m) if m.is_file() => {
+                return Err(format!(
+                    "{}: {} bytes, the stage reported {} (damaged in transfer?)",
+                    p.display(),
+                    m.len(),
+                    o.size
+                ))
+            }
+            Ok(_) => return Err(format!("{}: not a regular file", p.display())),
+            Err(e) => return Err(format!("{}: {e}", p.display())),
+        }
         let b = std::fs::read(&p).map_err(|e| format!("{}: {e}", p.display()))?;
         if b.len() as u64 != o.size || cache::hash_bytes(&b) != o.hash {
             return Err(format!(
@@ -476,9 +603,48 @@ pub fn commit(graph: &Graph, results: &[PathBuf], restore: &[String]) -> Result<
             ));
             continue;
         }
+        // The files must be those the stage's entry writes, no more, no fewer.
+        if let Some((kind, params)) = s.runnable() {
+            if let Ok(expected) = kind.outputs(params, &graph.input_args(i), &s.dir) {
+                let mut want: Vec<String> = expected
+                    .iter()
+                    .filter_map(|f| rel_text(f, &s.dir))
+                    .collect();
+                let mut got: Vec<String> = files.iter().map(|(r, _)| r.clone()).collect();
+                want.sort();
+                got.sort();
+                if want != got {
+                    done.push(result_of(
+                        i,
+                        Status::Failed,
+                        format!(
+                            "{}: the result's files ({}) are not those the stage writes ({})",
+                            dir.display(),
+                            got.join(", "),
+                            want.join(", ")
+                        ),
+                    ));
+                    continue;
+                }
+            }
+        }
         if planned.decision == Decision::UpToDate {
             // Committed meanwhile (by another run): the bytes are those of the same key.
             done.push(result_of(i, Status::UpToDate, "up to date".into()));
+            continue;
+        }
+        // Nothing of the user's is replaced (as `bake run` checks before it starts).
+        let targets: Vec<PathBuf> = files.iter().map(|(rel, _)| s.dir.join(rel)).collect();
+        let in_the_way = crate::owned::not_ours(
+            graph,
+            &exec::commit::manifest_guard(&manifest),
+            i,
+            targets,
+            false,
+        )
+        .and_then(|theirs| crate::owned::refuse(&theirs));
+        if let Err(e) = in_the_way {
+            done.push(result_of(i, Status::Failed, e.to_string()));
             continue;
         }
         let staging = session.staging_dir(i, &s.id);

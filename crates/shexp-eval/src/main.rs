@@ -46,6 +46,7 @@ fn main() {
             )));
         }
         ibl_cli::check_output(&cli.out, ibl_cli::OutputKind::Folder)?;
+        ibl_core::ownership::check_output_folder(&cli.out, "--out", true)?;
         let fit_params: fit::Params = match &cli.fit_params {
             Some(p) => ibl_core::io::data::read_as(p, "an SH-exp fit-parameter file")?,
             None => fit::Params::default(),
@@ -104,7 +105,10 @@ fn main() {
             images.push(imgs);
         }
         let files = eval::encode_outputs(&cli.out, &cli.params, &reports, &images)?;
+        let paths: Vec<PathBuf> = files.iter().map(|f| f.0.clone()).collect();
+        ibl_core::ownership::check_writes(&cli.out, &paths, cli.common.overwrite)?;
         let outputs = ibl_cli::write_outputs(&files)?;
+        ibl_cli::record_outputs("shexp-eval", &cli.out, &files)?;
         if !cli.common.quiet && !cli.common.json {
             print!("{}", eval::markdown(&reports));
         }

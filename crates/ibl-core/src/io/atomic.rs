@@ -96,6 +96,36 @@ pub fn write_many_atomic(files: &[(PathBuf, Vec<u8>)]) -> Result<()> {
     Ok(())
 }
 
+/// The name prefix of a write probe: `.ibl-write-probe-<pid>-<n>`.
+const PROBE: &str = ".ibl-write-probe-";
+
+/// Removes the write probes in `dir` whose process is gone (a kill between the probe's
+/// creation and its removal leaves one). Only where `/proc` says which processes live.
+fn remove_dead_probes(dir: &Path) {
+    if !Path::new("/proc/self").exists() {
+        return;
+    }
+    let Ok(rd) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for e in rd.flatten() {
+        let name = e.file_name();
+        let Some(rest) = name.to_str().and_then(|n| n.strip_prefix(PROBE)) else {
+            continue;
+        };
+        let pid = rest.split('-').next().unwrap_or("");
+        let dead = !pid.is_empty()
+            && pid.bytes().all(|b| b.is_ascii_digit())
+            && !Path::new("/proc").join(pid).exists();
+        // Only an empty regular file is a probe: nothing of a user's is removed.
+        let probe =
+            e.file_type().is_ok_and(|t| t.is_file()) && e.metadata().is_ok_and(|m| m.len() == 0);
+        if dead && probe {
+            let _ = std::fs::remove_file(e.path());
+        }
+    }
+}
+
 /// What `-o` names: a folder the bake writes its files into, or one output file.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum OutputKind {
@@ -116,8 +146,8 @@ pub fn check_output(path: &std::path::Path, kind: OutputKind) -> Result<()> {
             return Err(Error::invalid(
                 path,
                 format!(
-                    "the output must be a folder, but {shown} is an existing file: choose another \
-                     name or remove the file"
+                    "the output must be a folder, but {shown} is an existing file in the way: \
+                     choose another name or remove the file"
                 ),
             ))
         }
@@ -152,23 +182,23 @@ pub fn check_output(path: &std::path::Path, kind: OutputKind) -> Result<()> {
             }
         }
     }
+    // The same class (exit 2) and words whether `-o file` or `-o file/sub` meets the file.
     if !existing.is_dir() {
-        return Err(Error::io(
+        return Err(Error::invalid(
             path,
-            std::io::Error::new(
-                std::io::ErrorKind::NotADirectory,
-                format!(
-                    "cannot create the output folder {}: {} is a file in the way (move it or \
-                     choose another output)",
-                    dir.display(),
-                    existing.display()
-                ),
+            format!(
+                "the output must be a folder, but {} is an existing file in the way: choose \
+                 another name or remove the file",
+                existing.display()
             ),
         ));
     }
     // Writability as the writes will see it (permissions, read-only mounts, ACLs): create
     // and remove a probe file.
-    let probe = existing.join(format!(".ibl-write-probe-{}", std::process::id()));
+    // The probe is unique per call; a probe a killed process left (its pid gone) is removed.
+    remove_dead_probes(existing);
+    let k = COUNTER.fetch_add(1, Ordering::Relaxed);
+    let probe = existing.join(format!("{PROBE}{}-{k}", std::process::id()));
     match std::fs::OpenOptions::new()
         .write(true)
         .create_new(true)

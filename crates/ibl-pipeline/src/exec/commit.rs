@@ -244,11 +244,14 @@ fn keep_unchanged(
         .collect()
 }
 
-/// What `clean` removed.
+/// What `clean` removed, and what it left because it is not the runner's to remove.
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct CleanReport {
     /// Output files removed.
     pub removed: Vec<PathBuf>,
+    /// Files named like outputs that were left in place: changed since they were written,
+    /// not written by bake, or reached through a symlink out of the output folder.
+    pub kept: Vec<PathBuf>,
     /// The cache folder, if there was one (removed whole).
     pub cache: Option<PathBuf>,
 }
@@ -258,19 +261,26 @@ pub fn clean(session: Session, graph: &Graph) -> Result<CleanReport> {
     clean_output(session, Some(graph))
 }
 
-/// Removes every output the manifest of the session's output folder records, and the cache
-/// folder; with the pipeline's graph, also what a ninja run of it would have written. Only the
-/// output folder is needed: a pipeline whose inputs are gone can still be cleaned.
+/// Removes every output the manifest of the session's output folder records whose bytes are
+/// the ones recorded, and the cache folder; with the pipeline's graph, also what a ninja run
+/// of it wrote (files the bakes' CLIs recorded in `.ibl-outputs.json`, bytes unchanged). Any
+/// other file is left and reported in [`CleanReport::kept`]. Only the output folder is
+/// needed: a pipeline whose inputs are gone can still be cleaned.
 pub fn clean_output(session: Session, graph: Option<&Graph>) -> Result<CleanReport> {
     let output = session.cache.output.clone();
     let manifest = session.cache.load_manifest()?;
-    let mut files: Vec<PathBuf> = manifest
+    // (file, whether it is ours to remove)
+    let mut files: Vec<(PathBuf, bool)> = manifest
         .stages
         .values()
         .flat_map(|r| {
             r.outputs
                 .iter()
-                .map(|o| output.join(&r.dir).join(&o.rel))
+                .map(|o| {
+                    let p = paths::normalize(&output.join(&r.dir).join(&o.rel));
+                    let ours = crate::owned::matches_stamp(&p, &o.stamp, true);
+                    (p, ours)
+                })
                 .collect::<Vec<_>>()
         })
         .collect();
@@ -279,19 +289,59 @@ pub fn clean_output(session: Session, graph: Option<&Graph>) -> Result<CleanRepo
         for (i, s) in graph.stages.iter().enumerate() {
             if let (true, Some((kind, params))) = (s.needed(), s.runnable()) {
                 if let Ok(outs) = kind.outputs(params, &graph.input_args(i), &s.dir) {
-                    files.extend(outs);
+                    for f in outs.iter().map(|f| paths::normalize(f)) {
+                        let folder = f.parent().unwrap_or(&s.dir).to_path_buf();
+                        let ours = ibl_core::ownership::Record::load(&folder).owns(&folder, &f);
+                        files.push((f, ours));
+                    }
                 }
             }
         }
     }
+    // A file both recorded and planned is ours if either record says so.
     files.sort();
-    files.dedup();
+    let mut merged: Vec<(PathBuf, bool)> = Vec::with_capacity(files.len());
+    for (f, ours) in files {
+        match merged.last_mut() {
+            Some((last, o)) if *last == f => *o |= ours,
+            _ => merged.push((f, ours)),
+        }
+    }
     let mut report = CleanReport::default();
-    for f in files {
-        if paths::is_within(&f, &output) && std::fs::remove_file(&f).is_ok() {
-            paths::remove_empty_parents(&f, &output);
+    let mut records: BTreeMap<PathBuf, ibl_core::ownership::Record> = BTreeMap::new();
+    for (f, ours) in merged {
+        if std::fs::symlink_metadata(&f).is_err() {
+            continue;
+        }
+        let inside =
+            paths::is_within(&f, &output) && ibl_core::ownership::check_inside(&f, &output).is_ok();
+        if !(ours && inside) {
+            report.kept.push(f);
+            continue;
+        }
+        if std::fs::remove_file(&f).is_ok() {
+            let folder = f.parent().unwrap_or(&output).to_path_buf();
+            records
+                .entry(folder.clone())
+                .or_insert_with(|| ibl_core::ownership::Record::load(&folder))
+                .remove(&folder, &f);
             report.removed.push(f);
         }
+    }
+    // The CLIs' records: rewritten without the files removed, removed when empty.
+    for (folder, record) in records {
+        let path = folder.join(ibl_core::ownership::RECORD);
+        if !std::fs::symlink_metadata(&path).is_ok_and(|m| m.is_file()) {
+            continue;
+        }
+        if record.files.is_empty() {
+            let _ = std::fs::remove_file(&path);
+        } else {
+            let _ = record.save(&folder);
+        }
+    }
+    for f in &report.removed {
+        paths::remove_empty_parents(f, &output);
     }
     let cache_root = session.cache.root.clone();
     drop(session);

@@ -502,3 +502,82 @@ mod tests {
         assert!(!dir.path().join("out/.bake/tmp").exists());
     }
 }
+
+/// The planner's item-by-item decisions across real runs: here, not in `plan.rs`, so that the
+/// planner never imports the executor (the executor reads plans; plans know nothing of it).
+#[cfg(all(test, feature = "material"))]
+mod planned_items {
+    use crate::exec::{self, Quiet, Session};
+    use crate::graph::Graph;
+    use crate::plan::{plan, Decision};
+    use std::path::Path;
+
+    /// A folder of two material folders read by a quat-map stage, planned and run once.
+    fn baked(dir: &Path, bits: u32) -> Graph {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../pipelines/materials");
+        for m in ["frying-pan", "painted-metal"] {
+            std::fs::create_dir_all(dir.join("mats").join(m)).unwrap();
+            std::fs::copy(
+                root.join(m).join("normal.png"),
+                dir.join("mats").join(m).join("normal.png"),
+            )
+            .unwrap();
+        }
+        let file = dir.join("p.ron");
+        let src = format!(
+            r#"(output: "out", inputs: {{"mats": Folder("mats")}}, stages: [
+                (id: "q", kind: "quat-map", reads: ["mats"], params: (bits: {bits})),
+            ])"#
+        );
+        std::fs::write(&file, src).unwrap();
+        crate::load(&file).unwrap()
+    }
+
+    fn run(graph: &Graph) {
+        let session = Session::open(graph).unwrap();
+        let report = exec::run(&session, graph, plan(graph, false).unwrap(), 1, &Quiet).unwrap();
+        assert!(!report.failed(), "{:?}", report.stages);
+    }
+
+    fn items(graph: &Graph) -> Vec<(String, Decision)> {
+        let p = plan(graph, false).unwrap();
+        p.stages[0]
+            .items
+            .iter()
+            .map(|it| (it.name.clone(), it.decision.clone()))
+            .collect()
+    }
+
+    #[test]
+    fn items_are_planned_from_their_own_files_and_the_stages_parameters() {
+        let dir = tempfile::tempdir().unwrap();
+        let graph = baked(dir.path(), 8);
+        let first = items(&graph);
+        assert_eq!(first.len(), 2);
+        assert!(first
+            .iter()
+            .all(|(_, d)| *d == Decision::Run("never built".into())));
+        run(&graph);
+        // Built: the stage is up to date, no item is planned.
+        assert_eq!(
+            plan(&graph, false).unwrap().stages[0].decision,
+            Decision::UpToDate
+        );
+        assert!(items(&graph).is_empty());
+        // One output deleted by hand: that item alone comes back from the object store.
+        std::fs::remove_file(dir.path().join("out/q/painted-metal/quaternion.png")).unwrap();
+        let now = items(&graph);
+        assert_eq!(now[0].1, Decision::UpToDate, "{now:?}");
+        assert!(matches!(&now[1].1, Decision::Restore(w) if w.contains("outputs missing")));
+        run(&graph);
+        // Another parameter changes every item's key, and says which.
+        let graph = baked(dir.path(), 16);
+        let now = items(&graph);
+        assert!(
+            now.iter().all(
+                |(_, d)| matches!(d, Decision::Run(w) if w.contains("parameters changed: bits 8 -> 16"))
+            ),
+            "{now:?}"
+        );
+    }
+}

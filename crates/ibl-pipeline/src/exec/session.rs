@@ -58,6 +58,7 @@ impl Session {
         // Before anything is baked: an `output:` that is a file, lies under a file or cannot
         // be written is said now, with what to do, not as "File exists" after the work.
         ibl_core::io::check_output(output, ibl_core::io::OutputKind::Folder)?;
+        crate::owned::check_output_folder(output)?;
         let cache = CacheDir::new(output);
         std::fs::create_dir_all(&cache.root).map_err(|e| Error::io(&cache.root, e))?;
         let lock = take_lock(&cache.lock_path())?;
@@ -124,6 +125,7 @@ impl Session {
                     paths::is_within(staged, &self.cache.tmp())
                         && paths::is_within(target, output)
                         && !paths::is_within(target, root)
+                        && ibl_core::ownership::check_inside(target, output).is_ok()
                 });
             if !sound {
                 let _ = std::fs::remove_file(&path);
