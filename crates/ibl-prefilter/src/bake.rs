@@ -208,6 +208,16 @@ pub fn process_cpu_seconds() -> f64 {
     0.0
 }
 
+/// Hands memory freed by the last stage back to the system (glibc keeps it per thread arena,
+/// where another thread's next stage cannot reuse it, so the peak grew stage after stage).
+pub(crate) fn release_freed_memory() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: malloc_trim only returns free heap pages to the kernel.
+    unsafe {
+        libc::malloc_trim(0);
+    }
+}
+
 /// Peak resident memory of the process so far in MiB (VmHWM of /proc/self/status; 0 where
 /// there is none): the stage timings record it after every stage.
 pub fn peak_rss_mib() -> f64 {
@@ -248,6 +258,7 @@ impl CpuStages {
 
     /// Records the CPU seconds since the last mark as stage `name`.
     fn stage(&mut self, name: String) {
+        release_freed_memory();
         let d = self.lap();
         self.peaks.push((name.clone(), peak_rss_mib()));
         self.stages.push((name, d));
@@ -737,7 +748,14 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
     while level0.size > size {
         level0 = level0.downsample();
     }
-    let texels = SourceTexels::new(&source);
+    // The brute-force texel table: the tree method sums over its own finest cells instead
+    // (the same texels), so the bake holds the source once.
+    let tree_method = !params.reference && params.method == Method::Tree;
+    let texels = if tree_method {
+        SourceTexels::none()
+    } else {
+        SourceTexels::new(&source)
+    };
     let tt = Instant::now();
     let engine = if params.reference {
         Engine::Reference
@@ -813,7 +831,15 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
         let te = Instant::now();
         // The estimate compares the computed texels (the fine ones when a footprint is
         // averaged: the reduction itself is exact) with the brute force.
-        let estimated_error = (!params.reference).then(|| estimate_error(&fine_cube, &texels, r));
+        let estimated_error = (!params.reference).then(|| match &engine {
+            Engine::Tree(tree, _) => estimate_error(
+                &fine_cube,
+                &|d, a| tree.brute_convolve(d, a),
+                tree.texel_count(),
+                r,
+            ),
+            _ => estimate_error(&fine_cube, &|d, a| texels.convolve(d, a), texels.len(), r),
+        });
         estimate_seconds += te.elapsed().as_secs_f64();
         estimate_cpu += cpu.lap();
         let exact = reduce_to(fine_cube, n);
@@ -1042,6 +1068,7 @@ fn fit_to_lookup(
                 fit::Power::Kept,
             );
             stages[l].values = values;
+            release_freed_memory();
         }
     }
     kernel_seconds
@@ -1225,18 +1252,19 @@ const ESTIMATE_BUDGET: usize = 10_000_000;
 /// over every source texel.
 pub(crate) fn estimate_error(
     level: &Cubemap,
-    texels: &SourceTexels,
+    brute: &(dyn Fn(glam::Vec3, f32) -> ibl_core::Rgb + Sync),
+    source_texels: usize,
     roughness: f32,
 ) -> EstimatedError {
     use rayon::prelude::*;
-    let per_face = (ESTIMATE_BUDGET / (6 * texels.len().max(1))).max(1);
+    let per_face = (ESTIMATE_BUDGET / (6 * source_texels.max(1))).max(1);
     let g = ((per_face as f64).sqrt() as usize).clamp(1, 4);
     let probes = probe_texels(level.size, g);
     let alpha = roughness * roughness;
     let pairs: Vec<(f64, f64)> = probes
         .par_iter()
         .map(|&(f, i, j)| {
-            let r = texels.convolve(texel_direction(f, i, j, level.size), alpha);
+            let r = brute(texel_direction(f, i, j, level.size), alpha);
             (luminance(level.texel(f, i, j)) as f64, luminance(r) as f64)
         })
         .collect();

@@ -171,26 +171,30 @@ pub fn fit_level(
     assert_eq!(at_nodes.len(), plan.nodes.len());
     let n = exact.size;
     let per_face = n * n;
-    // Each texel-channel's error as a function of its step δ, as the vertices of that convex
-    // piecewise-linear function. Texels are independent here: in parallel, collected in order
-    // (the same result for any thread count).
-    let hulls: Vec<[Hull; 3]> = (0..6 * per_face)
-        .into_par_iter()
-        .map_init(
-            || {
-                (
-                    Vec::with_capacity(plan.nodes.len() + 1),
-                    HullScratch::default(),
-                )
-            },
-            |(terms, scratch), i| {
-                let (f, t) = (i / per_face, i % per_face);
-                let px = |c: &Cubemap| {
-                    let d = &c.faces[f].data[3 * t..3 * t + 3];
-                    [d[0] as f64, d[1] as f64, d[2] as f64]
-                };
-                let (plo, phi, pl) = (px(lo), hi.map(px).unwrap_or([0.0; 3]), px(exact));
-                std::array::from_fn(|c| {
+    let omega = ibl_core::cube::solid_angle_table(n);
+    let mut out = exact.clone();
+    // One channel at a time: the hulls of one channel are what the bake holds at its peak
+    // (three at once were 40% of it at 512²).
+    for c in 0..3 {
+        // Each texel's error as a function of its step δ, as the vertices of that convex
+        // piecewise-linear function. Texels are independent here: in parallel, collected in
+        // order (the same result for any thread count).
+        let hulls: Vec<Hull> = (0..6 * per_face)
+            .into_par_iter()
+            .map_init(
+                || {
+                    (
+                        Vec::with_capacity(plan.nodes.len() + 1),
+                        HullScratch::default(),
+                    )
+                },
+                |(terms, scratch), i| {
+                    let (f, t) = (i / per_face, i % per_face);
+                    let px = |c: &Cubemap| {
+                        let d = &c.faces[f].data[3 * t..3 * t + 3];
+                        [d[0] as f64, d[1] as f64, d[2] as f64]
+                    };
+                    let (plo, phi, pl) = (px(lo), hi.map(px).unwrap_or([0.0; 3]), px(exact));
                     // The coarser level moves by the same fraction of its value.
                     let coarser_ratio = if pl[c] > 0.0 && coarser == Coarser::Follows {
                         phi[c] / pl[c]
@@ -207,17 +211,14 @@ pub fn fit_level(
                         terms.push(Term::new(base - p[c], slope, luma(p)));
                     }
                     Hull::of_with(terms, -pl[c], scratch)
-                })
-            },
-        )
-        .collect();
-    let omega = ibl_core::cube::solid_angle_table(n);
-    let mut out = exact.clone();
-    for c in 0..3 {
+                },
+            )
+            .collect();
         let steps = match power {
-            Power::Free => hulls.iter().map(|h| h[c].argmin(0.0)).collect(),
-            Power::Kept => power_kept_steps(&hulls, c, |i| omega[i % per_face] as f64),
+            Power::Free => hulls.iter().map(|h| h.argmin(0.0)).collect(),
+            Power::Kept => power_kept_steps(&hulls, |i| omega[i % per_face] as f64),
         };
+        drop(hulls);
         for (i, delta) in steps.into_iter().enumerate() {
             let (f, t) = (i / per_face, i % per_face);
             let v = &mut out.faces[f].data[3 * t + c];
@@ -237,13 +238,13 @@ pub fn fit_level(
 /// reaches minus the slope between them. The steps, sorted by that price, are taken until the
 /// power change crosses 0, and the last one only in part, so the change is exactly 0. Bright
 /// texels, whose relative error is cheapest to move, carry it.
-fn power_kept_steps(hulls: &[[Hull; 3]], c: usize, omega: impl Fn(usize) -> f64) -> Vec<f64> {
+fn power_kept_steps(hulls: &[Hull], omega: impl Fn(usize) -> f64) -> Vec<f64> {
     use rayon::prelude::*;
-    let at: Vec<usize> = hulls.par_iter().map(|h| h[c].argmin_index(0.0)).collect();
+    let at: Vec<usize> = hulls.par_iter().map(|h| h.argmin_index(0.0)).collect();
     let mut steps: Vec<f64> = hulls
         .iter()
         .zip(&at)
-        .map(|(h, &i)| h[c].vertices[i].0)
+        .map(|(h, &i)| h.vertices[i].0)
         .collect();
     // Ordered sum: the same bits for any thread count.
     let change: f64 = steps.iter().enumerate().map(|(t, d)| omega(t) * d).sum();
@@ -258,7 +259,7 @@ fn power_kept_steps(hulls: &[[Hull; 3]], c: usize, omega: impl Fn(usize) -> f64)
         .zip(&at)
         .enumerate()
         .flat_map_iter(|(t, (h, &i))| {
-            let (v, ray) = (&h[c].vertices, h[c].ray);
+            let (v, ray) = (&h.vertices, h.ray);
             let slope = move |j: usize| (v[j].1 - v[j - 1].1) / (v[j].0 - v[j - 1].0);
             // Left: vertices i−1 … 0; right: i+1 … and past the last vertex, where g rises
             // along its steepest piece without end (a step, marked by the vertex count, that
@@ -290,13 +291,13 @@ fn power_kept_steps(hulls: &[[Hull; 3]], c: usize, omega: impl Fn(usize) -> f64)
     let order = |a: &(f64, usize, usize), b: &(f64, usize, usize)| {
         a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2))
     };
-    let vertex = |t: usize, j: usize| hulls[t][c].vertices.get(j).map(|v| v.0);
+    let vertex = |t: usize, j: usize| hulls[t].vertices.get(j).map(|v| v.0);
     // Power moved by one step (from the adjacent vertex; infinite for the unbounded one).
     let moved = |&(_, t, j): &(f64, usize, usize)| -> f64 {
         match vertex(t, j) {
             Some(to) => {
                 let from = if left { j + 1 } else { j - 1 };
-                omega(t) * (to - hulls[t][c].vertices[from].0)
+                omega(t) * (to - hulls[t].vertices[from].0)
             }
             None => {
                 if left {
@@ -320,7 +321,7 @@ fn power_kept_steps(hulls: &[[Hull; 3]], c: usize, omega: impl Fn(usize) -> f64)
             continue;
         }
         for &(_, t, j) in head.iter() {
-            let to = hulls[t][c].vertices[j].0;
+            let to = hulls[t].vertices[j].0;
             // The farthest vertex this half reaches.
             if (left && to < steps[t]) || (!left && to > steps[t]) {
                 steps[t] = to;
@@ -698,7 +699,7 @@ mod tests {
             let count = 5 + case % 30;
             let mut lowest = Vec::new();
             let mut terms_of = Vec::new();
-            let hulls: Vec<[Hull; 3]> = (0..count)
+            let hulls: Vec<Hull> = (0..count)
                 .map(|_| {
                     let y = 10f64.powf(4.0 * rng.next_f64() - 2.0);
                     let pl = y * (0.5 + rng.next_f64());
@@ -711,12 +712,12 @@ mod tests {
                     lowest.push(-pl);
                     let h = Hull::of(&terms, -pl);
                     terms_of.push(terms);
-                    [h.clone(), h.clone(), h]
+                    h
                 })
                 .collect();
             let omega = |t: usize| 0.5 + (t % 7) as f64 * 0.1;
-            let steps = power_kept_steps(&hulls, 1, omega);
-            let free: Vec<f64> = hulls.iter().map(|h| h[1].argmin(0.0)).collect();
+            let steps = power_kept_steps(&hulls, omega);
+            let free: Vec<f64> = hulls.iter().map(|h| h.argmin(0.0)).collect();
             let power: f64 = steps.iter().enumerate().map(|(t, d)| omega(t) * d).sum();
             let scale: f64 = free
                 .iter()

@@ -191,27 +191,38 @@ impl CellTree {
         // angle ≤ 2·asin(chord/2) ≤ 1.12·chord.
         let sa = ibl_core::cube::solid_angle_table(n);
         let texel_radius = 1.12 * std::f32::consts::SQRT_2 / n as f32 + 1e-4;
-        let rows: Vec<(Vec3, Rgb, f32)> = (0..6 * n * n)
+        // Each column filled in place (no row structs to split: the finest level is the
+        // largest thing the bake holds).
+        let at = |k: usize| {
+            let (f, rest) = (k / (n * n), k % (n * n));
+            (Face::from_index(f), rest % n, rest / n)
+        };
+        let m = 6 * n * n;
+        let mut axis = Vec::with_capacity(m);
+        (0..m)
             .into_par_iter()
             .map(|k| {
-                let (f, rest) = (k / (n * n), k % (n * n));
-                let (j, i) = (rest / n, rest % n);
-                let face = Face::from_index(f);
+                let (face, i, j) = at(k);
+                texel_direction(face, i, j, n)
+            })
+            .collect_into_vec(&mut axis);
+        let mut energy = Vec::with_capacity(m);
+        (0..m)
+            .into_par_iter()
+            .map(|k| {
+                let (face, i, j) = at(k);
                 let om = sa[j * n + i];
                 let c = cube.texel(face, i, j);
-                (
-                    texel_direction(face, i, j, n),
-                    [c[0] * om, c[1] * om, c[2] * om],
-                    om,
-                )
+                [c[0] * om, c[1] * om, c[2] * om]
             })
-            .collect();
+            .collect_into_vec(&mut energy);
+        let omega: Vec<f32> = (0..m).map(|k| sa[k % (n * n)]).collect();
         let finest = CellLevel {
             size: n,
-            axis: rows.iter().map(|r| r.0).collect(),
-            radius: vec![texel_radius; rows.len()],
-            energy: rows.iter().map(|r| r.1).collect(),
-            omega: rows.iter().map(|r| r.2).collect(),
+            axis,
+            radius: vec![texel_radius; m],
+            energy,
+            omega,
             moments: Vec::new(),
         };
         let mut levels = vec![finest];
@@ -253,39 +264,89 @@ impl CellTree {
     fn level_from_sums(s: usize, sums: &[Sums]) -> CellLevel {
         use rayon::prelude::*;
         let step = 2.0 / s as f32;
-        let cells: Vec<(Vec3, f32, Rgb, f32, Moments)> = sums
-            .par_iter()
+        let len = sums.len();
+        let empty = Moments {
+            lum: (Vec3::ZERO, 0.0, [0.0; 6]),
+            area: (Vec3::ZERO, 0.0, [0.0; 6]),
+        };
+        let mut level = CellLevel {
+            size: s,
+            axis: vec![Vec3::ZERO; len],
+            radius: vec![0.0; len],
+            energy: vec![[0.0; 3]; len],
+            omega: vec![0.0; len],
+            moments: vec![empty; len],
+        };
+        // Filled in place, column by column (no row structs to split).
+        level
+            .axis
+            .par_iter_mut()
+            .zip(level.radius.par_iter_mut())
+            .zip(level.energy.par_iter_mut())
+            .zip(level.omega.par_iter_mut())
+            .zip(level.moments.par_iter_mut())
             .enumerate()
-            .map(|(k, c)| {
+            .for_each(|(k, ((((axis, radius), energy), omega), moments))| {
+                let c = &sums[k];
                 let (f, rest) = (k / (s * s), k % (s * s));
                 let (j, i) = (rest / s, rest % s);
                 let area = c.moments(1);
                 let lum = if c.w[0] > 0.0 { c.moments(0) } else { area };
-                let axis = area.0.normalize();
+                *axis = area.0.normalize();
                 let (s0, t0) = (i as f32 * step - 1.0, j as f32 * step - 1.0);
-                let radius = cone_radius(Face::from_index(f), axis, s0, s0 + step, t0, t0 + step);
-                (
-                    axis,
-                    radius,
-                    c.e.map(|v| v as f32),
-                    c.w[1] as f32,
-                    Moments { lum, area },
-                )
-            })
-            .collect();
-        CellLevel {
-            size: s,
-            axis: cells.iter().map(|c| c.0).collect(),
-            radius: cells.iter().map(|c| c.1).collect(),
-            energy: cells.iter().map(|c| c.2).collect(),
-            omega: cells.iter().map(|c| c.3).collect(),
-            moments: cells.iter().map(|c| c.4).collect(),
-        }
+                *radius = cone_radius(Face::from_index(f), *axis, s0, s0 + step, t0, t0 + step);
+                *energy = c.e.map(|v| v as f32);
+                *omega = c.w[1] as f32;
+                *moments = Moments { lum, area };
+            });
+        level
     }
 
     /// Face size of the finest level (the source).
     pub fn size(&self) -> usize {
         self.levels.last().unwrap().size
+    }
+
+    /// The exact kernel of roughness α summed by brute force over every source texel (the
+    /// finest cells, placed at their centres) and normalised by its own sum, as
+    /// `SourceTexels::convolve` does: the bake's error estimate, without a second copy of
+    /// the source texels.
+    pub(crate) fn brute_convolve(&self, n: Vec3, alpha: f32) -> Rgb {
+        let lv = self.levels.last().unwrap();
+        let a2 = alpha * alpha;
+        let one_m = 1.0 - a2;
+        let mut acc = [0.0f64; 4];
+        // f32 partial sums over 64 texels, f64 totals.
+        for start in (0..lv.axis.len()).step_by(64) {
+            let end = (start + 64).min(lv.axis.len());
+            let mut part = [0.0f32; 4];
+            for k in start..end {
+                let s2 = 0.25 * (n - lv.axis[k]).length_squared();
+                let t = a2 + one_m * s2;
+                let w = (1.0 - 2.0 * s2).max(0.0) / (t * t);
+                let e = lv.energy[k];
+                part[0] += w * e[0];
+                part[1] += w * e[1];
+                part[2] += w * e[2];
+                part[3] += w * lv.omega[k];
+            }
+            for c in 0..4 {
+                acc[c] += part[c] as f64;
+            }
+        }
+        if acc[3] <= 0.0 {
+            return [0.0; 3];
+        }
+        [
+            (acc[0] / acc[3]) as f32,
+            (acc[1] / acc[3]) as f32,
+            (acc[2] / acc[3]) as f32,
+        ]
+    }
+
+    /// Source texels held (the finest level's cells).
+    pub(crate) fn texel_count(&self) -> usize {
+        self.levels.last().unwrap().axis.len()
     }
 
     /// Index of the level whose cells are the leaves for roughness α: the coarsest with a
