@@ -49,6 +49,75 @@ where
     cube
 }
 
+/// Builds `count` n×n cubemaps tile by tile, for kernels that share work across a tile (one
+/// hierarchical cut for its texels, several roughness values per cut): `kernel(state, face,
+/// i0, j0, w, h, out)` fills `out` (`count` × h × w texels, output-major then row-major) for the
+/// w×h tile whose first texel is (i0, j0). Tiles are t×t (clipped at the face edge); one
+/// parallel job per row of tiles, so a tile's work is done once whatever the thread count, and
+/// every texel is a function of its tile alone (the same bits for any thread count).
+pub fn map_cube_tiles_with<S, I, K>(
+    n: usize,
+    t: usize,
+    count: usize,
+    progress: &dyn Progress,
+    init: I,
+    kernel: K,
+) -> Vec<Cubemap>
+where
+    I: Fn() -> S + Sync,
+    K: Fn(&mut S, Face, usize, usize, usize, usize, &mut [Rgb]) + Sync,
+{
+    let t = t.clamp(1, n.max(1));
+    let tiles = n.div_ceil(t);
+    progress.start("texels", (count * 6 * n * n) as u64);
+    let jobs: Vec<(Face, usize)> = Face::ALL
+        .iter()
+        .flat_map(|&f| (0..tiles).map(move |ty| (f, ty)))
+        .collect();
+    // Each job returns its rows of every output: count × h × n texels.
+    let rows: Vec<Vec<Rgb>> = jobs
+        .par_iter()
+        .map_init(
+            || (init(), Vec::new()),
+            |(state, buf), &(face, ty)| {
+                let (j0, h) = (ty * t, t.min(n - ty * t));
+                let mut rows = vec![[0.0f32; 3]; count * h * n];
+                for tx in 0..tiles {
+                    let (i0, w) = (tx * t, t.min(n - tx * t));
+                    buf.clear();
+                    buf.resize(count * w * h, [0.0f32; 3]);
+                    kernel(state, face, i0, j0, w, h, buf);
+                    for c in 0..count {
+                        for jj in 0..h {
+                            let src = &buf[(c * h + jj) * w..(c * h + jj + 1) * w];
+                            let at = (c * h + jj) * n + i0;
+                            rows[at..at + w].copy_from_slice(src);
+                        }
+                    }
+                    progress.inc((count * w * h) as u64);
+                }
+                rows
+            },
+        )
+        .collect();
+    let mut cubes: Vec<Cubemap> = (0..count).map(|_| Cubemap::new(n)).collect();
+    for (&(face, ty), rows) in jobs.iter().zip(&rows) {
+        let (j0, h) = (ty * t, t.min(n - ty * t));
+        for (c, cube) in cubes.iter_mut().enumerate() {
+            let data = &mut cube.faces[face as usize].data;
+            for jj in 0..h {
+                let src = &rows[(c * h + jj) * n..(c * h + jj + 1) * n];
+                let dst = &mut data[(j0 + jj) * n * 3..(j0 + jj + 1) * n * 3];
+                for (d, s) in dst.chunks_exact_mut(3).zip(src) {
+                    d.copy_from_slice(s);
+                }
+            }
+        }
+    }
+    progress.finish();
+    cubes
+}
+
 /// Fills an image's rows in parallel: `data` is split into rows of `row_len` floats and
 /// `kernel(state, j, row)` writes row j and returns what it measured there. The results come
 /// back **in row order** (fold them for a thread-count-independent total). `init` makes

@@ -47,9 +47,23 @@ impl Bake for Prefilter {
         out: &Path,
         progress: &dyn Progress,
     ) -> Result<Baked, BakeError> {
+        let (tr, cr) = (std::time::Instant::now(), pf::process_cpu_seconds());
         let env = ibl_bake::environment(Self::NAME, inputs, p.sanitize)?;
+        let read_seconds = tr.elapsed().as_secs_f64();
+        let read_cpu = pf::process_cpu_seconds() - cr;
         let baked = pf::run(p, &env, out, progress)?;
         let chain = &baked.chain;
+        let mut stages_cpu = serde_json::Map::new();
+        stages_cpu.insert("read".into(), read_cpu.into());
+        for (k, v) in &chain.cpu_seconds {
+            stages_cpu.insert(k.clone(), (*v).into());
+        }
+        stages_cpu.insert("encode".into(), baked.encode_cpu_seconds.into());
+        let mut peaks = serde_json::Map::new();
+        for (k, v) in &chain.peak_mib {
+            peaks.insert(k.clone(), (*v).into());
+        }
+        peaks.insert("encode".into(), pf::peak_rss_mib().into());
         // The input's warnings, then the chain's own (an upsampled source, a kernel wider
         // than a level's support); the report's note is information, not a warning.
         let mut warnings = env.warnings();
@@ -62,6 +76,26 @@ impl Bake for Prefilter {
                 "estimate_seconds": chain.estimate_seconds,
                 "runtime_seconds": chain.runtime_seconds,
                 "level_seconds": chain.level_seconds,
+                // Every stage's seconds (what the bench charts; write = the summary's seconds
+                // minus their sum, as the files are written after this).
+                "stages": {
+                    "read": read_seconds,
+                    "resample": chain.resample_seconds,
+                    "source_tree": chain.tree_seconds,
+                    "source_texels_and_level0": chain.source_seconds - chain.tree_seconds,
+                    "levels": chain.level_seconds,
+                    "level_work": chain.level_work,
+                    "estimate": chain.estimate_seconds,
+                    "fit": chain.fit_seconds,
+                    "fit_kernel": chain.fit_kernel_seconds,
+                    "runtime": chain.runtime_seconds,
+                    "encode": baked.encode_seconds,
+                },
+                // The same stages in CPU seconds of every thread (the shared machine's wall
+                // clock is noisy); write is measured by the bench around the whole process.
+                "stages_cpu": stages_cpu,
+                // Peak resident MiB of the process at the end of each stage.
+                "stages_peak_mib": peaks,
                 "encoding": ibl_bake::encoding_details(&baked.encoding),
             }),
             info: chain.report.note.iter().cloned().collect(),

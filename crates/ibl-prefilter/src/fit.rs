@@ -171,21 +171,30 @@ pub fn fit_level(
     assert_eq!(at_nodes.len(), plan.nodes.len());
     let n = exact.size;
     let per_face = n * n;
-    // Each texel-channel's error as a function of its step δ, as the vertices of that convex
-    // piecewise-linear function. Texels are independent here: in parallel, collected in order
-    // (the same result for any thread count).
-    let hulls: Vec<[Hull; 3]> = (0..6 * per_face)
-        .into_par_iter()
-        .map_init(
-            || Vec::with_capacity(plan.nodes.len() + 1),
-            |terms, i| {
-                let (f, t) = (i / per_face, i % per_face);
-                let px = |c: &Cubemap| {
-                    let d = &c.faces[f].data[3 * t..3 * t + 3];
-                    [d[0] as f64, d[1] as f64, d[2] as f64]
-                };
-                let (plo, phi, pl) = (px(lo), hi.map(px).unwrap_or([0.0; 3]), px(exact));
-                std::array::from_fn(|c| {
+    let omega = ibl_core::cube::solid_angle_table(n);
+    let mut out = exact.clone();
+    // One channel at a time: the hulls of one channel are what the bake holds at its peak
+    // (three at once were 40% of it at 512²).
+    for c in 0..3 {
+        // Each texel's error as a function of its step δ, as the vertices of that convex
+        // piecewise-linear function. Texels are independent here: in parallel, collected in
+        // order (the same result for any thread count).
+        let hulls: Vec<Hull> = (0..6 * per_face)
+            .into_par_iter()
+            .map_init(
+                || {
+                    (
+                        Vec::with_capacity(plan.nodes.len() + 1),
+                        HullScratch::default(),
+                    )
+                },
+                |(terms, scratch), i| {
+                    let (f, t) = (i / per_face, i % per_face);
+                    let px = |c: &Cubemap| {
+                        let d = &c.faces[f].data[3 * t..3 * t + 3];
+                        [d[0] as f64, d[1] as f64, d[2] as f64]
+                    };
+                    let (plo, phi, pl) = (px(lo), hi.map(px).unwrap_or([0.0; 3]), px(exact));
                     // The coarser level moves by the same fraction of its value.
                     let coarser_ratio = if pl[c] > 0.0 && coarser == Coarser::Follows {
                         phi[c] / pl[c]
@@ -201,18 +210,15 @@ pub fn fit_level(
                         let slope = node.w_self + node.w_hi * coarser_ratio;
                         terms.push(Term::new(base - p[c], slope, luma(p)));
                     }
-                    Hull::of(terms, -pl[c])
-                })
-            },
-        )
-        .collect();
-    let omega = ibl_core::cube::solid_angle_table(n);
-    let mut out = exact.clone();
-    for c in 0..3 {
+                    Hull::of_with(terms, -pl[c], scratch)
+                },
+            )
+            .collect();
         let steps = match power {
-            Power::Free => hulls.iter().map(|h| h[c].argmin(0.0)).collect(),
-            Power::Kept => power_kept_steps(&hulls, c, |i| omega[i % per_face] as f64),
+            Power::Free => hulls.iter().map(|h| h.argmin(0.0)).collect(),
+            Power::Kept => power_kept_steps(&hulls, |i| omega[i % per_face] as f64),
         };
+        drop(hulls);
         for (i, delta) in steps.into_iter().enumerate() {
             let (f, t) = (i / per_face, i % per_face);
             let v = &mut out.faces[f].data[3 * t + c];
@@ -232,13 +238,13 @@ pub fn fit_level(
 /// reaches minus the slope between them. The steps, sorted by that price, are taken until the
 /// power change crosses 0, and the last one only in part, so the change is exactly 0. Bright
 /// texels, whose relative error is cheapest to move, carry it.
-fn power_kept_steps(hulls: &[[Hull; 3]], c: usize, omega: impl Fn(usize) -> f64) -> Vec<f64> {
+fn power_kept_steps(hulls: &[Hull], omega: impl Fn(usize) -> f64) -> Vec<f64> {
     use rayon::prelude::*;
-    let at: Vec<usize> = hulls.par_iter().map(|h| h[c].argmin_index(0.0)).collect();
+    let at: Vec<usize> = hulls.par_iter().map(|h| h.argmin_index(0.0)).collect();
     let mut steps: Vec<f64> = hulls
         .iter()
         .zip(&at)
-        .map(|(h, &i)| h[c].vertices[i].0)
+        .map(|(h, &i)| h.vertices[i].0)
         .collect();
     // Ordered sum: the same bits for any thread count.
     let change: f64 = steps.iter().enumerate().map(|(t, d)| omega(t) * d).sum();
@@ -253,26 +259,80 @@ fn power_kept_steps(hulls: &[[Hull; 3]], c: usize, omega: impl Fn(usize) -> f64)
         .zip(&at)
         .enumerate()
         .flat_map_iter(|(t, (h, &i))| {
-            let v = &h[c].vertices;
+            let (v, ray) = (&h.vertices, h.ray);
             let slope = move |j: usize| (v[j].1 - v[j - 1].1) / (v[j].0 - v[j - 1].0);
-            let moves: Vec<(f64, usize, usize)> = if left {
-                (1..=i).rev().map(|j| (-slope(j), t, j - 1)).collect()
-            } else {
-                // Past the last vertex g rises along its steepest piece without end: a step
-                // (marked by the vertex count) that can take any amount.
-                (i + 1..v.len())
-                    .map(|j| (slope(j), t, j))
-                    .chain(std::iter::once((h[c].ray, t, v.len())))
-                    .collect()
-            };
-            moves
+            // Left: vertices i−1 … 0; right: i+1 … and past the last vertex, where g rises
+            // along its steepest piece without end (a step, marked by the vertex count, that
+            // can take any amount).
+            let count = if left { i } else { v.len() - i };
+            (0..count).map(move |k| {
+                if left {
+                    let j = i - k;
+                    (-slope(j), t, j - 1)
+                } else {
+                    let j = i + 1 + k;
+                    if j < v.len() {
+                        (slope(j), t, j)
+                    } else {
+                        (ray, t, j)
+                    }
+                }
+            })
         })
         .collect();
-    // A total order (price, texel, vertex): the same sequence for any thread count.
-    events.par_sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
+    // A total order (price, texel, vertex): the same sequence for any thread count. Walking
+    // all of it in that order (a sort of every event) cost more than the rest of the fit; the
+    // crossing of 0 is found instead by a selection on the cumulative power moved: split the
+    // events at their median (deterministic introselect), take the cheaper half whole when
+    // the change does not cross 0 inside it, else look inside it; small ranges are sorted and
+    // walked one step at a time. A texel's steps have strictly rising prices (its hull is
+    // convex with strict corners), so a whole half moves each of its texels to the farthest
+    // vertex it reaches there.
+    let order = |a: &(f64, usize, usize), b: &(f64, usize, usize)| {
+        a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2))
+    };
+    let vertex = |t: usize, j: usize| hulls[t].vertices.get(j).map(|v| v.0);
+    // Power moved by one step (from the adjacent vertex; infinite for the unbounded one).
+    let moved = |&(_, t, j): &(f64, usize, usize)| -> f64 {
+        match vertex(t, j) {
+            Some(to) => {
+                let from = if left { j + 1 } else { j - 1 };
+                omega(t) * (to - hulls[t].vertices[from].0)
+            }
+            None => {
+                if left {
+                    f64::NEG_INFINITY
+                } else {
+                    f64::INFINITY
+                }
+            }
+        }
+    };
     let mut left_over = change;
-    for (_, t, j) in events {
-        let Some(&(to, _)) = hulls[t][c].vertices.get(j) else {
+    let mut rest: &mut [(f64, usize, usize)] = &mut events;
+    const WALK: usize = 2048;
+    while rest.len() > WALK {
+        let mid = rest.len() / 2;
+        rest.select_nth_unstable_by(mid, order);
+        let (head, tail) = std::mem::take(&mut rest).split_at_mut(mid);
+        let sum: f64 = head.iter().map(moved).sum();
+        if (left_over + sum) * left_over <= 0.0 || !sum.is_finite() {
+            rest = head;
+            continue;
+        }
+        for &(_, t, j) in head.iter() {
+            let to = hulls[t].vertices[j].0;
+            // The farthest vertex this half reaches.
+            if (left && to < steps[t]) || (!left && to > steps[t]) {
+                steps[t] = to;
+            }
+        }
+        left_over += sum;
+        rest = tail;
+    }
+    rest.sort_unstable_by(order);
+    for &(_, t, j) in rest.iter() {
+        let Some(to) = vertex(t, j) else {
             steps[t] -= left_over / omega(t);
             return steps;
         };
@@ -288,6 +348,14 @@ fn power_kept_steps(hulls: &[[Hull; 3]], c: usize, omega: impl Fn(usize) -> f64)
     steps
 }
 
+/// Reusable buffers of [`Hull::of_with`].
+#[derive(Default)]
+struct HullScratch {
+    live: Vec<Term>,
+    d: Vec<f64>,
+    vertices: Vec<(f64, f64)>,
+}
+
 /// A texel-channel's worst relative error g(δ) = max_k |offset_k + slope_k·δ| / scale_k on
 /// [lowest, ∞), by its vertices (δ_i, g_i) sorted by δ: g is convex and piecewise linear, so
 /// the minimiser of g(δ) + μδ is one of them for any price μ.
@@ -301,14 +369,27 @@ struct Hull {
 impl Hull {
     /// The hull of the terms (those with a zero or non-finite scale, black there, left out; a
     /// single vertex at 0 when none is left).
+    #[cfg(test)]
     fn of(terms: &[Term], lowest: f64) -> Hull {
-        let live: Vec<Term> = terms
-            .iter()
-            .filter(|t| {
-                t.scale > 0.0 && t.scale.is_finite() && t.offset.is_finite() && t.slope.is_finite()
-            })
-            .map(|t| Term::new(t.offset / t.scale, t.slope / t.scale, 1.0))
-            .collect();
+        Self::of_with(terms, lowest, &mut HullScratch::default())
+    }
+
+    /// [`Hull::of`] with reusable buffers (one allocation: the vertices kept).
+    fn of_with(terms: &[Term], lowest: f64, scratch: &mut HullScratch) -> Hull {
+        let HullScratch { live, d, vertices } = scratch;
+        live.clear();
+        live.extend(
+            terms
+                .iter()
+                .filter(|t| {
+                    t.scale > 0.0
+                        && t.scale.is_finite()
+                        && t.offset.is_finite()
+                        && t.slope.is_finite()
+                })
+                .map(|t| Term::new(t.offset / t.scale, t.slope / t.scale, 1.0)),
+        );
+        let live = &*live;
         if live.is_empty() || live.iter().all(|t| t.slope == 0.0) {
             return Hull {
                 vertices: vec![(0.0f64.max(lowest), 0.0)],
@@ -322,7 +403,8 @@ impl Hull {
         };
         // Every vertex is a crossing of two of the 2k pieces ±(offset + slope·δ): a term's own
         // zero, or two terms equal in magnitude; or the bound.
-        let mut d = vec![lowest];
+        d.clear();
+        d.push(lowest);
         for (i, a) in live.iter().enumerate() {
             if a.slope != 0.0 {
                 d.push(-a.offset / a.slope);
@@ -337,12 +419,12 @@ impl Hull {
             }
         }
         d.retain(|x| x.is_finite() && *x >= lowest);
-        d.sort_by(f64::total_cmp);
+        // Unstable is the same order: total_cmp ties are bit-identical.
+        d.sort_unstable_by(f64::total_cmp);
         d.dedup();
         // Keep the corners: points where the slope of g turns (the others lie on a segment).
-        let pts: Vec<(f64, f64)> = d.into_iter().map(|x| (x, g(x))).collect();
-        let mut vertices: Vec<(f64, f64)> = Vec::with_capacity(pts.len());
-        for p in pts {
+        vertices.clear();
+        for p in d.iter().map(|&x| (x, g(x))) {
             while vertices.len() >= 2 {
                 let (a, b) = (vertices[vertices.len() - 2], vertices[vertices.len() - 1]);
                 // b is not a corner when it lies on or above the chord from a to p.
@@ -356,7 +438,10 @@ impl Hull {
             vertices.push(p);
         }
         let ray = live.iter().map(|t| t.slope.abs()).fold(0.0, f64::max);
-        Hull { vertices, ray }
+        Hull {
+            vertices: vertices.to_vec(),
+            ray,
+        }
     }
 
     /// The vertex minimising g(δ) + μδ (the first of equals).
@@ -614,7 +699,7 @@ mod tests {
             let count = 5 + case % 30;
             let mut lowest = Vec::new();
             let mut terms_of = Vec::new();
-            let hulls: Vec<[Hull; 3]> = (0..count)
+            let hulls: Vec<Hull> = (0..count)
                 .map(|_| {
                     let y = 10f64.powf(4.0 * rng.next_f64() - 2.0);
                     let pl = y * (0.5 + rng.next_f64());
@@ -627,12 +712,12 @@ mod tests {
                     lowest.push(-pl);
                     let h = Hull::of(&terms, -pl);
                     terms_of.push(terms);
-                    [h.clone(), h.clone(), h]
+                    h
                 })
                 .collect();
             let omega = |t: usize| 0.5 + (t % 7) as f64 * 0.1;
-            let steps = power_kept_steps(&hulls, 1, omega);
-            let free: Vec<f64> = hulls.iter().map(|h| h[1].argmin(0.0)).collect();
+            let steps = power_kept_steps(&hulls, omega);
+            let free: Vec<f64> = hulls.iter().map(|h| h.argmin(0.0)).collect();
             let power: f64 = steps.iter().enumerate().map(|(t, d)| omega(t) * d).sum();
             let scale: f64 = free
                 .iter()

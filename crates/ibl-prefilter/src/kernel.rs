@@ -129,6 +129,11 @@ impl SourceTexels {
         all
     }
 
+    /// No texels (where the bake sums over the cell tree's own copy of them).
+    pub(crate) fn none() -> Self {
+        Self::empty(0)
+    }
+
     fn empty(size: usize) -> Self {
         SourceTexels {
             size,

@@ -22,7 +22,7 @@
 use glam::Vec3;
 use ibl_core::cube::{texel_direction, Cubemap, Face};
 use ibl_core::progress::Progress;
-use ibl_core::traverse::map_cube_texels_with;
+use ibl_core::traverse::map_cube_tiles_with;
 use ibl_core::{luminance, Rgb};
 use std::f32::consts::FRAC_PI_2;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -191,27 +191,38 @@ impl CellTree {
         // angle ≤ 2·asin(chord/2) ≤ 1.12·chord.
         let sa = ibl_core::cube::solid_angle_table(n);
         let texel_radius = 1.12 * std::f32::consts::SQRT_2 / n as f32 + 1e-4;
-        let rows: Vec<(Vec3, Rgb, f32)> = (0..6 * n * n)
+        // Each column filled in place (no row structs to split: the finest level is the
+        // largest thing the bake holds).
+        let at = |k: usize| {
+            let (f, rest) = (k / (n * n), k % (n * n));
+            (Face::from_index(f), rest % n, rest / n)
+        };
+        let m = 6 * n * n;
+        let mut axis = Vec::with_capacity(m);
+        (0..m)
             .into_par_iter()
             .map(|k| {
-                let (f, rest) = (k / (n * n), k % (n * n));
-                let (j, i) = (rest / n, rest % n);
-                let face = Face::from_index(f);
+                let (face, i, j) = at(k);
+                texel_direction(face, i, j, n)
+            })
+            .collect_into_vec(&mut axis);
+        let mut energy = Vec::with_capacity(m);
+        (0..m)
+            .into_par_iter()
+            .map(|k| {
+                let (face, i, j) = at(k);
                 let om = sa[j * n + i];
                 let c = cube.texel(face, i, j);
-                (
-                    texel_direction(face, i, j, n),
-                    [c[0] * om, c[1] * om, c[2] * om],
-                    om,
-                )
+                [c[0] * om, c[1] * om, c[2] * om]
             })
-            .collect();
+            .collect_into_vec(&mut energy);
+        let omega: Vec<f32> = (0..m).map(|k| sa[k % (n * n)]).collect();
         let finest = CellLevel {
             size: n,
-            axis: rows.iter().map(|r| r.0).collect(),
-            radius: vec![texel_radius; rows.len()],
-            energy: rows.iter().map(|r| r.1).collect(),
-            omega: rows.iter().map(|r| r.2).collect(),
+            axis,
+            radius: vec![texel_radius; m],
+            energy,
+            omega,
             moments: Vec::new(),
         };
         let mut levels = vec![finest];
@@ -253,39 +264,89 @@ impl CellTree {
     fn level_from_sums(s: usize, sums: &[Sums]) -> CellLevel {
         use rayon::prelude::*;
         let step = 2.0 / s as f32;
-        let cells: Vec<(Vec3, f32, Rgb, f32, Moments)> = sums
-            .par_iter()
+        let len = sums.len();
+        let empty = Moments {
+            lum: (Vec3::ZERO, 0.0, [0.0; 6]),
+            area: (Vec3::ZERO, 0.0, [0.0; 6]),
+        };
+        let mut level = CellLevel {
+            size: s,
+            axis: vec![Vec3::ZERO; len],
+            radius: vec![0.0; len],
+            energy: vec![[0.0; 3]; len],
+            omega: vec![0.0; len],
+            moments: vec![empty; len],
+        };
+        // Filled in place, column by column (no row structs to split).
+        level
+            .axis
+            .par_iter_mut()
+            .zip(level.radius.par_iter_mut())
+            .zip(level.energy.par_iter_mut())
+            .zip(level.omega.par_iter_mut())
+            .zip(level.moments.par_iter_mut())
             .enumerate()
-            .map(|(k, c)| {
+            .for_each(|(k, ((((axis, radius), energy), omega), moments))| {
+                let c = &sums[k];
                 let (f, rest) = (k / (s * s), k % (s * s));
                 let (j, i) = (rest / s, rest % s);
                 let area = c.moments(1);
                 let lum = if c.w[0] > 0.0 { c.moments(0) } else { area };
-                let axis = area.0.normalize();
+                *axis = area.0.normalize();
                 let (s0, t0) = (i as f32 * step - 1.0, j as f32 * step - 1.0);
-                let radius = cone_radius(Face::from_index(f), axis, s0, s0 + step, t0, t0 + step);
-                (
-                    axis,
-                    radius,
-                    c.e.map(|v| v as f32),
-                    c.w[1] as f32,
-                    Moments { lum, area },
-                )
-            })
-            .collect();
-        CellLevel {
-            size: s,
-            axis: cells.iter().map(|c| c.0).collect(),
-            radius: cells.iter().map(|c| c.1).collect(),
-            energy: cells.iter().map(|c| c.2).collect(),
-            omega: cells.iter().map(|c| c.3).collect(),
-            moments: cells.iter().map(|c| c.4).collect(),
-        }
+                *radius = cone_radius(Face::from_index(f), *axis, s0, s0 + step, t0, t0 + step);
+                *energy = c.e.map(|v| v as f32);
+                *omega = c.w[1] as f32;
+                *moments = Moments { lum, area };
+            });
+        level
     }
 
     /// Face size of the finest level (the source).
     pub fn size(&self) -> usize {
         self.levels.last().unwrap().size
+    }
+
+    /// The exact kernel of roughness α summed by brute force over every source texel (the
+    /// finest cells, placed at their centres) and normalised by its own sum, as
+    /// `SourceTexels::convolve` does: the bake's error estimate, without a second copy of
+    /// the source texels.
+    pub(crate) fn brute_convolve(&self, n: Vec3, alpha: f32) -> Rgb {
+        let lv = self.levels.last().unwrap();
+        let a2 = alpha * alpha;
+        let one_m = 1.0 - a2;
+        let mut acc = [0.0f64; 4];
+        // f32 partial sums over 64 texels, f64 totals.
+        for start in (0..lv.axis.len()).step_by(64) {
+            let end = (start + 64).min(lv.axis.len());
+            let mut part = [0.0f32; 4];
+            for k in start..end {
+                let s2 = 0.25 * (n - lv.axis[k]).length_squared();
+                let t = a2 + one_m * s2;
+                let w = (1.0 - 2.0 * s2).max(0.0) / (t * t);
+                let e = lv.energy[k];
+                part[0] += w * e[0];
+                part[1] += w * e[1];
+                part[2] += w * e[2];
+                part[3] += w * lv.omega[k];
+            }
+            for c in 0..4 {
+                acc[c] += part[c] as f64;
+            }
+        }
+        if acc[3] <= 0.0 {
+            return [0.0; 3];
+        }
+        [
+            (acc[0] / acc[3]) as f32,
+            (acc[1] / acc[3]) as f32,
+            (acc[2] / acc[3]) as f32,
+        ]
+    }
+
+    /// Source texels held (the finest level's cells).
+    pub(crate) fn texel_count(&self) -> usize {
+        self.levels.last().unwrap().axis.len()
     }
 
     /// Index of the level whose cells are the leaves for roughness α: the coarsest with a
@@ -405,12 +466,13 @@ pub(crate) struct CutList {
     horizon: CellBlock,
 }
 
-/// The cell sum of the kernel (see [`CellLevel`]) for one weight: mean at chord² `d2` + `q`
-/// from n, variance `var` of n·l over the cell. f(c) = max(c, 0)/t² with
-/// t = α² + (1−α²)(1−c)/2 is the kernel without α²/π (which cancels in the ratio).
+/// The cell sum of the kernel (see [`CellLevel`]) for one weight: mean at chord² + q = `dq`
+/// from n (shared by every roughness of a cut), variance `var` of n·l over the cell.
+/// f(c) = max(c, 0)/t² with t = α² + (1−α²)(1−c)/2 is the kernel without α²/π (which cancels
+/// in the ratio).
 #[inline(always)]
-fn cell_weight<const HORIZON: bool>(d2: f32, q: f32, var: f32, a2: f32, b: f32) -> f32 {
-    let s2 = 0.25 * (d2 + q);
+fn weight_at<const HORIZON: bool>(dq: f32, var: f32, a2: f32, b: f32) -> f32 {
+    let s2 = 0.25 * dq;
     let c = 1.0 - 2.0 * s2;
     let u = 1.0 / (a2 + b * s2);
     let uu = u * u;
@@ -443,11 +505,11 @@ fn cell_weight<const HORIZON: bool>(d2: f32, q: f32, var: f32, a2: f32, b: f32) 
     }
 }
 
-/// Cell weights of one block for one weight kind (`o` = 0: numerator, 10: normalisation),
-/// one straight loop the compiler vectorises.
+/// The per-cell terms of one weight kind (`o` = 0: numerator, 10: normalisation) that every
+/// roughness shares: chord² + (1 − |m̄|²) from n, and Var(n·l) = nᵀ C n (one straight loop the
+/// compiler vectorises).
 #[inline(always)]
-fn weights<const HORIZON: bool>(block: &CellBlock, o: usize, n: Vec3, a2: f32, out: &mut [f32]) {
-    let b = 1.0 - a2;
+fn geometry(block: &CellBlock, o: usize, n: Vec3, dq: &mut [f32], var: &mut [f32]) {
     let nn = [
         n.x * n.x,
         n.y * n.y,
@@ -457,7 +519,7 @@ fn weights<const HORIZON: bool>(block: &CellBlock, o: usize, n: Vec3, a2: f32, o
         2.0 * n.y * n.z,
     ];
     let c = &block.cols;
-    let len = out.len();
+    let len = dq.len();
     let (mx, my, mz, mq) = (
         &c[o][..len],
         &c[o + 1][..len],
@@ -472,74 +534,119 @@ fn weights<const HORIZON: bool>(block: &CellBlock, o: usize, n: Vec3, a2: f32, o
         &c[o + 8][..len],
         &c[o + 9][..len],
     );
+    let var = &mut var[..len];
     for k in 0..len {
         let (dx, dy, dz) = (n.x - mx[k], n.y - my[k], n.z - mz[k]);
-        let var = nn[0] * c0[k]
+        var[k] = nn[0] * c0[k]
             + nn[1] * c1[k]
             + nn[2] * c2[k]
             + nn[3] * c3[k]
             + nn[4] * c4[k]
             + nn[5] * c5[k];
-        out[k] = cell_weight::<HORIZON>(dx * dx + dy * dy + dz * dz, mq[k], var, a2, b);
+        dq[k] = (dx * dx + dy * dy + dz * dz) + mq[k];
     }
 }
 
-/// Σ over a block of (W_num·E_rgb, W_den·Ω), in 8 f32 lanes flushed to f64 every 64 cells.
+/// Σ over a block of (W_num·E_rgb, W_den·Ω) for every α² of `a2s` (into `acc`, one entry
+/// each), in 8 f32 lanes flushed to f64 every 64 cells. The geometry is computed once for all
+/// of them; only the kernel's radial profile is evaluated per roughness.
 #[inline(always)]
 fn accumulate<const HORIZON: bool>(
     block: &CellBlock,
     n: Vec3,
-    a2: f32,
+    a2s: &[f32],
     scratch: &mut Vec<f32>,
-    acc: &mut [f64; 4],
+    acc: &mut [[f64; 4]],
 ) {
     const L: usize = LANES;
     let len = block.cols[0].len();
     debug_assert!(len.is_multiple_of(L));
-    scratch.resize(2 * len, 0.0);
-    let (wm, wg) = scratch.split_at_mut(len);
-    weights::<HORIZON>(block, 0, n, a2, wm);
-    weights::<HORIZON>(block, 10, n, a2, wg);
+    if len == 0 {
+        return;
+    }
+    scratch.resize(6 * len, 0.0);
+    let (dm, rest) = scratch.split_at_mut(len);
+    let (vm, rest) = rest.split_at_mut(len);
+    let (dg, rest) = rest.split_at_mut(len);
+    let (vg, rest) = rest.split_at_mut(len);
+    let (wm, wg) = rest.split_at_mut(len);
+    geometry(block, 0, n, dm, vm);
+    geometry(block, 10, n, dg, vg);
     let (er, eg, eb, om) = (
         &block.cols[20][..len],
         &block.cols[21][..len],
         &block.cols[22][..len],
         &block.cols[23][..len],
     );
-    let mut lanes = [[0.0f32; L]; 4];
-    let mut i = 0;
-    while i < len {
-        for k in 0..L {
-            let j = i + k;
-            lanes[0][k] += wm[j] * er[j];
-            lanes[1][k] += wm[j] * eg[j];
-            lanes[2][k] += wm[j] * eb[j];
-            lanes[3][k] += wg[j] * om[j];
+    for (&a2, acc) in a2s.iter().zip(acc.iter_mut()) {
+        let b = 1.0 - a2;
+        for k in 0..len {
+            wm[k] = weight_at::<HORIZON>(dm[k], vm[k], a2, b);
+            wg[k] = weight_at::<HORIZON>(dg[k], vg[k], a2, b);
         }
-        i += L;
-        if i % 64 == 0 || i == len {
-            for c in 0..4 {
-                acc[c] += lanes[c].iter().map(|v| *v as f64).sum::<f64>();
-                lanes[c] = [0.0; L];
+        let mut lanes = [[0.0f32; L]; 4];
+        let mut i = 0;
+        while i < len {
+            for k in 0..L {
+                let j = i + k;
+                lanes[0][k] += wm[j] * er[j];
+                lanes[1][k] += wm[j] * eg[j];
+                lanes[2][k] += wm[j] * eb[j];
+                lanes[3][k] += wg[j] * om[j];
+            }
+            i += L;
+            if i % 64 == 0 || i == len {
+                for c in 0..4 {
+                    acc[c] += lanes[c].iter().map(|v| *v as f64).sum::<f64>();
+                    lanes[c] = [0.0; L];
+                }
             }
         }
     }
 }
 
-/// Both blocks of a cut. Compiled twice on x86-64: for AVX2 (8 lanes in one register) and for
-/// the SSE2 baseline. Neither allows fused multiply-add, so both give the same bits.
+/// Both blocks of a cut, for every α² of `a2s`. Compiled twice on x86-64: for AVX2 (8 lanes
+/// in one register) and for the SSE2 baseline. Neither allows fused multiply-add, so both give
+/// the same bits.
 #[inline(always)]
-fn accumulate_cut(cut: &CutList, n: Vec3, a2: f32, scratch: &mut Vec<f32>) -> [f64; 4] {
-    let mut acc = [0.0f64; 4];
-    accumulate::<false>(&cut.smooth, n, a2, scratch, &mut acc);
-    accumulate::<true>(&cut.horizon, n, a2, scratch, &mut acc);
-    acc
+fn accumulate_cut_multi(
+    cut: &CutList,
+    n: Vec3,
+    a2s: &[f32],
+    scratch: &mut Vec<f32>,
+    acc: &mut [[f64; 4]],
+) {
+    acc.iter_mut().for_each(|a| *a = [0.0; 4]);
+    accumulate::<false>(&cut.smooth, n, a2s, scratch, acc);
+    accumulate::<true>(&cut.horizon, n, a2s, scratch, acc);
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
+fn accumulate_cut_multi_avx2(
+    cut: &CutList,
+    n: Vec3,
+    a2s: &[f32],
+    scratch: &mut Vec<f32>,
+    acc: &mut [[f64; 4]],
+) {
+    accumulate_cut_multi(cut, n, a2s, scratch, acc)
+}
+
+/// One roughness of [`accumulate_cut_multi`].
+#[cfg(test)]
+fn accumulate_cut(cut: &CutList, n: Vec3, a2: f32, scratch: &mut Vec<f32>) -> [f64; 4] {
+    let mut acc = [[0.0f64; 4]];
+    accumulate_cut_multi(cut, n, &[a2], scratch, &mut acc);
+    acc[0]
+}
+
+#[cfg(all(test, target_arch = "x86_64"))]
 fn accumulate_cut_avx2(cut: &CutList, n: Vec3, a2: f32, scratch: &mut Vec<f32>) -> [f64; 4] {
-    accumulate_cut(cut, n, a2, scratch)
+    let mut acc = [[0.0f64; 4]];
+    // SAFETY: only called by the test after checking for AVX2.
+    unsafe { accumulate_cut_multi_avx2(cut, n, &[a2], scratch, &mut acc) };
+    acc[0]
 }
 
 impl CutList {
@@ -573,24 +680,42 @@ impl CutList {
     /// [`CellLevel`]); the normalisation comes from the same cells, so a constant environment
     /// comes back exactly.
     pub fn convolve(&self, n: Vec3, alpha: f32, scratch: &mut Vec<f32>) -> Rgb {
-        let a2 = alpha * alpha;
+        let mut acc = [[0.0f64; 4]];
+        let mut out = [[0.0f32; 3]];
+        self.convolve_multi(n, &[alpha * alpha], scratch, &mut acc, &mut out);
+        out[0]
+    }
+
+    /// [`Self::convolve`] at every α² of `a2s` at once (into `out`, `acc` as scratch): the
+    /// cut and the geometry of its cells are shared, only the kernel's profile differs.
+    fn convolve_multi(
+        &self,
+        n: Vec3,
+        a2s: &[f32],
+        scratch: &mut Vec<f32>,
+        acc: &mut [[f64; 4]],
+        out: &mut [Rgb],
+    ) {
         #[cfg(target_arch = "x86_64")]
-        let acc = if std::arch::is_x86_feature_detected!("avx2") {
+        if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU has just been checked for AVX2.
-            unsafe { accumulate_cut_avx2(self, n, a2, scratch) }
+            unsafe { accumulate_cut_multi_avx2(self, n, a2s, scratch, acc) }
         } else {
-            accumulate_cut(self, n, a2, scratch)
-        };
-        #[cfg(not(target_arch = "x86_64"))]
-        let acc = accumulate_cut(self, n, a2, scratch);
-        if acc[3] <= 0.0 {
-            return [0.0; 3];
+            accumulate_cut_multi(self, n, a2s, scratch, acc)
         }
-        [
-            (acc[0] / acc[3]) as f32,
-            (acc[1] / acc[3]) as f32,
-            (acc[2] / acc[3]) as f32,
-        ]
+        #[cfg(not(target_arch = "x86_64"))]
+        accumulate_cut_multi(self, n, a2s, scratch, acc);
+        for (o, acc) in out.iter_mut().zip(acc.iter()) {
+            *o = if acc[3] <= 0.0 {
+                [0.0; 3]
+            } else {
+                [
+                    (acc[0] / acc[3]) as f32,
+                    (acc[1] / acc[3]) as f32,
+                    (acc[2] / acc[3]) as f32,
+                ]
+            };
+        }
     }
 }
 
@@ -604,21 +729,12 @@ fn tile_size(n: usize) -> usize {
     }
 }
 
-/// Per-thread state: the cuts of the tile row the thread is in, and its tallies.
-struct TileRow {
-    key: Option<(Face, usize)>,
-    cuts: Vec<CutList>,
-    stack: Vec<(usize, usize)>,
-    scratch: Vec<f32>,
-    work: u64,
-}
-
 /// What a level cost.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub(crate) struct TreeWork {
     /// Σ over output texels of the cells summed for it.
     pub cell_evaluations: u64,
-    /// Cuts built (one per tile and tile row visit).
+    /// Cuts built (one per tile).
     pub cuts: u64,
 }
 
@@ -659,55 +775,103 @@ pub(crate) fn tree_level(
     p: &TreeParams,
     progress: &dyn Progress,
 ) -> (Cubemap, TreeWork) {
-    let alpha = roughness * roughness;
+    let (mut cubes, work) = tree_levels_one_cut(tree, n, &[roughness], p, progress);
+    (cubes.pop().expect("one roughness"), work)
+}
+
+/// n×n cubes at several roughness values r > 0 from one cut per tile (what the lookup fit
+/// needs at a level: its own roughness and its nodes). The cut is the finest any of them asks
+/// for (the smallest α's leaf level, the largest r's horizon split), so every cube is at least
+/// as accurate as alone; the cut and each cell's geometry are computed once. `TreeWork` is per
+/// cube (every cube sums the same cells).
+pub(crate) fn tree_levels(
+    tree: &CellTree,
+    n: usize,
+    roughness: &[f32],
+    p: &TreeParams,
+    progress: &dyn Progress,
+) -> (Vec<Cubemap>, Vec<TreeWork>) {
+    // Only roughness values with the same leaf level share a cut: a finer leaf level costs
+    // every cube of the group its near cells (4× per level).
+    let leaf: Vec<usize> = roughness
+        .iter()
+        .map(|r| tree.leaf_level(r * r, p.kappa))
+        .collect();
+    let mut out: Vec<Option<(Cubemap, TreeWork)>> = roughness.iter().map(|_| None).collect();
+    for i in 0..roughness.len() {
+        if out[i].is_some() {
+            continue;
+        }
+        let group: Vec<usize> = (i..roughness.len())
+            .filter(|&j| leaf[j] == leaf[i])
+            .collect();
+        let rs: Vec<f32> = group.iter().map(|&j| roughness[j]).collect();
+        let (cubes, work) = tree_levels_one_cut(tree, n, &rs, p, progress);
+        for (j, c) in group.into_iter().zip(cubes) {
+            out[j] = Some((c, work));
+        }
+    }
+    out.into_iter().map(|c| c.expect("every roughness")).unzip()
+}
+
+/// [`tree_levels`] for roughness values sharing one cut per tile.
+fn tree_levels_one_cut(
+    tree: &CellTree,
+    n: usize,
+    roughness: &[f32],
+    p: &TreeParams,
+    progress: &dyn Progress,
+) -> (Vec<Cubemap>, TreeWork) {
+    let a2s: Vec<f32> = roughness.iter().map(|r| (r * r) * (r * r)).collect();
     let spec = CutSpec {
-        leaf: tree.leaf_level(alpha, p.kappa),
+        leaf: roughness
+            .iter()
+            .map(|r| tree.leaf_level(r * r, p.kappa))
+            .max()
+            .unwrap_or(0),
         theta: p.theta,
-        horizon: p.horizon_at(roughness),
+        horizon: roughness
+            .iter()
+            .map(|&r| p.horizon_at(r))
+            .fold(f32::INFINITY, f32::min),
     };
     let t = tile_size(n);
-    let tiles = n.div_ceil(t);
     let (work, cuts) = (AtomicU64::new(0), AtomicU64::new(0));
     let coord = |k: usize| (2.0 * k.min(n) as f32 / n as f32) - 1.0;
-    let cube = map_cube_texels_with(
+    let count = roughness.len();
+    let cubes = map_cube_tiles_with(
         n,
+        t,
+        count,
         progress,
-        || TileRow {
-            key: None,
-            cuts: Vec::new(),
-            stack: Vec::new(),
-            scratch: Vec::new(),
-            work: 0,
+        || {
+            (
+                TreeBuffers::default(),
+                vec![[0.0f64; 4]; count],
+                vec![[0.0f32; 3]; count],
+            )
         },
-        |row, face, i, j| {
-            let ty = j / t;
-            if row.key != Some((face, ty)) {
-                row.cuts.resize_with(tiles, CutList::default);
-                for tx in 0..tiles {
-                    let (s0, s1, t0, t1) = (
-                        coord(tx * t),
-                        coord(tx * t + t),
-                        coord(ty * t),
-                        coord(ty * t + t),
-                    );
-                    let centre = face.direction(0.5 * (s0 + s1), 0.5 * (t0 + t1)).normalize();
-                    let radius = cone_radius(face, centre, s0, s1, t0, t1);
-                    let (cuts, stack) = (&mut row.cuts, &mut row.stack);
-                    tree.cut(centre, radius, &spec, &mut cuts[tx], stack);
+        |(buf, acc, texel), face, i0, j0, w, h, out| {
+            let (s0, s1, t0, t1) = (coord(i0), coord(i0 + w), coord(j0), coord(j0 + h));
+            let centre = face.direction(0.5 * (s0 + s1), 0.5 * (t0 + t1)).normalize();
+            let radius = cone_radius(face, centre, s0, s1, t0, t1);
+            tree.cut(centre, radius, &spec, &mut buf.cut, &mut buf.stack);
+            cuts.fetch_add(1, Ordering::Relaxed);
+            work.fetch_add((w * h * buf.cut.len()) as u64, Ordering::Relaxed);
+            for jj in 0..h {
+                for ii in 0..w {
+                    let d = texel_direction(face, i0 + ii, j0 + jj, n);
+                    buf.cut
+                        .convolve_multi(d, &a2s, &mut buf.scratch, acc, texel);
+                    for (c, v) in texel.iter().enumerate() {
+                        out[(c * h + jj) * w + ii] = *v;
+                    }
                 }
-                cuts.fetch_add(tiles as u64, Ordering::Relaxed);
-                row.key = Some((face, ty));
             }
-            let cut = &row.cuts[i / t];
-            row.work += cut.len() as u64;
-            if i + 1 == n {
-                work.fetch_add(std::mem::take(&mut row.work), Ordering::Relaxed);
-            }
-            cut.convolve(texel_direction(face, i, j, n), alpha, &mut row.scratch)
         },
     );
     (
-        cube,
+        cubes,
         TreeWork {
             cell_evaluations: work.into_inner(),
             cuts: cuts.into_inner(),
@@ -894,6 +1058,53 @@ mod tests {
             // SAFETY: AVX2 checked above.
             let b = unsafe { accumulate_cut_avx2(&cut, n, 0.0625, &mut scratch) };
             assert_eq!(a.map(f64::to_bits), b.map(f64::to_bits));
+        }
+    }
+
+    /// Several roughness values from one cut per tile (the lookup fit's nodes) against each
+    /// alone: the shared cut is the finest any of them asks for, so they agree to the tree's
+    /// accuracy, and a roughness alone is what `tree_level` gives, bit for bit.
+    #[test]
+    fn shared_cuts_agree_with_separate_levels() {
+        let cube = random_cube(32, 5);
+        let tree = CellTree::new(&cube);
+        let texels = SourceTexels::new(&cube);
+        let p = TreeParams {
+            theta: 0.7,
+            kappa: 2.0,
+            horizon: 0.12,
+        };
+        let rs = [0.4f32, 0.45, 0.5, 0.9, 1.0];
+        let (many, work) = tree_levels(&tree, 8, &rs, &p, &NoProgress);
+        assert_eq!((many.len(), work.len()), (rs.len(), rs.len()));
+        for (k, &r) in rs.iter().enumerate() {
+            let (alone, _) = tree_level(&tree, 8, r, &p, &NoProgress);
+            let (mine, _) = tree_levels(&tree, 8, &[r], &p, &NoProgress);
+            assert_eq!(
+                alone.faces, mine[0].faces,
+                "r {r}: one roughness is tree_level"
+            );
+            // Mean relative error of each against the brute force.
+            let (mut shared, mut single, mut count) = (0.0f64, 0.0f64, 0.0f64);
+            for face in Face::ALL {
+                for j in 0..8 {
+                    for i in 0..8 {
+                        let exact = texels.convolve(texel_direction(face, i, j, 8), r * r);
+                        let (a, b) = (many[k].texel(face, i, j), alone.texel(face, i, j));
+                        for c in 0..3 {
+                            shared += ((a[c] - exact[c]).abs() / exact[c]) as f64;
+                            single += ((b[c] - exact[c]).abs() / exact[c]) as f64;
+                            count += 1.0;
+                        }
+                    }
+                }
+            }
+            let (shared, single) = (shared / count, single / count);
+            eprintln!("r {r}: mean error shared cut {shared:.2e}, alone {single:.2e}");
+            assert!(
+                shared < 1e-2 && shared < 1.5 * single + 1e-4,
+                "r {r}: {shared} vs {single}"
+            );
         }
     }
 
