@@ -154,24 +154,26 @@ fn ktx2_layout_reads_back_equal_to_the_faces() {
 }
 
 #[test]
-fn max_roughness_stops_the_chain_and_says_so() {
+fn max_roughness_keeps_the_level_count_the_lookup_needs_and_says_so() {
+    // Issue 22: the engine's lod = r·(mipCount − 1) needs the full chain's level count, so
+    // the levels past the cut are still written (the exact kernel, unfitted).
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("o");
     let flags = ["--size", "32", "--levels", "5", "--max-roughness", "0.6"];
     let o = BIN.bake(fixture("hdri/interior_256.exr"), &out, &flags);
     let err = stderr(&o);
     assert!(err.contains("--max-roughness"), "{err}");
-    // r = 0, 0.25, 0.5 kept; 0.75 and 1 dropped.
-    assert!(out.join("m2_px.exr").exists() && !out.join("m3_px.exr").exists());
+    // r = 0, 0.25, 0.5 fitted; 0.75 and 1 kept exact.
+    assert!(out.join("m4_px.exr").exists() && !out.join("m5_px.exr").exists());
     let r = report(&out);
-    assert_eq!(r["levels"], 3);
+    assert_eq!(r["levels"], 5);
     assert_eq!(r["chain_levels"], 5);
     assert_eq!(r["level"][2]["roughness"].as_f64().unwrap(), 0.5);
-    assert!(
-        r["note"].as_str().unwrap().contains("level 2"),
-        "{}",
-        r["note"]
-    );
+    assert!(r["level"][2].get("beyond_max_roughness").is_none());
+    assert_eq!(r["level"][3]["beyond_max_roughness"], true);
+    assert!(r["level"][3]["fit"].is_null());
+    let note = r["note"].as_str().unwrap();
+    assert!(note.contains("levels 0..=2") && note.contains("full chain"), "{note}");
 }
 
 #[test]
