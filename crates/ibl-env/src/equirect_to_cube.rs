@@ -130,6 +130,9 @@ pub fn output_paths(params: &Params, out: &Path) -> Result<Vec<PathBuf>> {
     let enc = params.encoding()?;
     let mut p = output::cube_output_paths(out, 1, enc.layout, params.cube_name());
     p.extend(output::encoding_sidecar_path(out, params.cube_name(), &enc));
+    if !params.to_equirect {
+        p.push(out.join(ibl_target::NOTE_NAME));
+    }
     Ok(p)
 }
 
@@ -188,7 +191,17 @@ pub fn run(
     let name = params.cube_name();
     let encoded = output::encode_cube(out, &CubeMips { levels: vec![cube] }, &enc, name, &[])?;
     let mut files = encoded.files;
-    files.extend(output::encoding_sidecar(out, name, &enc, &encoded.levels)?);
+    let sidecar = output::encoding_sidecar(out, name, &enc, &encoded.levels)?;
+    let outputs = ibl_target::note::Outputs {
+        cube: ibl_target::note::names(files.iter().map(|f| f.0.as_path())),
+        levels: 1,
+        sidecars: ibl_target::note::names(sidecar.iter().map(|f| f.0.as_path())),
+        ..Default::default()
+    };
+    files.extend(sidecar);
+    // The how-to-load note, naming only what this run wrote (every target, gltf too).
+    let note = ibl_target::note::load_note(params.target, ibl_target::note::Writer::Cube, &outputs);
+    files.push((out.join(ibl_target::NOTE_NAME), note.into_bytes()));
     Ok(Baked {
         files,
         face_size: n,

@@ -137,9 +137,7 @@ impl Params {
         if let Some(name) = self.target_sh_file() {
             files.push(out_dir.join(name));
         }
-        if self.target != Target::Gltf {
-            files.push(out_dir.join(ibl_target::NOTE_NAME));
-        }
+        files.push(out_dir.join(ibl_target::NOTE_NAME));
         Ok(files)
     }
 }
@@ -513,25 +511,30 @@ pub fn run(
         params.cube_name(),
         &[],
     )?;
+    let names = |f: &[(PathBuf, Vec<u8>)]| ibl_target::note::names(f.iter().map(|f| f.0.as_path()));
+    let mut outputs = ibl_target::note::Outputs {
+        irradiance: names(&encoded.files),
+        sh: Some(params.sh_file.clone()),
+        ..Default::default()
+    };
     files.extend(encoded.files);
-    files.extend(output::encoding_sidecar(
-        out_dir,
-        params.cube_name(),
-        &enc,
-        &encoded.levels,
-    )?);
+    let sidecar = output::encoding_sidecar(out_dir, params.cube_name(), &enc, &encoded.levels)?;
+    outputs.sidecars = names(sidecar.as_slice());
+    files.extend(sidecar);
     if let (Some(name), Some(bytes)) = (
         params.target_sh_file(),
         target_sh_bytes(params.target, &coefficients.irradiance),
     ) {
         files.push((out_dir.join(name), bytes));
+        outputs.engine_sh = Some(name.to_string());
     }
-    if params.target != Target::Gltf {
-        files.push((
-            out_dir.join(ibl_target::NOTE_NAME),
-            format!("{}\n", params.target.spec().note).into_bytes(),
-        ));
-    }
+    // The how-to-load note, naming only what this run wrote (every target, gltf too).
+    let note = ibl_target::note::load_note(
+        params.target,
+        ibl_target::note::Writer::Irradiance,
+        &outputs,
+    );
+    files.push((out_dir.join(ibl_target::NOTE_NAME), note.into_bytes()));
     Ok(Baked {
         files,
         coefficients,

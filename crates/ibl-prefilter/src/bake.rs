@@ -577,6 +577,13 @@ pub fn run(
     } else {
         encoded.files
     };
+    let mut outputs = ibl_target::note::Outputs {
+        chain: ibl_target::note::names(files.iter().map(|f| f.0.as_path())),
+        levels: chain.mips.levels.len(),
+        report: Some(REPORT_NAME.to_string()),
+        max_roughness: chain.report.note.clone(),
+        ..Default::default()
+    };
     let json = out_dir.join(REPORT_NAME);
     let bytes = io::data::encode(&json, &chain.report)?;
     files.push((json, bytes));
@@ -587,13 +594,12 @@ pub fn run(
         let orientation = params.target.spec().orientation;
         let bytes = ibl_target::babylon::encode_env(&path, &oriented, &irradiance, orientation)?;
         files.push((path, bytes));
+        outputs.env = Some(BABYLON_ENV_NAME.to_string());
     }
-    if params.target != Target::Gltf {
-        files.push((
-            out_dir.join(ibl_target::NOTE_NAME),
-            format!("{}\n", params.target.spec().note).into_bytes(),
-        ));
-    }
+    // The how-to-load note, naming only what this run wrote (every target, gltf too).
+    let note =
+        ibl_target::note::load_note(params.target, ibl_target::note::Writer::Prefilter, &outputs);
+    files.push((out_dir.join(ibl_target::NOTE_NAME), note.into_bytes()));
     Ok(Baked {
         files,
         chain,
@@ -633,9 +639,7 @@ pub fn output_paths(params: &Params, out_dir: &Path) -> Result<Vec<PathBuf>> {
     if params.target == Target::Babylon {
         p.push(out_dir.join(BABYLON_ENV_NAME));
     }
-    if params.target != Target::Gltf {
-        p.push(out_dir.join(ibl_target::NOTE_NAME));
-    }
+    p.push(out_dir.join(ibl_target::NOTE_NAME));
     Ok(p)
 }
 
@@ -1272,13 +1276,21 @@ mod tests {
             for (l, rep) in b.report.level.iter().enumerate() {
                 if rep.roughness < 1.0 {
                     let got = lod.lod(rep.roughness, n, cut.size);
-                    assert!((got - l as f32).abs() < 1e-3, "{target:?} level {l}: lod {got}");
+                    assert!(
+                        (got - l as f32).abs() < 1e-3,
+                        "{target:?} level {l}: lod {got}"
+                    );
                 }
             }
             // The runtime error at r <= max_roughness is the uncut chain's (or lower: the
             // last kept level is fitted against an exact neighbour rather than a fitted one).
             let (ra, rb) = (a.report.runtime.unwrap(), b.report.runtime.unwrap());
-            for ((r, ea), eb) in ra.roughness.iter().zip(&ra.mean_abs_rel).zip(&rb.mean_abs_rel) {
+            for ((r, ea), eb) in ra
+                .roughness
+                .iter()
+                .zip(&ra.mean_abs_rel)
+                .zip(&rb.mean_abs_rel)
+            {
                 if *r <= max_r {
                     eprintln!("{target:?} r {r:.3}: uncut {ea:.4} cut {eb:.4}");
                     assert!(
@@ -1325,7 +1337,13 @@ mod tests {
                     &NoProgress,
                 )
                 .unwrap();
-                for (l, (f, e)) in fitted.mips.levels.iter().zip(&exact.mips.levels).enumerate() {
+                for (l, (f, e)) in fitted
+                    .mips
+                    .levels
+                    .iter()
+                    .zip(&exact.mips.levels)
+                    .enumerate()
+                {
                     for face in 0..6 {
                         let (fd, ed) = (&f.faces[face].data, &e.faces[face].data);
                         assert!(

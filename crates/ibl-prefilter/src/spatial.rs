@@ -190,9 +190,7 @@ fn solve_pinned(
     let mut sub = vec![0.0f64; m * m];
     let mut rhs = vec![0.0f64; m];
     let mut om = vec![0.0f64; m];
-    let fixed_power: f64 = (0..k)
-        .filter_map(|p| pinned[p].map(|x| omega[p] * x))
-        .sum();
+    let fixed_power: f64 = (0..k).filter_map(|p| pinned[p].map(|x| omega[p] * x)).sum();
     for (r, &p) in free.iter().enumerate() {
         for (c, &q) in free.iter().enumerate() {
             sub[r * m + c] = a[p * k + q];
