@@ -137,6 +137,11 @@ impl Params {
         if let Some(name) = self.target_sh_file() {
             files.push(out_dir.join(name));
         }
+        files.extend(self.target.spec().orientation.sidecar_path(
+            out_dir,
+            enc.layout,
+            self.cube_name(),
+        ));
         files.push(out_dir.join(ibl_target::NOTE_NAME));
         Ok(files)
     }
@@ -503,13 +508,14 @@ pub fn run(
     let mut files = vec![(sh_path.clone(), io::data::encode(&sh_path, &coefficients)?)];
     let enc = params.encoding()?;
     // The engine's orientation: an exact texel permutation.
-    let cube = params.target.spec().orientation.apply(&cube);
+    let orientation = params.target.spec().orientation;
+    let cube = orientation.apply(&cube);
     let encoded = output::encode_cube(
         out_dir,
         &CubeMips { levels: vec![cube] },
         &enc,
         params.cube_name(),
-        &[],
+        &orientation.metadata(params.target.name()),
     )?;
     let names = |f: &[(PathBuf, Vec<u8>)]| ibl_target::note::names(f.iter().map(|f| f.0.as_path()));
     let mut outputs = ibl_target::note::Outputs {
@@ -527,6 +533,15 @@ pub fn run(
     ) {
         files.push((out_dir.join(name), bytes));
         outputs.engine_sh = Some(name.to_string());
+    }
+    if let Some(side) = orientation.sidecar(
+        out_dir,
+        enc.layout,
+        params.cube_name(),
+        params.target.name(),
+    ) {
+        outputs.orientation = ibl_target::note::names([side.0.as_path()]).pop();
+        files.push(side);
     }
     // The how-to-load note, naming only what this run wrote (every target, gltf too).
     let note = ibl_target::note::load_note(

@@ -567,7 +567,9 @@ pub fn run(
     let mut chain = bake_chain(params, &input.env, progress)?;
     // The engine's orientation: an exact texel permutation of every level.
     let oriented = params.target.spec().orientation.apply_mips(&chain.mips);
-    let metadata = target_metadata(params.target, &chain.mips);
+    let spec = params.target.spec();
+    let mut metadata = target_metadata(params.target, &chain.mips);
+    metadata.extend(spec.orientation.metadata(params.target.name()));
     let encoded = output::encode_cube(out_dir, &oriented, &enc, params.chain_name(), &metadata)?;
     chain.report.encoding = Some(output::encoding_report(&enc, &encoded.levels));
     chain.warnings.extend(encoded.warnings);
@@ -584,6 +586,17 @@ pub fn run(
         max_roughness: chain.report.note.clone(),
         ..Default::default()
     };
+    if params.target != Target::Babylon {
+        if let Some(side) = spec.orientation.sidecar(
+            out_dir,
+            enc.layout,
+            params.chain_name(),
+            params.target.name(),
+        ) {
+            outputs.orientation = ibl_target::note::names([side.0.as_path()]).pop();
+            files.push(side);
+        }
+    }
     let json = out_dir.join(REPORT_NAME);
     let bytes = io::data::encode(&json, &chain.report)?;
     files.push((json, bytes));
@@ -638,6 +651,12 @@ pub fn output_paths(params: &Params, out_dir: &Path) -> Result<Vec<PathBuf>> {
     p.push(out_dir.join(REPORT_NAME));
     if params.target == Target::Babylon {
         p.push(out_dir.join(BABYLON_ENV_NAME));
+    } else {
+        p.extend(params.target.spec().orientation.sidecar_path(
+            out_dir,
+            enc.layout,
+            params.chain_name(),
+        ));
     }
     p.push(out_dir.join(ibl_target::NOTE_NAME));
     Ok(p)

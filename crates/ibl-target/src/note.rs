@@ -59,6 +59,8 @@ pub struct Outputs {
     pub engine_sh: Option<String>,
     /// Sidecars recording a lossy encoding's cost (`<name>.encoding.json`).
     pub sidecars: Vec<String>,
+    /// The sidecar recording the cube's orientation (DDS, EXR faces in an engine's frame).
+    pub orientation: Option<String>,
 }
 
 /// The file names (inside the output folder) of the files a writer encoded.
@@ -155,6 +157,12 @@ pub fn load_note(target: Target, writer: Writer, out: &Outputs) -> String {
     }
     for f in &out.sidecars {
         line("what the lossy pixel format cost per level", f.clone());
+    }
+    if let Some(f) = &out.orientation {
+        line(
+            "the cube's orientation, which our tools read back (a KTX file keeps it in its ibl.orientation key instead)",
+            f.clone(),
+        );
     }
     let _ = writeln!(s);
     let _ = writeln!(s, "Orientation: {}.", orientation_text(&spec));
