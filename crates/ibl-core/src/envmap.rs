@@ -422,6 +422,18 @@ fn load_unchecked(path: &Path, sanitize: bool) -> Result<LoadedEnvironment> {
         }
         let faces: [Image; 6] = faces.try_into().expect("six faces");
         let cube = Cubemap::from_faces(faces).map_err(|e| Error::invalid(path, e.to_string()))?;
+        // Faces written in an engine's frame say so in a sidecar: read back in ours.
+        let sidecar = crate::orientation::sidecar_path(path);
+        let recorded = if sidecar.is_file() {
+            let bytes = std::fs::read(&sidecar).map_err(|e| Error::io(&sidecar, e))?;
+            Some(
+                crate::orientation::from_sidecar(&bytes)
+                    .map_err(|e| Error::invalid(&sidecar, e))?,
+            )
+        } else {
+            None
+        };
+        let cube = undo_orientation(cube, recorded, path, &mut read_as);
         return Ok(LoadedEnvironment {
             env: Environment::Cube(cube),
             path: path.to_path_buf(),
@@ -436,17 +448,41 @@ fn load_unchecked(path: &Path, sanitize: bool) -> Result<LoadedEnvironment> {
             std::io::Error::new(std::io::ErrorKind::NotFound, "no such file or folder"),
         ));
     }
-    if let Some((mut mips, note)) = read_container_cube(path)? {
+    if let Some((mut mips, note, metadata)) = read_container_cube(path)? {
         let mut cube = mips.levels.swap_remove(0);
         let mut report = TexelReport::default();
         for face in &mut cube.faces {
             merge(&mut report, &check_finite(face, path, sanitize)?);
         }
+        let mut read_as: Vec<String> = note.into_iter().collect();
+        // The orientation a KTX key or (DDS) a sidecar records; none: a foreign file.
+        let recorded = match crate::orientation::from_metadata(&metadata) {
+            Some(m) => Some(m.map_err(|e| Error::invalid(path, e))?),
+            None => {
+                let sidecar = crate::orientation::sidecar_path(path);
+                if sidecar.is_file() {
+                    let bytes = std::fs::read(&sidecar).map_err(|e| Error::io(&sidecar, e))?;
+                    Some(
+                        crate::orientation::from_sidecar(&bytes)
+                            .map_err(|e| Error::invalid(&sidecar, e))?,
+                    )
+                } else {
+                    read_as.push(format!(
+                        "{}: no {} metadata (nor {}): read as a cube in docs/CONVENTIONS.md's frame; if an engine's tool wrote it in its own frame (Bevy's z negated, cmgen's turn), the bake is turned the same way",
+                        path.display(),
+                        crate::orientation::METADATA_KEY,
+                        sidecar.file_name().unwrap_or_default().to_string_lossy()
+                    ));
+                    None
+                }
+            }
+        };
+        let cube = undo_orientation(cube, recorded, path, &mut read_as);
         return Ok(LoadedEnvironment {
             env: Environment::Cube(cube),
             path: path.to_path_buf(),
             report,
-            read_as: note.into_iter().collect(),
+            read_as,
             negative: NegativeReport::default(),
         });
     }
@@ -557,7 +593,34 @@ pub use crate::output::Layout;
 /// when it is too short to have any); `None` if it is not a container file. A container
 /// holding a 2D image is refused here (cube readers need six faces). With the cube, the
 /// warning when the file's name says another format ([`io::content_mismatch`]).
-fn read_container_cube(path: &Path) -> Result<Option<(CubeMips, Option<String>)>> {
+/// A cube read from a file written in an engine's frame (`recorded`: A, ours from file),
+/// turned back into ours (texel d of ours is the file's at Aᵀ·d), with a line saying so.
+fn undo_orientation(
+    cube: Cubemap,
+    recorded: Option<crate::orientation::Matrix>,
+    path: &Path,
+    notes: &mut Vec<String>,
+) -> Cubemap {
+    use crate::orientation as o;
+    match recorded {
+        Some(m) if m != o::IDENTITY => {
+            notes.push(format!(
+                "{}: stored in an engine's frame (ours from file: {}), read back in ours",
+                path.display(),
+                o::format(&m)
+            ));
+            o::transform(&cube, &o::transpose(&m))
+        }
+        _ => cube,
+    }
+}
+
+/// The cube chain of a KTX2 / KTX1 / DDS file (`None` for other files), how a content /
+/// name mismatch was read, and the container's key/value metadata.
+#[allow(clippy::type_complexity)]
+fn read_container_cube(
+    path: &Path,
+) -> Result<Option<(CubeMips, Option<String>, Vec<(String, Vec<u8>)>)>> {
     if path.is_dir() {
         return Ok(None);
     }
@@ -586,12 +649,12 @@ fn read_container_cube(path: &Path) -> Result<Option<(CubeMips, Option<String>)>
         ));
     }
     let note = io::content_mismatch(path, &head[..n]);
-    io::texture::decode_cube(path, &tex.payload).map(|m| Some((m, note)))
+    io::texture::decode_cube(path, &tex.payload).map(|m| Some((m, note, tex.metadata)))
 }
 
 /// Loads a cube chain written by [`crate::output::encode_cube`] (faces or any container).
 pub fn read_cube_chain(path: &Path) -> Result<CubeMips> {
-    if let Some((mips, _)) = read_container_cube(path)? {
+    if let Some((mips, _, _)) = read_container_cube(path)? {
         return Ok(mips);
     }
     if find_with_stem(path, "m0_px").is_some() && find_with_stem(path, "px").is_some() {
@@ -727,7 +790,12 @@ mod tests {
         std::fs::write(&p, &ktx).unwrap();
         let loaded = load_environment(&p, false).unwrap();
         assert!(matches!(loaded.env, Environment::Cube(_)));
-        let w = loaded.warnings();
+        // A KTX2 without our orientation key is foreign: warned about too (issue 22).
+        let (orient, w): (Vec<String>, Vec<String>) = loaded
+            .warnings()
+            .into_iter()
+            .partition(|w| w.contains("no ibl.orientation metadata"));
+        assert_eq!(orient.len(), 1, "{orient:?}");
         assert_eq!(w.len(), 1, "{w:?}");
         assert!(
             w[0].ends_with(
@@ -738,7 +806,11 @@ mod tests {
         );
         let p = d.path().join("cube.ktx2");
         std::fs::write(&p, &ktx).unwrap();
-        assert!(load_environment(&p, false).unwrap().warnings().is_empty());
+        let w = load_environment(&p, false).unwrap().warnings();
+        assert!(
+            w.len() == 1 && w[0].contains("no ibl.orientation metadata"),
+            "{w:?}"
+        );
     }
 
     fn labelled_cube(n: usize) -> Cubemap {

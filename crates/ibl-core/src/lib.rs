@@ -17,6 +17,7 @@ pub mod error;
 pub mod image;
 pub mod io;
 pub mod linalg;
+pub mod orientation;
 pub mod output;
 pub mod ownership;
 pub mod params;

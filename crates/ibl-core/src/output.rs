@@ -329,11 +329,23 @@ pub fn cube_output_paths(dir: &Path, levels: usize, layout: Layout, name: &str) 
 /// of another layout or of levels beyond the new chain. A bake removes them after a successful
 /// write, so a folder holds exactly one result (a reader would otherwise mix two).
 pub fn stale_cube_files(dir: &Path, name: &str, written: &[PathBuf]) -> Vec<PathBuf> {
+    // An orientation sidecar is stale too (a reader would turn the new cube by it), but only
+    // one our tools wrote: it must parse as one.
+    let ours =
+        |p: &PathBuf| std::fs::read(p).is_ok_and(|b| crate::orientation::from_sidecar(&b).is_ok());
     let mut out: Vec<PathBuf> = Layout::all()
         .iter()
         .filter_map(|l| l.container_path(dir, name))
         .chain([dir.join(format!("{name}.encoding.json"))])
         .filter(|p| p.is_file())
+        .chain(
+            [
+                dir.join(format!("{name}.orientation.json")),
+                dir.join(crate::orientation::FACES_SIDECAR),
+            ]
+            .into_iter()
+            .filter(|p| p.is_file() && ours(p)),
+        )
         .collect();
     let six = |stem: &dyn Fn(Face) -> String| -> Vec<PathBuf> {
         let found: Vec<PathBuf> = Face::ALL

@@ -143,6 +143,14 @@ pub fn output_paths(params: &Params, out: &Path) -> Result<Vec<PathBuf>> {
     let enc = params.encoding()?;
     let mut p = output::cube_output_paths(out, 1, enc.layout, params.cube_name());
     p.extend(output::encoding_sidecar_path(out, params.cube_name(), &enc));
+    if !params.to_equirect {
+        p.extend(params.target.spec().orientation.sidecar_path(
+            out,
+            enc.layout,
+            params.cube_name(),
+        ));
+        p.push(out.join(ibl_target::NOTE_NAME));
+    }
     Ok(p)
 }
 
@@ -197,11 +205,28 @@ pub fn run(
     }
     let n = params.size.unwrap_or_else(|| input.env.natural_face_size());
     let cube = input.env.to_cube(n, params.filter, params.rotate, progress);
-    let cube = params.target.spec().orientation.apply(&cube);
+    let orientation = params.target.spec().orientation;
+    let cube = orientation.apply(&cube);
     let name = params.cube_name();
-    let encoded = output::encode_cube(out, &CubeMips { levels: vec![cube] }, &enc, name, &[])?;
+    let metadata = orientation.metadata(params.target.name());
+    let encoded =
+        output::encode_cube(out, &CubeMips { levels: vec![cube] }, &enc, name, &metadata)?;
     let mut files = encoded.files;
-    files.extend(output::encoding_sidecar(out, name, &enc, &encoded.levels)?);
+    let sidecar = output::encoding_sidecar(out, name, &enc, &encoded.levels)?;
+    let mut outputs = ibl_target::note::Outputs {
+        cube: ibl_target::note::names(files.iter().map(|f| f.0.as_path())),
+        levels: 1,
+        sidecars: ibl_target::note::names(sidecar.iter().map(|f| f.0.as_path())),
+        ..Default::default()
+    };
+    files.extend(sidecar);
+    if let Some(side) = orientation.sidecar(out, enc.layout, name, params.target.name()) {
+        outputs.orientation = ibl_target::note::names([side.0.as_path()]).pop();
+        files.push(side);
+    }
+    // The how-to-load note, naming only what this run wrote (every target, gltf too).
+    let note = ibl_target::note::load_note(params.target, ibl_target::note::Writer::Cube, &outputs);
+    files.push((out.join(ibl_target::NOTE_NAME), note.into_bytes()));
     Ok(Baked {
         files,
         face_size: n,
@@ -252,5 +277,78 @@ mod tests {
             ..Default::default()
         };
         assert!(p.validate().is_err());
+    }
+
+    /// Issue 22: a cube written in any target's orientation, in any container, reads back
+    /// (load_environment undoing what its KTX key or sidecar records) as our cube: the same
+    /// SH as the cube written in our frame (Bevy's had L10's sign flipped, Filament's L10 and
+    /// L11 swapped).
+    #[test]
+    fn every_targets_orientation_reads_back_as_ours() {
+        use crate::irradiance::project;
+        use ibl_core::envmap::load_environment;
+        use ibl_core::progress::NoProgress;
+        use ibl_target::Target;
+        let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/hdri/sunset_256.exr");
+        let input = load_environment(&src, false).unwrap();
+        let tmp = tempfile::tempdir().unwrap();
+        let bake = |target: Target, layout: Layout, dir: &str| {
+            let params = Params {
+                size: Some(16),
+                target,
+                layout: Some(layout),
+                format: Some(PixelFormat::Rgba32f),
+                ..Default::default()
+            };
+            let out = tmp.path().join(dir);
+            let baked = run(&params, &input, &out, &NoProgress).unwrap();
+            io::write_many_atomic(&baked.files).unwrap();
+            let path = match layout.container_path(&out, params.cube_name()) {
+                Some(p) => p,
+                None => out,
+            };
+            let back = load_environment(&path, false).unwrap();
+            (project(&back.env, 3, 0.0), back.read_as)
+        };
+        let (ours, _) = bake(Target::Gltf, Layout::Faces, "ours");
+        for target in [
+            Target::Gltf,
+            Target::Bevy,
+            Target::Filament,
+            Target::Three,
+            Target::Babylon,
+            Target::Unity,
+        ] {
+            for layout in [Layout::Faces, Layout::Ktx2, Layout::Ktx1, Layout::Dds] {
+                let (sh, notes) = bake(target, layout, &format!("{target:?}-{layout:?}"));
+                for (i, (a, b)) in sh.iter().zip(&ours).enumerate() {
+                    for c in 0..3 {
+                        assert!(
+                            (a[c] - b[c]).abs() <= 1e-5 * b[0].abs().max(1e-6),
+                            "{target:?} {layout:?} coefficient {i}: {a:?} vs ours {b:?}"
+                        );
+                    }
+                }
+                // Our own files carry their orientation: no "unknown orientation" warning.
+                assert!(
+                    notes.iter().all(|n| !n.contains("no ibl.orientation")),
+                    "{target:?} {layout:?}: {notes:?}"
+                );
+            }
+        }
+        // A foreign container (no key, no sidecar) is read as ours, with a warning.
+        let foreign = tmp
+            .path()
+            .join("Bevy-Dds/skybox_rgb9e5_zstd.orientation.json");
+        std::fs::remove_file(&foreign).unwrap();
+        let back =
+            load_environment(&tmp.path().join("Bevy-Dds/skybox_rgb9e5_zstd.dds"), false).unwrap();
+        assert!(
+            back.read_as
+                .iter()
+                .any(|n| n.contains("no ibl.orientation")),
+            "{:?}",
+            back.read_as
+        );
     }
 }

@@ -150,9 +150,12 @@ impl Params {
         if let Some(name) = self.target_sh_file() {
             files.push(out_dir.join(name));
         }
-        if self.target != Target::Gltf {
-            files.push(out_dir.join(ibl_target::NOTE_NAME));
-        }
+        files.extend(self.target.spec().orientation.sidecar_path(
+            out_dir,
+            enc.layout,
+            self.cube_name(),
+        ));
+        files.push(out_dir.join(ibl_target::NOTE_NAME));
         Ok(files)
     }
 }
@@ -586,33 +589,48 @@ pub fn run(
     let mut files = vec![(sh_path.clone(), io::data::encode(&sh_path, &coefficients)?)];
     let enc = params.encoding()?;
     // The engine's orientation: an exact texel permutation.
-    let cube = params.target.spec().orientation.apply(&cube);
+    let orientation = params.target.spec().orientation;
+    let cube = orientation.apply(&cube);
     let encoded = output::encode_cube(
         out_dir,
         &CubeMips { levels: vec![cube] },
         &enc,
         params.cube_name(),
-        &[],
+        &orientation.metadata(params.target.name()),
     )?;
+    let names = |f: &[(PathBuf, Vec<u8>)]| ibl_target::note::names(f.iter().map(|f| f.0.as_path()));
+    let mut outputs = ibl_target::note::Outputs {
+        irradiance: names(&encoded.files),
+        sh: Some(params.sh_file.clone()),
+        ..Default::default()
+    };
     files.extend(encoded.files);
-    files.extend(output::encoding_sidecar(
-        out_dir,
-        params.cube_name(),
-        &enc,
-        &encoded.levels,
-    )?);
+    let sidecar = output::encoding_sidecar(out_dir, params.cube_name(), &enc, &encoded.levels)?;
+    outputs.sidecars = names(sidecar.as_slice());
+    files.extend(sidecar);
     if let (Some(name), Some(bytes)) = (
         params.target_sh_file(),
         target_sh_bytes(params.target, &coefficients.irradiance),
     ) {
         files.push((out_dir.join(name), bytes));
+        outputs.engine_sh = Some(name.to_string());
     }
-    if params.target != Target::Gltf {
-        files.push((
-            out_dir.join(ibl_target::NOTE_NAME),
-            format!("{}\n", params.target.spec().note).into_bytes(),
-        ));
+    if let Some(side) = orientation.sidecar(
+        out_dir,
+        enc.layout,
+        params.cube_name(),
+        params.target.name(),
+    ) {
+        outputs.orientation = ibl_target::note::names([side.0.as_path()]).pop();
+        files.push(side);
     }
+    // The how-to-load note, naming only what this run wrote (every target, gltf too).
+    let note = ibl_target::note::load_note(
+        params.target,
+        ibl_target::note::Writer::Irradiance,
+        &outputs,
+    );
+    files.push((out_dir.join(ibl_target::NOTE_NAME), note.into_bytes()));
     Ok(Baked {
         files,
         coefficients,

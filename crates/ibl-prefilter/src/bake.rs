@@ -367,10 +367,10 @@ impl Params {
             }
         }
         if self.target == Target::Babylon
-            && (!self.size.is_power_of_two() || self.baked_levels() != max_levels(self.size))
+            && (!self.size.is_power_of_two() || self.written_levels() != max_levels(self.size))
         {
             return Err(Error::param(format!(
-                "--target babylon needs a power-of-two --size and its full chain down to 1×1 ({} levels for --size {}; no --max-roughness): Babylon's .env holds every level",
+                "--target babylon needs a power-of-two --size and its full chain down to 1×1 ({} levels for --size {}): Babylon's .env holds every level",
                 max_levels(self.size),
                 self.size
             )));
@@ -441,6 +441,18 @@ impl Params {
                 .max(1),
             _ => n,
         }
+    }
+
+    /// Levels written: with --max-roughness still the full chain N. glTF, Bevy and Filament
+    /// compute the lod from the file's level count (a chain cut to k levels is read at
+    /// lod = r·(k − 1) of the shorter chain: every level at the wrong roughness, 24–34% off);
+    /// Babylon's `.env` holds every level; and every lookup (Unity's fixed 6 too) blends the
+    /// last kept level with the next one for r between their roughness, up to max_roughness.
+    /// The levels past the cut hold the exact kernel at their roughness, unfitted
+    /// ([`LevelReport::beyond_max_roughness`]): --max-roughness saves the lookup fit of the
+    /// rough levels and says which levels carry the accuracy contract, never the mapping.
+    pub fn written_levels(&self) -> usize {
+        self.chain_levels()
     }
 
     /// Whether levels are fitted to the lookup ([`crate::fit`]): --fit-lookup, else on where it
@@ -612,6 +624,11 @@ pub struct LevelReport {
     /// the level is corrected so the engine's bilinear read between its texels matches the
     /// exact kernel (see [`crate::spatial`]), and the read's error before and after.
     pub read_fit: Option<spatial::ReadFit>,
+    /// A level past `--max-roughness`, written so the engine's lookup keeps the full chain's
+    /// level count ([`Params::written_levels`]): the exact kernel at its roughness, not fitted
+    /// to the lookup (absent when false).
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub beyond_max_roughness: bool,
 }
 
 /// The error of one level measured against the brute-force kernel on probe texels.
@@ -695,14 +712,39 @@ pub fn run(
     let ce = process_cpu_seconds();
     // The engine's orientation: an exact texel permutation of every level.
     let oriented = params.target.spec().orientation.apply_mips(&chain.mips);
+    let spec = params.target.spec();
     let mut metadata = target_metadata(params.target, &chain.mips);
+    metadata.extend(spec.orientation.metadata(params.target.name()));
     if let Some(lk) = &chain.report.custom_lookup {
         metadata.extend(lk.metadata(&chain.report.level_roughness));
     }
     let encoded = output::encode_cube(out_dir, &oriented, &enc, params.chain_name(), &metadata)?;
     chain.report.encoding = Some(output::encoding_report(&enc, &encoded.levels));
     chain.warnings.extend(encoded.warnings);
-    let mut files = encoded.files;
+    // Babylon loads the `.env` alone: the chain's own files (EXR faces) would be strays.
+    let mut files = if params.target == Target::Babylon {
+        Vec::new()
+    } else {
+        encoded.files
+    };
+    let mut outputs = ibl_target::note::Outputs {
+        chain: ibl_target::note::names(files.iter().map(|f| f.0.as_path())),
+        levels: chain.mips.levels.len(),
+        report: Some(REPORT_NAME.to_string()),
+        max_roughness: chain.report.note.clone(),
+        ..Default::default()
+    };
+    if params.target != Target::Babylon {
+        if let Some(side) = spec.orientation.sidecar(
+            out_dir,
+            enc.layout,
+            params.chain_name(),
+            params.target.name(),
+        ) {
+            outputs.orientation = ibl_target::note::names([side.0.as_path()]).pop();
+            files.push(side);
+        }
+    }
     let json = out_dir.join(REPORT_NAME);
     let bytes = io::data::encode(&json, &chain.report)?;
     files.push((json, bytes));
@@ -713,18 +755,17 @@ pub fn run(
         let orientation = params.target.spec().orientation;
         let bytes = ibl_target::babylon::encode_env(&path, &oriented, &irradiance, orientation)?;
         files.push((path, bytes));
+        outputs.env = Some(BABYLON_ENV_NAME.to_string());
     }
     if let Some(lk) = &chain.report.custom_lookup {
         for (name, text) in lk.shaders() {
             files.push((out_dir.join(name), text.into_bytes()));
         }
     }
-    if params.target != Target::Gltf {
-        files.push((
-            out_dir.join(ibl_target::NOTE_NAME),
-            format!("{}\n", params.target.spec().note).into_bytes(),
-        ));
-    }
+    // The how-to-load note, naming only what this run wrote (every target, gltf too).
+    let note =
+        ibl_target::note::load_note(params.target, ibl_target::note::Writer::Prefilter, &outputs);
+    files.push((out_dir.join(ibl_target::NOTE_NAME), note.into_bytes()));
     Ok(Baked {
         files,
         chain,
@@ -752,22 +793,30 @@ fn target_metadata(target: Target, mips: &CubeMips) -> Vec<(String, Vec<u8>)> {
 /// Paths [`run`] writes for `params` (for planning and cleaning).
 pub fn output_paths(params: &Params, out_dir: &Path) -> Result<Vec<PathBuf>> {
     let enc = params.encoding()?;
-    let mut p = output::cube_output_paths(
-        out_dir,
-        params.baked_levels(),
-        enc.layout,
-        params.chain_name(),
-    );
+    let mut p = if params.target == Target::Babylon {
+        Vec::new()
+    } else {
+        output::cube_output_paths(
+            out_dir,
+            params.written_levels(),
+            enc.layout,
+            params.chain_name(),
+        )
+    };
     p.push(out_dir.join(REPORT_NAME));
     if params.target == Target::Babylon {
         p.push(out_dir.join(BABYLON_ENV_NAME));
+    } else {
+        p.extend(params.target.spec().orientation.sidecar_path(
+            out_dir,
+            enc.layout,
+            params.chain_name(),
+        ));
     }
     if params.custom_lookup().is_some() {
         p.extend(custom::SHADER_FILES.iter().map(|f| out_dir.join(f)));
     }
-    if params.target != Target::Gltf {
-        p.push(out_dir.join(ibl_target::NOTE_NAME));
-    }
+    p.push(out_dir.join(ibl_target::NOTE_NAME));
     Ok(p)
 }
 
@@ -842,6 +891,7 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
         estimated_error: None,
         fit: None,
         read_fit: None,
+        beyond_max_roughness: false,
     }];
     let (mut level_seconds, mut level_work) = (vec![0.0], vec![0u64]);
     let mut estimate_seconds = 0.0;
@@ -849,7 +899,11 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
     let fits = params.fits_lookup();
     // The exact levels first (with --max-roughness and the fit, one more past the last baked
     // level: its coarser neighbour, which the engine's blend reads and the fit needs).
-    let n_exact = if fits && n_baked < n_chain {
+    // Levels past --max-roughness that the engine's lookup needs are the exact kernel too.
+    let n_written = params.written_levels();
+    let n_exact = if n_written > n_baked {
+        n_written
+    } else if fits && n_baked < n_chain {
         n_baked + 1
     } else {
         n_baked
@@ -906,6 +960,7 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
             estimated_error,
             fit: None,
             read_fit: None,
+            beyond_max_roughness: l >= n_baked,
         });
         stages.push(Stage {
             values: exact.clone(),
@@ -931,11 +986,11 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
     fit_seconds += tf.elapsed().as_secs_f64();
     cpu.stages.push(("estimate".into(), estimate_cpu));
     cpu.stage("fit".into());
-    // The extra coarser neighbour is not part of the chain.
-    stages.truncate(n_baked);
-    reports.truncate(n_baked);
-    level_seconds.truncate(n_baked);
-    level_work.truncate(n_baked);
+    // The extra coarser neighbour is not part of a cut chain.
+    stages.truncate(n_written);
+    reports.truncate(n_written);
+    level_seconds.truncate(n_written);
+    level_work.truncate(n_written);
     let levels: Vec<Cubemap> = stages.iter().map(Stage::stored).collect();
     for (report, st) in reports.iter_mut().zip(&stages) {
         if let Some((plan, _)) = &st.fitting {
@@ -944,12 +999,18 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
     }
     let note = (n_baked < n_chain).then(|| {
         format!(
-            "--max-roughness {} stopped the chain at level {} (roughness {}) of {} levels; roughness spacing 1/{} of the full chain kept",
+            "--max-roughness {}: levels 0..={} (roughness <= {}) carry the accuracy contract{}; levels {}..={} are the exact kernel at their roughness, unfitted, kept because {}'s lookup ({}) reads each level at its roughness only on the full chain of {} levels (and blends level {} with level {} up to the cut)",
             params.max_roughness.unwrap_or(1.0),
             n_baked - 1,
             params.level_roughness(n_baked - 1),
+            if fits { " and are fitted to the lookup" } else { "" },
+            n_baked,
+            n_written - 1,
+            params.target.name(),
+            params.target.spec().lod.name(),
             n_chain,
-            n_chain - 1
+            n_baked - 1,
+            n_baked
         )
     });
     let (method, quality) = if params.reference {
@@ -963,14 +1024,14 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
         tool: "prefilter",
         version: ibl_core::TOOL_VERSION,
         size,
-        levels: n_baked,
+        levels: n_written,
         chain_levels: n_chain,
         method,
         quality,
         kernel: "D_GGX(n·h, α)·max(n·l, 0), h = normalize(n + l), n = v, α = r², r of each level as the target's lookup reads it, normalised to unit sum",
         target: params.target,
         lookup: params.lookup().name(),
-        level_roughness: (0..n_baked).map(|l| params.level_roughness(l)).collect(),
+        level_roughness: (0..n_written).map(|l| params.level_roughness(l)).collect(),
         fit_lookup: params.fits_lookup(),
         source_size: src_size,
         tree: matches!(engine, Engine::Tree(..)).then(|| params.quality.tree_params()),
@@ -1143,8 +1204,10 @@ struct Stage {
 
 impl Stage {
     /// What the level stores: the per-texel fit's values plus the read correction (the
-    /// read-fitted exact level minus the exact level), never negative. Both keep the exact
-    /// level's power; where a texel had to be clamped to 0, its channel is rescaled to it.
+    /// read-fitted exact level minus the exact level), never negative and never black where
+    /// the exact level is not: a texel channel the sum takes to 0 or below keeps the per-texel
+    /// fit's value, else the exact one. Both keep the exact level's power; where a texel was
+    /// replaced, its channel is rescaled to it.
     fn stored(&self) -> Cubemap {
         let mut out = self.values.clone();
         let Some(read) = &self.correction else {
@@ -1154,8 +1217,13 @@ impl Stage {
         for ((o, f), e) in out.faces.iter_mut().zip(&read.faces).zip(&self.exact.faces) {
             for ((v, f), e) in o.data.iter_mut().zip(&f.data).zip(&e.data) {
                 let sum = *v + (f - e);
-                clamped |= sum < 0.0;
-                *v = sum.max(0.0);
+                if sum > 0.0 || *e <= 0.0 {
+                    clamped |= sum < 0.0;
+                    *v = sum.max(0.0);
+                } else {
+                    clamped = true;
+                    *v = if *v > 0.0 { *v } else { *e };
+                }
             }
         }
         if clamped {
@@ -1421,6 +1489,150 @@ mod tests {
             ..p
         };
         assert_eq!(p.baked_levels(), 1);
+    }
+
+    /// A sky with a soft sun (relative errors meaningful everywhere).
+    fn sunny_sky(n: usize) -> Cubemap {
+        Cubemap::from_fn(n, |d| {
+            let d = d.normalize();
+            let sun = (d.dot(glam::Vec3::new(0.4, 0.7, 0.59).normalize()) - 0.9).max(0.0) * 80.0;
+            let base = 0.2 + 0.8 * d.y.max(0.0) + 0.1 * (3.0 * d.x).sin().abs();
+            [base + sun, base * 0.9 + sun, base * 0.7 + 0.5 * sun]
+        })
+    }
+
+    /// Issue 22: a chain cut by --max-roughness is read by the engine it was made for at the
+    /// intended roughness. glTF / Bevy / Filament compute the lod from the file's level count,
+    /// Babylon's `.env` holds a full chain and every lookup blends the last kept level with the
+    /// next: the chain keeps its level count (levels past the cut: the exact kernel, unfitted)
+    /// and its lookup error at r <= max_roughness is the uncut chain's.
+    #[test]
+    fn a_max_roughness_chain_is_read_at_the_intended_roughness_by_its_engine() {
+        use ibl_core::envmap::Environment;
+        use ibl_core::progress::NoProgress;
+        let env = Environment::Cube(sunny_sky(32));
+        let max_r = 0.45;
+        for (target, levels) in [
+            (Target::Gltf, Some(5)),
+            (Target::Bevy, Some(5)),
+            (Target::Filament, Some(5)),
+            (Target::Unity, Some(5)),
+            (Target::Babylon, None),
+        ] {
+            let full = Params {
+                size: 16,
+                levels,
+                target,
+                quality: Quality::Draft,
+                ..Default::default()
+            };
+            let cut = Params {
+                max_roughness: Some(max_r),
+                ..full.clone()
+            };
+            assert!(cut.baked_levels() < cut.chain_levels(), "{target:?}");
+            let a = bake_chain(&full, &env, &NoProgress).unwrap();
+            let b = bake_chain(&cut, &env, &NoProgress).unwrap();
+            let lod = target.spec().lod;
+            let n = b.mips.levels.len();
+            assert_eq!(n, cut.chain_levels(), "{target:?} keeps the level count");
+            assert!(b.report.level[cut.baked_levels()].beyond_max_roughness);
+            assert!(!b.report.level[cut.baked_levels() - 1].beyond_max_roughness);
+            assert!(b.report.note.as_deref().unwrap().contains("full chain"));
+            // The engine's lookup, on the file's own level count, lands on each level at the
+            // roughness the level was baked for.
+            for (l, rep) in b.report.level.iter().enumerate() {
+                if rep.roughness < 1.0 {
+                    let got = lod.lod(rep.roughness, n, cut.size);
+                    assert!(
+                        (got - l as f32).abs() < 1e-3,
+                        "{target:?} level {l}: lod {got}"
+                    );
+                }
+            }
+            // The runtime error at r <= max_roughness is the uncut chain's (or lower: the
+            // last kept level is fitted against an exact neighbour rather than a fitted one).
+            let (ra, rb) = (a.report.runtime.unwrap(), b.report.runtime.unwrap());
+            for ((r, ea), eb) in ra
+                .roughness
+                .iter()
+                .zip(&ra.mean_abs_rel)
+                .zip(&rb.mean_abs_rel)
+            {
+                if *r <= max_r {
+                    eprintln!("{target:?} r {r:.3}: uncut {ea:.4} cut {eb:.4}");
+                    assert!(
+                        (ea - eb).abs() <= 0.3 * ea + 0.002,
+                        "{target:?} r {r}: uncut {ea} cut {eb}"
+                    );
+                }
+            }
+        }
+    }
+
+    /// Issue 22: no stored level holds a black or negative face where the exact level is
+    /// not (the read fit clamped the 1×1 level of a Babylon chain to black), for every target,
+    /// on a sky and on a 10⁵ sun on black.
+    #[test]
+    fn no_fitted_face_is_black_or_negative_where_the_exact_one_is_not() {
+        use ibl_core::envmap::Environment;
+        use ibl_core::progress::NoProgress;
+        let mut sun = Cubemap::new(32);
+        let k = (9 * 32 + 21) * 3;
+        sun.faces[Face::Pz as usize].data[k..k + 3].copy_from_slice(&[1e5, 9e4, 7e4]);
+        for env in [sunny_sky(32), sun] {
+            let env = Environment::Cube(env);
+            for target in [
+                Target::Gltf,
+                Target::Bevy,
+                Target::Filament,
+                Target::Unity,
+                Target::Babylon,
+            ] {
+                let params = Params {
+                    size: 16,
+                    target,
+                    quality: Quality::Draft,
+                    ..Default::default()
+                };
+                let fitted = bake_chain(&params, &env, &NoProgress).unwrap();
+                let exact = bake_chain(
+                    &Params {
+                        fit_lookup: Some(false),
+                        ..params.clone()
+                    },
+                    &env,
+                    &NoProgress,
+                )
+                .unwrap();
+                for (l, (f, e)) in fitted
+                    .mips
+                    .levels
+                    .iter()
+                    .zip(&exact.mips.levels)
+                    .enumerate()
+                {
+                    for face in 0..6 {
+                        let (fd, ed) = (&f.faces[face].data, &e.faces[face].data);
+                        assert!(
+                            fd.iter().all(|v| v.is_finite() && *v >= 0.0),
+                            "{target:?} level {l} face {face}: negative or non-finite"
+                        );
+                        for c in 0..3 {
+                            let sum = |d: &[f32]| d.iter().skip(c).step_by(3).sum::<f32>();
+                            if sum(ed) > 0.0 {
+                                assert!(
+                                    sum(fd) > 0.0,
+                                    "{target:?} level {l} ({}²) face {face} channel {c}: black where exact is {}",
+                                    f.size,
+                                    sum(ed)
+                                );
+                            }
+                        }
+                    }
+                }
+            }
+        }
     }
 
     #[test]

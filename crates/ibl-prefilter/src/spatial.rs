@@ -44,8 +44,8 @@ pub struct ReadFit {
     pub mean_abs_rel_before: f64,
     /// The same of the fitted level.
     pub mean_abs_rel_after: f64,
-    /// Texel channels the fit would have made negative, stored black (their channel then
-    /// rescaled to keep its power).
+    /// Texel channels the fit would have made negative (or black where the exact level is
+    /// not), stored at their exact value instead, the others fitted again around them.
     pub clamped: usize,
 }
 
@@ -128,17 +128,33 @@ pub fn fit_bilinear(stored: &Cubemap, dense: &Cubemap) -> (Cubemap, ReadFit) {
         if v.iter().any(|v| !v.is_finite()) {
             return unchanged(before);
         }
-        // Light is never negative: where the fit would make it so (texels larger than what
-        // they hold, a 1×1 level), the texel is black and the channel rescaled to keep its
-        // power.
-        let negative = v.iter().filter(|v| **v < 0.0).count();
-        if negative > 0 {
-            v.iter_mut().for_each(|v| *v = v.max(0.0));
-            let kept: f64 = omega.iter().zip(&v).map(|(o, v)| o * v).sum();
-            if kept > 0.0 {
-                v.iter_mut().for_each(|v| *v *= power / kept);
+        // Light is never negative, and a texel is never black where the exact level is not:
+        // where the fit would go below zero (texels larger than what they hold, a 1×1 level),
+        // the texel keeps its exact value (the footprint mean) and the other texels are
+        // fitted again with it fixed, power kept (an active set, grown until no free texel is
+        // negative; at worst every texel is pinned and the level is the exact one). Clamping
+        // to 0 instead left a 1×1 Babylon face black (issue 22).
+        let mut pinned: Vec<Option<f64>> = vec![None; k];
+        let stored_c =
+            |p: usize| stored.faces[p / (n * n)].data[3 * (p % (n * n)) + c].max(0.0) as f64;
+        loop {
+            let negative: Vec<usize> = (0..k)
+                .filter(|&p| pinned[p].is_none() && v[p] <= 0.0 && stored_c(p) > 0.0)
+                .chain((0..k).filter(|&p| pinned[p].is_none() && v[p] < 0.0))
+                .collect();
+            if negative.is_empty() {
+                break;
             }
-            clamped += negative;
+            for p in negative {
+                if pinned[p].is_none() {
+                    pinned[p] = Some(stored_c(p));
+                    clamped += 1;
+                }
+            }
+            let Some(w) = solve_pinned(&a, &rhs, &omega, power, &pinned) else {
+                return unchanged(before);
+            };
+            v = w;
         }
         for (p, v) in v.iter().enumerate() {
             fitted.faces[p / (n * n)].data[3 * (p % (n * n)) + c] = *v as f32;
@@ -152,6 +168,48 @@ pub fn fit_bilinear(stored: &Cubemap, dense: &Cubemap) -> (Cubemap, ReadFit) {
         clamped,
     };
     (fitted, report)
+}
+
+/// The power-constrained least-squares texels with some texels fixed (`pinned`): the normal
+/// equations A·v = b restricted to the free texels, the fixed ones moved to the right-hand
+/// side, and Σ Ω_i v_i = `power` by its Lagrange multiplier over the free texels.
+fn solve_pinned(
+    a: &[f64],
+    b: &[f64],
+    omega: &[f64],
+    power: f64,
+    pinned: &[Option<f64>],
+) -> Option<Vec<f64>> {
+    let k = b.len();
+    let free: Vec<usize> = (0..k).filter(|&p| pinned[p].is_none()).collect();
+    let mut v: Vec<f64> = pinned.iter().map(|p| p.unwrap_or(0.0)).collect();
+    if free.is_empty() {
+        return Some(v);
+    }
+    let m = free.len();
+    let mut sub = vec![0.0f64; m * m];
+    let mut rhs = vec![0.0f64; m];
+    let mut om = vec![0.0f64; m];
+    let fixed_power: f64 = (0..k).filter_map(|p| pinned[p].map(|x| omega[p] * x)).sum();
+    for (r, &p) in free.iter().enumerate() {
+        for (c, &q) in free.iter().enumerate() {
+            sub[r * m + c] = a[p * k + q];
+        }
+        let fixed: f64 = (0..k)
+            .filter_map(|q| pinned[q].map(|x| a[p * k + q] * x))
+            .sum();
+        rhs[r] = b[p] - fixed;
+        om[r] = omega[p];
+    }
+    let x = solve_spd(&sub, &rhs, m)?;
+    let y = solve_spd(&sub, &om, m)?;
+    let oy: f64 = om.iter().zip(&y).map(|(o, v)| o * v).sum();
+    let ox: f64 = om.iter().zip(&x).map(|(o, v)| o * v).sum();
+    let mu = (ox - (power - fixed_power)) / oy;
+    for (r, &p) in free.iter().enumerate() {
+        v[p] = x[r] - mu * y[r];
+    }
+    v.iter().all(|v| v.is_finite()).then_some(v)
 }
 
 type Sample = ([(usize, f32); 4], [f32; 3], f64);

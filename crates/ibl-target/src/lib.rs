@@ -12,8 +12,10 @@
 
 pub mod babylon;
 pub mod lod;
+pub mod note;
 pub mod orient;
 pub mod sh;
+pub mod snippet;
 
 pub use lod::LodMapping;
 pub use orient::Orientation;
@@ -136,7 +138,8 @@ pub struct TargetSpec {
     pub diffuse: DiffuseForm,
     /// File names the engine expects.
     pub files: FileNames,
-    /// How to load the outputs, written beside them as [`NOTE_NAME`].
+    /// A one-paragraph summary of how to load the outputs; the note written beside a run's
+    /// outputs as [`NOTE_NAME`] is [`note::load_note`], built from the files the run wrote.
     pub note: &'static str,
 }
 
@@ -207,7 +210,7 @@ impl Target {
                     sh: None,
                     cube: "skybox_rgb9e5_zstd",
                 },
-                note: "Bevy: EnvironmentMapLight { diffuse_map: asset_server.load(\"diffuse_rgb9e5_zstd.ktx2\"), specular_map: asset_server.load(\"specular_rgb9e5_zstd.ktx2\"), intensity: 1.0, ..default() } (enable Bevy's `ktx2` and `zstd` features). The cubes are stored with z negated, as Bevy samples them, so the environment shows as the source panorama; the chain's level l is at roughness l/(N-1), as Bevy reads it.",
+                note: "Bevy: EnvironmentMapLight { diffuse_map: asset_server.load(\"diffuse_rgb9e5_zstd.ktx2\"), specular_map: asset_server.load(\"specular_rgb9e5_zstd.ktx2\"), intensity: 900.0, ..default() } (intensity in cd/m^2 per unit of the files, as Bevy's examples use; enable Bevy's `ktx2` and `zstd` features). The cubes are stored with z negated, as Bevy samples them, so the environment shows as the source panorama; the chain's level l is at roughness l/(N-1), as Bevy reads it.",
             },
             // google/filament `shaders/src/surface_light_indirect.fs` (perceptualRoughnessToLod,
             // Irradiance_SphericalHarmonics), `tools/cmgen/src/cmgen.cpp` (KTX1 output with the

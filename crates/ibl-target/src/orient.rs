@@ -4,7 +4,9 @@
 //! with flips, no resampling.
 
 use glam::Vec3;
-use ibl_core::cube::{face_texel_index, texel_direction, CubeMips, Cubemap, Face};
+use ibl_core::cube::{CubeMips, Cubemap};
+use ibl_core::envmap::Layout;
+use std::path::{Path, PathBuf};
 
 /// A signed permutation matrix A: the texel of the engine's file in direction t holds our
 /// radiance in direction A·t.
@@ -39,6 +41,46 @@ impl Orientation {
         *self == Self::IDENTITY
     }
 
+    /// KTX2 / KTX1 key/value data recording the orientation (every target, ours included, so
+    /// a file without it is known to be foreign): [`ibl_core::orientation::METADATA_KEY`].
+    pub fn metadata(&self, target: &str) -> Vec<(String, Vec<u8>)> {
+        vec![ibl_core::orientation::metadata_entry(
+            &self.ours_from_file,
+            target,
+        )]
+    }
+
+    /// Where a layout without key/value data records the orientation: beside a DDS always,
+    /// in a folder of EXR faces when it is not our frame (a folder of faces without one is
+    /// read in ours, as every tool reads face folders).
+    pub fn sidecar_path(&self, dir: &Path, layout: Layout, name: &str) -> Option<PathBuf> {
+        match layout {
+            Layout::Dds => layout
+                .container_path(dir, name)
+                .map(|p| ibl_core::orientation::sidecar_path(&p)),
+            Layout::Faces if !self.is_identity() => {
+                Some(dir.join(ibl_core::orientation::FACES_SIDECAR))
+            }
+            _ => None,
+        }
+    }
+
+    /// [`Orientation::sidecar_path`] with its bytes.
+    pub fn sidecar(
+        &self,
+        dir: &Path,
+        layout: Layout,
+        name: &str,
+        target: &str,
+    ) -> Option<(PathBuf, Vec<u8>)> {
+        self.sidecar_path(dir, layout, name).map(|p| {
+            (
+                p,
+                ibl_core::orientation::sidecar_json(&self.ours_from_file, target),
+            )
+        })
+    }
+
     /// Our direction A·t for a direction t of the engine's file.
     #[inline]
     pub(crate) fn ours_from_file(&self, t: Vec3) -> Vec3 {
@@ -61,24 +103,7 @@ impl Orientation {
 
     /// The cube the engine's file holds: texel t of the result is our texel at A·t (exact).
     pub fn apply(&self, cube: &Cubemap) -> Cubemap {
-        if self.is_identity() {
-            return cube.clone();
-        }
-        let n = cube.size;
-        let mut out = Cubemap::new(n);
-        for face in Face::ALL {
-            for j in 0..n {
-                for i in 0..n {
-                    let (f, sc, tc) =
-                        Face::from_direction(self.ours_from_file(texel_direction(face, i, j, n)));
-                    let (si, sj) = face_texel_index(sc, tc, n);
-                    let c = cube.texel(f, si, sj);
-                    let k = (j * n + i) * 3;
-                    out.faces[face as usize].data[k..k + 3].copy_from_slice(&c);
-                }
-            }
-        }
-        out
+        ibl_core::orientation::transform(cube, &self.ours_from_file)
     }
 
     /// [`Orientation::apply`] on every level of a chain.
@@ -92,6 +117,7 @@ impl Orientation {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use ibl_core::cube::{texel_direction, Face};
     use ibl_core::sampling::Pcg32;
 
     const ALL: [Orientation; 4] = [

@@ -187,13 +187,16 @@ pub(crate) fn three_radiance(irradiance: &[[f32; 3]]) -> [[f64; 3]; 9] {
 /// A three.js `LightProbe` in the form `LightProbe.toJSON` writes (mrdoob/three.js
 /// `src/lights/LightProbe.js`, `src/lights/Light.js`, `src/core/Object3D.js`), read back by
 /// `ObjectLoader.parse` (`src/loaders/ObjectLoader.js`, case 'LightProbe':
-/// `new LightProbe().fromJSON(data)` reads `intensity` and `sh`).
+/// `new LightProbe().fromJSON(data)` reads `intensity` and `sh`). Its `uuid` is derived from
+/// the coefficients ([`content_uuid`]): unique per content, and the same bytes on every run.
 pub fn three_light_probe_json(irradiance: &[[f32; 3]]) -> serde_json::Value {
     let sh: Vec<f64> = three_radiance(irradiance)
         .iter()
         .flatten()
         .copied()
         .collect();
+    let bytes: Vec<u8> = sh.iter().flat_map(|v| v.to_le_bytes()).collect();
+    let uuid = content_uuid("three.LightProbe", &bytes);
     serde_json::json!({
         "metadata": {
             "version": 4.6,
@@ -201,7 +204,7 @@ pub fn three_light_probe_json(irradiance: &[[f32; 3]]) -> serde_json::Value {
             "generator": "Object3D.toJSON"
         },
         "object": {
-            "uuid": "6c1b3f3e-6a8e-4f0e-9b1a-1b1ba5eb1b00",
+            "uuid": uuid,
             "type": "LightProbe",
             "layers": 1,
             "matrix": [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1],
@@ -211,6 +214,31 @@ pub fn three_light_probe_json(irradiance: &[[f32; 3]]) -> serde_json::Value {
             "sh": sh
         }
     })
+}
+
+/// A UUID derived from content (RFC 9562 version 8, "custom": the first 122 bits of
+/// BLAKE3(`kind` ‖ 0 ‖ `content`) with the version and variant bits set). Chosen over a random
+/// v4 uuid because the pipeline cache and the golden byte manifests need the same bytes for
+/// the same inputs; a hash of the content is still unique per content (two documents share a
+/// uuid only when they hold the same probe), where a constant collided for every probe.
+pub fn content_uuid(kind: &str, content: &[u8]) -> String {
+    let mut h = blake3::Hasher::new();
+    h.update(kind.as_bytes());
+    h.update(&[0]);
+    h.update(content);
+    let mut b = [0u8; 16];
+    b.copy_from_slice(&h.finalize().as_bytes()[..16]);
+    b[6] = (b[6] & 0x0f) | 0x80;
+    b[8] = (b[8] & 0x3f) | 0x80;
+    let hex: String = b.iter().map(|x| format!("{x:02x}")).collect();
+    format!(
+        "{}-{}-{}-{}-{}",
+        &hex[0..8],
+        &hex[8..12],
+        &hex[12..16],
+        &hex[16..20],
+        &hex[20..32]
+    )
 }
 
 /// n points of a Fibonacci spiral on the unit sphere (fixed, deterministic).
@@ -404,6 +432,31 @@ mod tests {
                 assert!((e - expect[ch] as f64).abs() < 1e-5);
             }
         }
+    }
+
+    #[test]
+    fn light_probe_uuids_differ_per_content_and_repeat_per_run() {
+        let c = coeffs();
+        let mut d = c.clone();
+        d[0][0] += 0.25;
+        let (a, a2, b) = (
+            three_light_probe_json(&c),
+            three_light_probe_json(&c),
+            three_light_probe_json(&d),
+        );
+        let u = a["object"]["uuid"].as_str().unwrap().to_string();
+        assert_eq!(u, a2["object"]["uuid"].as_str().unwrap());
+        assert_ne!(u, b["object"]["uuid"].as_str().unwrap());
+        assert_ne!(u, "6c1b3f3e-6a8e-4f0e-9b1a-1b1ba5eb1b00");
+        // RFC 9562 layout: 8-4-4-4-12 hex, version 8, variant 10.
+        let parts: Vec<&str> = u.split('-').collect();
+        assert_eq!(
+            parts.iter().map(|p| p.len()).collect::<Vec<_>>(),
+            [8, 4, 4, 4, 12]
+        );
+        assert!(u.chars().all(|ch| ch == '-' || ch.is_ascii_hexdigit()));
+        assert!(parts[2].starts_with('8'), "{u}");
+        assert!(matches!(&parts[3][..1], "8" | "9" | "a" | "b"), "{u}");
     }
 
     #[test]

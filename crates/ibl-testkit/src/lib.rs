@@ -204,6 +204,33 @@ pub fn copy_tree(from: &Path, to: &Path) {
     }
 }
 
+/// Checks the how-to-load note `dir/LOAD.txt` (issue 22): it exists, and every file name it
+/// mentions (a word ending in an extension our tools write) is a file in `dir`. Independent of
+/// the note's own parser. Returns the note.
+pub fn assert_note_names_only_existing_files(dir: &Path) -> String {
+    const EXT: [&str; 11] = [
+        "ktx2", "ktx", "dds", "exr", "hdr", "png", "json", "ron", "txt", "env", "pfm",
+    ];
+    let note = std::fs::read_to_string(dir.join("LOAD.txt"))
+        .unwrap_or_else(|e| panic!("{}/LOAD.txt: {e}", dir.display()));
+    let present = files_in(dir);
+    for word in note.split(|c: char| c.is_whitespace() || "\"'`(),;:<>[]{}/=".contains(c)) {
+        let w = word.trim_end_matches('.');
+        let Some((stem, ext)) = w.rsplit_once('.') else {
+            continue;
+        };
+        if stem.is_empty() || !EXT.contains(&ext.to_ascii_lowercase().as_str()) {
+            continue;
+        }
+        assert!(
+            present.iter().any(|f| f == w),
+            "{}: the note names {w}, which this run did not write (files: {present:?})\n{note}",
+            dir.display()
+        );
+    }
+    note
+}
+
 /// Names of the entries of `dir`, sorted; empty when `dir` does not exist.
 pub fn files_in(dir: &Path) -> Vec<String> {
     let mut v: Vec<String> = std::fs::read_dir(dir)

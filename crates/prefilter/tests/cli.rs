@@ -154,23 +154,28 @@ fn ktx2_layout_reads_back_equal_to_the_faces() {
 }
 
 #[test]
-fn max_roughness_stops_the_chain_and_says_so() {
+fn max_roughness_keeps_the_level_count_the_lookup_needs_and_says_so() {
+    // Issue 22: the engine's lod = r·(mipCount − 1) needs the full chain's level count, so
+    // the levels past the cut are still written (the exact kernel, unfitted).
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("o");
     let flags = ["--size", "32", "--levels", "5", "--max-roughness", "0.6"];
     let o = BIN.bake(fixture("hdri/interior_256.exr"), &out, &flags);
     let err = stderr(&o);
     assert!(err.contains("--max-roughness"), "{err}");
-    // r = 0, 0.25, 0.5 kept; 0.75 and 1 dropped.
-    assert!(out.join("m2_px.exr").exists() && !out.join("m3_px.exr").exists());
+    // r = 0, 0.25, 0.5 fitted; 0.75 and 1 kept exact.
+    assert!(out.join("m4_px.exr").exists() && !out.join("m5_px.exr").exists());
     let r = report(&out);
-    assert_eq!(r["levels"], 3);
+    assert_eq!(r["levels"], 5);
     assert_eq!(r["chain_levels"], 5);
     assert_eq!(r["level"][2]["roughness"].as_f64().unwrap(), 0.5);
+    assert!(r["level"][2].get("beyond_max_roughness").is_none());
+    assert_eq!(r["level"][3]["beyond_max_roughness"], true);
+    assert!(r["level"][3]["fit"].is_null());
+    let note = r["note"].as_str().unwrap();
     assert!(
-        r["note"].as_str().unwrap().contains("level 2"),
-        "{}",
-        r["note"]
+        note.contains("levels 0..=2") && note.contains("full chain"),
+        "{note}"
     );
 }
 
@@ -482,4 +487,41 @@ fn negative_values_reach_the_range_check_and_outputs_are_checked_first() {
     std::fs::write(&notes, "x").unwrap();
     let says = "is an existing file: choose another name";
     BIN.refused_bake(&input, &notes, &[], 2, says);
+}
+
+/// Issue 22: for every target × layout, the note (LOAD.txt) is written (gltf too) and names
+/// only files this run wrote.
+#[test]
+fn every_target_and_layout_writes_a_note_naming_only_its_own_files() {
+    let tmp = tempfile::tempdir().unwrap();
+    let input = fixture("hdri/sunset_256.exr");
+    for t in ["gltf", "bevy", "filament", "three", "babylon", "unity"] {
+        if t == "three" {
+            continue;
+        }
+        let layouts: [&[&str]; 5] = [
+            &[],
+            &["--layout", "faces", "--format", "rgba16f"],
+            &["--layout", "ktx2", "--format", "rgba16f"],
+            &["--layout", "dds", "--format", "rgba16f"],
+            &["--layout", "ktx1", "--format", "rgba16f"],
+        ];
+        for (k, layout) in layouts.iter().enumerate() {
+            let out = tmp.path().join(format!("{t}-{k}"));
+            let mut flags = vec!["--target", t, "--size", "8", "--quality", "draft", "-q"];
+            flags.extend_from_slice(layout);
+            let o = BIN.run_bake(&input, &out, &flags);
+            assert!(o.status.success(), "{t} {layout:?}: {}", stderr(&o));
+            let note = ibl_testkit::assert_note_names_only_existing_files(&out);
+            assert!(note.contains(&format!("--target {t}")), "{note}");
+            if t == "babylon" {
+                // Only the .env, its report and the note: no EXR faces beside the .env.
+                assert_eq!(
+                    files_in(&out),
+                    ["LOAD.txt", "environment.env", "prefilter.json"],
+                    "{layout:?}"
+                );
+            }
+        }
+    }
 }
