@@ -529,7 +529,12 @@ pub fn run(
     if params.target != Target::Gltf {
         files.push((
             out_dir.join(ibl_target::NOTE_NAME),
-            format!("{}\n", params.target.spec().note).into_bytes(),
+            format!(
+                "{}\n{}",
+                params.target.spec().note,
+                ibl_target::snippet::fenced(params.target)
+            )
+            .into_bytes(),
         ));
     }
     Ok(Baked {

@@ -14,6 +14,7 @@ pub mod babylon;
 pub mod lod;
 pub mod orient;
 pub mod sh;
+pub mod snippet;
 
 pub use lod::LodMapping;
 pub use orient::Orientation;
