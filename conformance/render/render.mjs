@@ -59,6 +59,9 @@ try {
       fs.mkdirSync(path.dirname(job.out), { recursive: true });
       writePfm(`${job.out}.pfm`, w, h, rgb);
       writePng(`${job.out}.png`, w, h, rgb);
+      // A file the page made with the engine's own tools (Babylon's .env writer), kept beside.
+      const extra = await page.evaluate(() => window.__extra || null);
+      if (extra) fs.writeFileSync(`${job.out}.${extra.ext}`, Buffer.from(extra.b64, "base64"));
       console.log(`rendered ${job.out}.pfm (${job.page}, ${((Date.now() - t0) / 1000).toFixed(1)} s)`);
     } catch (e) {
       failed++;

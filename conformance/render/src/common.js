@@ -33,12 +33,16 @@ export async function loadSnippet(noteUrl, names, exports) {
   return (...values) => f(...values);
 }
 
-/** Hands the RGBA float read-back (rows bottom first) to the driver. */
-export function finish(w, h, rgba) {
-  const bytes = new Uint8Array(rgba.buffer, rgba.byteOffset, rgba.byteLength);
+/** Base64 of bytes. */
+export function b64(bytes) {
   let s = "";
   for (let i = 0; i < bytes.length; i += 0x8000) s += String.fromCharCode.apply(null, bytes.subarray(i, i + 0x8000));
-  window.__result = { w, h, b64: btoa(s) };
+  return btoa(s);
+}
+
+/** Hands the RGBA float read-back (rows bottom first) to the driver. */
+export function finish(w, h, rgba) {
+  window.__result = { w, h, b64: b64(new Uint8Array(rgba.buffer, rgba.byteOffset, rgba.byteLength)) };
 }
 
 /** Runs `main`, reporting any failure to the driver. */

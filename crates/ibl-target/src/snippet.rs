@@ -69,11 +69,24 @@ export function loadIndirectLight(Filament, engine, url) {
 }
 "#;
 
+/// Babylon.js 9 (`@babylonjs/core`, `prefilter --target babylon`): BabylonJS/Babylon.js
+/// `packages/dev/core/src/Materials/Textures/cubeTexture.ts` (`CreateFromPrefilteredData`
+/// reads a `.env` through `Misc/environmentTextureTools.ts`), in Babylon's default
+/// left-handed scene, the frame the file is written in.
+const BABYLON: &str = r#"import { CubeTexture } from "@babylonjs/core";
+
+// In Babylon's default (left-handed) scene; the .env carries the chain and the irradiance.
+export function loadEnvironment(scene, url) {
+  return (scene.environmentTexture = CubeTexture.CreateFromPrefilteredData(url, scene));
+}
+"#;
+
 /// The JS snippet of `target`'s note, if the engine is a web engine the harness renders.
 pub fn load_snippet(target: Target) -> Option<&'static str> {
     match target {
         Target::Three => Some(THREE),
         Target::Filament => Some(FILAMENT),
+        Target::Babylon => Some(BABYLON),
         _ => None,
     }
 }
