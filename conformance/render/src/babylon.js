@@ -6,7 +6,7 @@
 //! environment.env loaded by the LOAD.txt snippet. Read back as floats from a float RTT.
 import {
   Engine, Scene, Color4, Vector3, FreeCamera, Camera, MeshBuilder, PBRMaterial, Color3,
-  HDRCubeTexture, CubeTexture, RenderTargetTexture, Constants, EnvironmentTextureTools,
+  HDRCubeTexture, CubeTexture, Matrix, RenderTargetTexture, Constants, EnvironmentTextureTools,
 } from "@babylonjs/core";
 import { params, SCENE, loadSnippet, finish, run, b64 } from "./common.js";
 
@@ -31,10 +31,17 @@ run(async () => {
   scene.imageProcessingConfiguration.applyByPostProcess = true;
   scene.imageProcessingConfiguration.toneMappingEnabled = false;
   scene.imageProcessingConfiguration.exposure = 1;
-  const camera = new FreeCamera("cam", new Vector3(0, 0, -10), scene);
+  // rightHanded: Babylon's right-handed mode, the contract's frame as is (camera at +z);
+  // otherwise Babylon's default left-handed scene with the contract's z negated.
+  scene.useRightHandedSystem = !!params.rightHanded;
+  // Babylon's PBR takes the view vector from the eye position even for an orthographic camera
+  // (normalize(vEyePosition - vPositionW)), so the eye is put 1e4 away: the contract's
+  // v = (0, 0, 1) to within 0.03° at the outer spheres.
+  const D = 1e4;
+  const camera = new FreeCamera("cam", new Vector3(0, 0, params.rightHanded ? D : -D), scene);
   camera.setTarget(new Vector3(0, 0, 0));
   camera.mode = Camera.ORTHOGRAPHIC_CAMERA;
-  Object.assign(camera, { orthoLeft: -6, orthoRight: 6, orthoTop: 2, orthoBottom: -2, minZ: 0.1, maxZ: 100 });
+  Object.assign(camera, { orthoLeft: -6, orthoRight: 6, orthoTop: 2, orthoBottom: -2, minZ: D - 10, maxZ: D + 10 });
   const meshes = [];
   for (const row of SCENE.rows) {
     SCENE.cols.forEach((cx, i) => {
@@ -67,6 +74,10 @@ run(async () => {
   }
   // The page's world turn (the same for every route): rotationY of the environment, degrees.
   scene.environmentTexture.rotationY = ((params.rotationY || 0) * Math.PI) / 180;
+  // mirror: a scale of the lookup direction (Babylon's own panorama route shows the panorama
+  // mirrored against the contract's convention: panoramaToCubemap's atan2(z, x) in a
+  // left-handed world), applied alike to every route.
+  if (params.mirror) scene.environmentTexture.setReflectionTextureMatrix(Matrix.Scaling(...params.mirror).multiply(Matrix.RotationY(((params.rotationY || 0) * Math.PI) / 180)));
   await waitReady(scene.environmentTexture);
   const rtt = new RenderTargetTexture("rt", { width: SCENE.width, height: SCENE.height }, scene, false, true, Constants.TEXTURETYPE_FLOAT);
   rtt.renderList = meshes;
