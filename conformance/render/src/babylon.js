@@ -6,7 +6,7 @@
 //! environment.env loaded by the LOAD.txt snippet. Read back as floats from a float RTT.
 import {
   Engine, Scene, Color4, Vector3, FreeCamera, Camera, MeshBuilder, PBRMaterial, Color3,
-  HDRCubeTexture, CubeTexture, Matrix, RenderTargetTexture, Constants, EnvironmentTextureTools,
+  HDRCubeTexture, CubeTexture, RenderTargetTexture, Constants, EnvironmentTextureTools,
 } from "@babylonjs/core";
 import { params, SCENE, loadSnippet, finish, run, b64 } from "./common.js";
 
@@ -74,10 +74,6 @@ run(async () => {
   }
   // The page's world turn (the same for every route): rotationY of the environment, degrees.
   scene.environmentTexture.rotationY = ((params.rotationY || 0) * Math.PI) / 180;
-  // mirror: a scale of the lookup direction (Babylon's own panorama route shows the panorama
-  // mirrored against the contract's convention: panoramaToCubemap's atan2(z, x) in a
-  // left-handed world), applied alike to every route.
-  if (params.mirror) scene.environmentTexture.setReflectionTextureMatrix(Matrix.Scaling(...params.mirror).multiply(Matrix.RotationY(((params.rotationY || 0) * Math.PI) / 180)));
   await waitReady(scene.environmentTexture);
   const rtt = new RenderTargetTexture("rt", { width: SCENE.width, height: SCENE.height }, scene, false, true, Constants.TEXTURETYPE_FLOAT);
   rtt.renderList = meshes;
