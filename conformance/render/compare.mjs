@@ -4,8 +4,11 @@
 //! relative luminance error |a − ref| / max(ref, eps) and its 95th percentile.
 //!
 //! usage: node compare.mjs REF.pfm A.pfm [--label NAME] [--max GROUP=MEAN ...] [--json OUT]
+//!          [--patches MIN]
 //!   GROUP: met-mirror | met-rough | diel-mirror | diel-rough | all. Exits 1 when a group's mean
-//!   is above its --max, 2 on bad input.
+//!   is above its --max (or, with --patches, when fewer than MIN of the metallic mirror sphere's
+//!   coloured pixels carry the reference's hue: the orientation panorama's ±X ±Y ±Z patches
+//!   seen where the reference sees them), 2 on bad input.
 import fs from "node:fs";
 import { readPfm, sphereAt, W, H } from "./lib.mjs";
 
@@ -40,12 +43,39 @@ export function groupErrors(ref, a) {
   };
 }
 
+/** Hue sector (0..5, 60° each) of a saturated colour, −1 for greys and darks. */
+function hue(r, g, b) {
+  const mx = Math.max(r, g, b), mn = Math.min(r, g, b);
+  if (!(mx > 1e-4) || (mx - mn) / mx < 0.35) return -1;
+  let h = mx === r ? ((g - b) / (mx - mn)) % 6 : mx === g ? (b - r) / (mx - mn) + 2 : (r - g) / (mx - mn) + 4;
+  if (h < 0) h += 6;
+  return Math.floor(h + 0.5) % 6;
+}
+
+/** Fraction of the metallic mirror sphere's saturated reference pixels whose hue sector `a`
+ *  shows too: a flipped, turned or upside-down world moves the patches and fails it. */
+export function patchAgreement(ref, a) {
+  let n = 0, same = 0;
+  for (let row = 0; row < H; row++) {
+    for (let px = 0; px < W; px++) {
+      if (sphereAt(px, row) !== 0) continue;
+      const i = 3 * ((H - 1 - row) * W + px);
+      const hr = hue(ref.rgb[i], ref.rgb[i + 1], ref.rgb[i + 2]);
+      if (hr < 0) continue;
+      n++;
+      if (hue(a.rgb[i], a.rgb[i + 1], a.rgb[i + 2]) === hr) same++;
+    }
+  }
+  return n ? same / n : NaN;
+}
+
 function main(argv) {
   const pos = [], max = {};
-  let label = null, json = null;
+  let label = null, json = null, patches = null;
   for (let k = 0; k < argv.length; k++) {
     if (argv[k] === "--label") label = argv[++k];
     else if (argv[k] === "--json") json = argv[++k];
+    else if (argv[k] === "--patches") patches = +argv[++k];
     else if (argv[k] === "--max") {
       const [g, v] = argv[++k].split("=");
       if (![...GROUPS, "all"].includes(g) || !(+v >= 0)) throw new Error(`--max ${argv[k]}: GROUP=MEAN with GROUP one of ${GROUPS.join(", ")}, all`);
@@ -65,7 +95,16 @@ function main(argv) {
   if (json) fs.writeFileSync(json, JSON.stringify({ label, ref: refPath, image: aPath, ...r }, null, 1));
   const over = Object.entries(max).filter(([g, m]) => !(r.groups[g].mean <= m));
   for (const [g, m] of over) console.error(`${label || aPath}: ${g} mean error ${pct(r.groups[g].mean)} is above ${pct(m)} (vs ${refPath})`);
-  return over.length ? 1 : 0;
+  let bad = over.length > 0;
+  if (patches !== null) {
+    const f = patchAgreement(ref, a);
+    console.log(`${(label || aPath).padEnd(28)} orientation patches: ${pct(f)} of the mirror sphere's coloured pixels agree`);
+    if (!(f >= patches)) {
+      console.error(`${label || aPath}: orientation patches agree on ${pct(f)}, below ${pct(patches)} (vs ${refPath})`);
+      bad = true;
+    }
+  }
+  return bad ? 1 : 0;
 }
 
 if (import.meta.url === `file://${process.argv[1]}`) {

@@ -18,6 +18,14 @@ BIN=${BIN:-target/release}
 REF_RENDER=${REF_RENDER:-$BIN/render-ref}
 W=target/conformance/render
 FIXTURES=${RENDER_FIXTURES:-"city_512 interior_256 studio_256"}
+# ORIENT_ENV: the orientation panorama (coloured patches on ±X ±Y ±Z and a chirality mark, an
+# EXR), rendered like a fixture; every render of it must show the patches where the engine's own
+# route (or the reference) does (compare.mjs --patches).
+ORIENT_ENV=${ORIENT_ENV:-}
+envpath() { # fixture name → EXR path
+	if [ "$1" = orientation ]; then echo "$ORIENT_ENV"; else echo "fixtures/hdri/$1.exr"; fi
+}
+if [ -n "$ORIENT_ENV" ]; then FIXTURES="$FIXTURES orientation"; fi
 t0=$(date +%s)
 bash conformance/render/install.sh
 R=conformance/render
@@ -35,7 +43,7 @@ job() { # page out params-json
 	sep=","
 }
 for name in $FIXTURES; do
-	env="fixtures/hdri/$name.exr"
+	env="$(envpath "$name")"
 	d="$W/$name"
 	rm -rf "$d"
 	mkdir -p "$d"
@@ -44,10 +52,11 @@ for name in $FIXTURES; do
 	"$BIN/prefilter" "$env" -o "$d/filament" --target filament -q
 	"$BIN/prefilter" "$env" -o "$d/babylon" --target babylon -q
 	node "$R/exr2hdr.mjs" "$env" "$d/$name.hdr"
+	cp "$env" "$d/$name.exr"
 	u="/$d"
-	job three "$d/three-own" "{\"route\":\"own\",\"equirect\":\"/$env\"}"
+	job three "$d/three-own" "{\"route\":\"own\",\"equirect\":\"$u/$name.exr\"}"
 	job three "$d/three-ours" "{\"route\":\"ours\",\"note\":\"$u/three-irr/LOAD.txt\",\"dir\":\"$u/three-cube\"}"
-	job three "$d/three-own-diffuse" "{\"route\":\"own\",\"diffuseOnly\":true,\"equirect\":\"/$env\"}"
+	job three "$d/three-own-diffuse" "{\"route\":\"own\",\"diffuseOnly\":true,\"equirect\":\"$u/$name.exr\"}"
 	job three "$d/three-probe-diffuse" "{\"route\":\"probe\",\"diffuseOnly\":true,\"note\":\"$u/three-irr/LOAD.txt\",\"probe\":\"$u/three-irr/LightProbe.json\"}"
 	# The file is in cmgen's frame (our world turned 90° about +Y); the page turns it back.
 	job filament "$d/filament-ours" "{\"glb\":\"/$R/build/spheres.glb\",\"ktx\":\"$u/filament/env_ibl.ktx\",\"note\":\"$u/filament/LOAD.txt\",\"rotation\":[0,0,-1,0,1,0,1,0,0]}"
@@ -74,6 +83,14 @@ cmp() { # label ref image [--max ...]
 echo "== mean relative luminance error and p95, masked spheres (compare.mjs)"
 for name in $FIXTURES; do
 	d="$W/$name"
+	if [ "$name" = orientation ]; then
+		echo "-- orientation panorama: the patches where the engine's own route shows them"
+		cmp "three ours|own" "$d/three-own.pfm" "$d/three-ours.pfm" --patches 0.9
+		cmp "babylon ours|own" "$d/babylon-own.pfm" "$d/babylon-ours.pfm" --patches 0.9
+		cmp "babylon own|three own" "$d/three-own.pfm" "$d/babylon-own.pfm" --patches 0.9
+		cmp "filament ours|three own" "$d/three-own.pfm" "$d/filament-ours.pfm" --patches 0.9
+		continue
+	fi
 	echo "-- $name: ours against the engine's own route from the same panorama"
 	cmp "three ours|own" "$d/three-own.pfm" "$d/three-ours.pfm" --max met-mirror=0.05 --max met-rough=0.01 --max diel-rough=0.01
 	cmp "three probe|own diffuse" "$d/three-own-diffuse.pfm" "$d/three-probe-diffuse.pfm" --max diel-rough=0.12
@@ -87,7 +104,7 @@ for name in $FIXTURES; do
 	if [ -x "$REF_RENDER" ]; then
 		echo "-- $name: against the reference ($REF_RENDER, the engine's BRDF terms)"
 		for e in three filament babylon; do
-			"$REF_RENDER" "fixtures/hdri/$name.exr" -o "$d/ref-$e.pfm" --engine "$e"
+			"$REF_RENDER" "$(envpath "$name")" -o "$d/ref-$e.pfm" --engine "$e"
 		done
 		cmp "three ours|ref" "$d/ref-three.pfm" "$d/three-ours.pfm"
 		cmp "three own|ref" "$d/ref-three.pfm" "$d/three-own.pfm"
