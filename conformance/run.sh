@@ -53,3 +53,4 @@ done
 CARGO_TARGET_DIR="$PWD/$WORK/bevy-target" cargo build --release -q --manifest-path conformance/bevy/Cargo.toml
 xargs "$WORK/bevy-target/release/bevy-conformance" < "$T/bevy-args.txt"
 bash conformance/engines/run.sh
+bash conformance/render/run.sh

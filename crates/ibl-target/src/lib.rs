@@ -274,7 +274,7 @@ impl Target {
                 layout: Layout::Faces,
                 format: PixelFormat::Rgba32f,
                 zstd: None,
-                orientation: Orientation::FLIP_Z,
+                orientation: babylon::ORIENTATION,
                 lod: LodMapping::Babylon {
                     scale: lod::BABYLON_LOD_SCALE,
                 },
@@ -442,11 +442,16 @@ mod tests {
                         close(file(Target::Three).sample_bilinear(s), want),
                         "three {w:?}"
                     );
-                    // Unity / Babylon (left-handed): world u ↔ our (u.x, u.y, −u.z).
-                    for t in [Target::Unity, Target::Babylon] {
-                        let uw = Vec3::new(w.x, w.y, -w.z);
-                        assert!(close(file(t).sample_bilinear(uw), want), "{t:?}");
-                    }
+                    // Unity (left-handed): world u ↔ our (u.x, u.y, −u.z).
+                    let uw = Vec3::new(w.x, w.y, -w.z);
+                    assert!(close(file(Target::Unity).sample_bilinear(uw), want));
+                    // Babylon: its own panorama route puts our direction (s.z, s.y, s.x) at
+                    // the file direction s (babylon::ORIENTATION, measured by rendering).
+                    let s = Vec3::new(w.z, w.y, w.x);
+                    assert!(
+                        close(file(Target::Babylon).sample_bilinear(s), want),
+                        "babylon"
+                    );
                     // Filament samples the file at the world direction; what cmgen puts there
                     // is the panorama at its mirrored longitude: mirrorCubemap reads
                     // (−x, y, z), equirectangularToCubemap maps s to

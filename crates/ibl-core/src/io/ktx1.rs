@@ -18,6 +18,7 @@ const HEADER_LEN: usize = 64;
 /// `KTXwriter`).
 pub fn encode(p: &Payload, metadata: &[(String, Vec<u8>)]) -> Vec<u8> {
     let c = p.format.codes();
+    let gl_type = header_gl_type(p.format);
     let mut kv = vec![super::ktx2::writer_entry()];
     kv.extend(metadata.iter().cloned());
     let mut kvd = Vec::new();
@@ -32,7 +33,7 @@ pub fn encode(p: &Payload, metadata: &[(String, Vec<u8>)]) -> Vec<u8> {
     out.extend(IDENTIFIER);
     for v in [
         ENDIAN,
-        c.gl_type,
+        gl_type,
         c.gl_type_size,
         c.gl_format,
         c.gl_internal_format,
@@ -62,6 +63,22 @@ pub fn encode(p: &Payload, metadata: &[(String, Vec<u8>)]) -> Vec<u8> {
         out.resize(out.len().div_ceil(4) * 4, 0); // mipPadding
     }
     out
+}
+
+/// The `glType` the header carries. The spec's type for R11F_G11F_B10F data is
+/// UNSIGNED_INT_10F_11F_11F_REV (0x8C3B), but Filament's KTX1 reader, the one engine that
+/// reads these files, maps only UNSIGNED_BYTE, UNSIGNED_SHORT, HALF_FLOAT, FLOAT and
+/// R11F_G11F_B10F (0x8C3A) to a pixel type (google/filament
+/// `libs/ktxreader/src/Ktx1Reader.cpp`, `toPixelDataType`), and aborts on any other
+/// ("internal format=29 and {format=4, type=15} is not supported", `filament/src/Texture.cpp`).
+/// cmgen writes 0x8C3A (`tools/cmgen/src/cmgen.cpp` via `libs/image/src/KtxBundle.cpp`), and
+/// libktx, which reads the format from glInternalFormat, accepts both, so we write what
+/// Filament reads. Our reader keys on glInternalFormat and reads either value.
+fn header_gl_type(f: PixelFormat) -> u32 {
+    match f {
+        PixelFormat::B10g11r11 => f.codes().gl_internal_format,
+        _ => f.codes().gl_type,
+    }
 }
 
 /// Parses a KTX 1.1 file (either endianness) into its payload and key/value metadata.
@@ -199,6 +216,25 @@ mod tests {
         assert_eq!(
             b.len(),
             64 + kvd_len + (4 + 6 * 64) + (4 + 6 * 16) + (4 + 6 * 4)
+        );
+    }
+
+    #[test]
+    fn b10g11r11_header_carries_the_gl_type_filament_reads() {
+        let b = encode(&payload(PixelFormat::B10g11r11, 2), &[]);
+        let word = |k: usize| u32::from_le_bytes(b[12 + 4 * k..16 + 4 * k].try_into().unwrap());
+        // glType, glTypeSize, glFormat, glInternalFormat, glBaseInternalFormat as cmgen
+        // writes them (Filament's Ktx1Reader.cpp maps glType 0x8C3A, not 0x8C3B).
+        assert_eq!(
+            (word(1), word(2), word(3), word(4), word(5)),
+            (0x8C3A, 4, 0x1907, 0x8C3A, 0x1907)
+        );
+        // The spec's glType (0x8C3B, what we wrote before) still reads.
+        let mut spec = b.clone();
+        spec[16..20].copy_from_slice(&0x8C3Bu32.to_le_bytes());
+        assert_eq!(
+            decode(Path::new("c.ktx"), &spec).unwrap().0,
+            decode(Path::new("c.ktx"), &b).unwrap().0
         );
     }
 
