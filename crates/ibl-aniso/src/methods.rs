@@ -8,8 +8,6 @@ use crate::major_axis;
 use crate::material::{iso_roughness, Material};
 use crate::scene::Frame;
 use glam::Vec3;
-use ibl_brdf::microfacet::Microfacet;
-use ibl_brdf::Ggx;
 use ibl_core::bordered::BorderedMips;
 use ibl_core::sampling::{hammersley, Pcg32};
 use ibl_core::{Cubemap, Rgb};
@@ -449,10 +447,8 @@ fn as_route(
     }
 }
 
-/// VNDF filtered importance sampling: N visible normals (a Hammersley set with a per-pixel
-/// rotation), each tap weighted G2/G1 (and the Schlick tail for E1), read from the box pyramid
-/// at lod = ½log2(Ω_s/Ω_p) + 1 with Ω_s = 1/(N p_l), p_l = G1(v) D(m)/(4 n·v) (Křivánek &
-/// Colbert 2008 eq. 13, the +1 their recommended bias).
+/// VNDF filtered importance sampling (`fis-N`): the shipped method's emulation
+/// ([`crate::ship`]) at N taps, with a per-pixel Cranley–Patterson rotation drawn from `seed`.
 fn fis(
     pyr: &BorderedMips,
     frame: &Frame,
@@ -462,41 +458,14 @@ fn fis(
     taps: usize,
     seed: u64,
 ) -> E01 {
-    let g = Ggx::new(at, ab);
-    let vl = frame.to_local(v).normalize();
-    let lambda_v = g.lambda(vl);
-    let g1 = 1.0 / (1.0 + lambda_v);
+    crate::ship::shade_n(pyr, frame, v, at, ab, taps as u32, fis_rotation(seed))
+}
+
+/// The per-pixel rotation of `fis-N` at `seed`.
+pub(crate) fn fis_rotation(seed: u64) -> glam::Vec2 {
     let mut rng = Pcg32::new(seed, 0xf15);
     let (s1, s2) = (rng.next_f32(), rng.next_f32());
-    let omega_p = pyr.base_log2_texel_solid_angle();
-    let max_lod = pyr.max_lod() as f32;
-    let (mut e0, mut e1) = ([0.0f32; 3], [0.0f32; 3]);
-    let n = taps as u32;
-    for i in 0..n {
-        let (h1, h2) = hammersley(i, n);
-        let Some(m) = g.sample_visible(vl, (h1 + s1).fract(), (h2 + s2).fract()) else {
-            continue;
-        };
-        let l = ibl_brdf::reflect(vl, m);
-        if l.z <= 0.0 {
-            continue;
-        }
-        let pl = g1 * g.d(m) / (4.0 * vl.z);
-        let lod = if pl > 0.0 {
-            (0.5 * (-(n as f32 * pl).log2() - omega_p) + 1.0).clamp(0.0, max_lod)
-        } else {
-            max_lod
-        };
-        let c = pyr.sample(frame.to_world(l), lod);
-        let w = (1.0 + lambda_v) / (1.0 + lambda_v + g.lambda(l));
-        let chi = (1.0 - vl.dot(m).clamp(0.0, 1.0)).powi(5);
-        for k in 0..3 {
-            e0[k] += w * c[k];
-            e1[k] += w * chi * c[k];
-        }
-    }
-    let inv = 1.0 / n as f32;
-    (e0.map(|c| c * inv), e1.map(|c| c * inv))
+    glam::Vec2::new(s1, s2)
 }
 
 #[cfg(test)]
