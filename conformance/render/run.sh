@@ -21,11 +21,12 @@ FIXTURES=${RENDER_FIXTURES:-"city_512 interior_256 studio_256"}
 # ORIENT_ENV: the orientation panorama (coloured patches on ±X ±Y ±Z and a chirality mark, an
 # EXR), rendered like a fixture; every render of it must show the patches where the engine's own
 # route (or the reference) does (compare.mjs --patches).
-ORIENT_ENV=${ORIENT_ENV:-}
+# Default: the synthetic one of orientation-exr.mjs; ORIENT_ENV=none skips it.
+ORIENT_ENV=${ORIENT_ENV:-$W/orientation.exr}
 envpath() { # fixture name → EXR path
 	if [ "$1" = orientation ]; then echo "$ORIENT_ENV"; else echo "fixtures/hdri/$1.exr"; fi
 }
-if [ -n "$ORIENT_ENV" ]; then FIXTURES="$FIXTURES orientation"; fi
+if [ "$ORIENT_ENV" != none ]; then FIXTURES="$FIXTURES orientation"; fi
 t0=$(date +%s)
 bash conformance/render/install.sh
 R=conformance/render
@@ -34,6 +35,7 @@ for page in three filament babylon; do
 	"$R/node_modules/.bin/esbuild" "$R/src/$page.js" --bundle --format=esm --minify --log-level=warning --outfile="$R/build/$page.js"
 done
 node "$R/spheres-glb.mjs" "$R/build/spheres.glb"
+if [ "$ORIENT_ENV" = "$W/orientation.exr" ]; then node "$R/orientation-exr.mjs" "$ORIENT_ENV"; fi
 
 jobs="$W/jobs.json"
 echo "[" > "$jobs"

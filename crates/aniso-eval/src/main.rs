@@ -18,8 +18,13 @@ use std::path::PathBuf;
 #[command(version, about)]
 struct Cli {
     /// Input environments (.exr/.hdr equirect or cross, face folders, .ktx2 cubes).
-    #[arg(required = true)]
+    #[arg(required_unless_present = "emit_shader")]
     inputs: Vec<PathBuf>,
+    /// Write the shipped method (VNDF filtered importance sampling, 16 taps) as
+    /// aniso_fis.glsl, aniso_fis.hlsl and aniso_fis.wgsl into this folder and exit: the same
+    /// constants and steps as the fis-16 method of the evaluator.
+    #[arg(long, value_name = "DIR", conflicts_with = "inputs")]
+    emit_shader: Option<PathBuf>,
     /// Prefiltered chain (a folder of m{l}_<face> images or a .ktx2) written by `prefilter`
     /// for --target (one environment only); default: bake one at --chain-size.
     #[arg(long)]
@@ -36,6 +41,21 @@ struct Cli {
 fn main() {
     let cli = ibl_cli::parse::<Cli>("aniso-eval");
     ibl_cli::run("aniso-eval", cli.common.clone(), |ctx| {
+        if let Some(dir) = &cli.emit_shader {
+            ibl_cli::check_output(dir, ibl_cli::OutputKind::Folder)?;
+            let files: Vec<(PathBuf, Vec<u8>)> = ibl_aniso::ship::Lang::ALL
+                .iter()
+                .map(|(lang, ext)| {
+                    (
+                        dir.join(format!("aniso_fis.{ext}")),
+                        ibl_aniso::ship::emit(*lang).into_bytes(),
+                    )
+                })
+                .collect();
+            let outputs = ibl_cli::write_outputs(&files)?;
+            let details = serde_json::json!({ "shipped": ibl_aniso::ship::SHIPPED });
+            return Ok::<_, ibl_aniso::Error>((outputs, details));
+        }
         let (methods, preset) = cli.params.validate()?;
         if cli.inputs.len() > 1 && cli.prefiltered.is_some() {
             return Err(ibl_aniso::Error::Core(ibl_core::Error::param(

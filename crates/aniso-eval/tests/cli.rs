@@ -302,3 +302,34 @@ fn bad_inputs_fail_cleanly() {
         assert!(!out.exists());
     }
 }
+
+#[test]
+fn emits_the_shipped_shader_in_three_languages() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("shaders");
+    BIN.run_ok(&["--emit-shader", out.to_str().unwrap()]);
+    for (lang, ext) in ibl_aniso::ship::Lang::ALL {
+        let text = std::fs::read_to_string(out.join(format!("aniso_fis.{ext}"))).unwrap();
+        assert_eq!(text, ibl_aniso::ship::emit(lang), "{ext}");
+        assert!(text.contains(&format!(
+            "ANISO_FIS_TAPS{} = {}u;",
+            if ext == "wgsl" { ": u32" } else { "" },
+            ibl_aniso::ship::SHIPPED.taps
+        )));
+    }
+    // A file in the way of the folder, and a mix with inputs: one-line errors, nothing written.
+    let file = dir.path().join("file");
+    std::fs::write(&file, "x").unwrap();
+    let r = BIN.run(&["--emit-shader", file.join("sub").to_str().unwrap()]);
+    assert_one_line_error(&r, 4, "a file in the way");
+    let sky = dir.path().join("sky.exr");
+    write_env(&sky);
+    let other = dir.path().join("other");
+    let r = BIN.run(&[
+        sky.to_str().unwrap(),
+        "--emit-shader",
+        other.to_str().unwrap(),
+    ]);
+    assert_eq!(r.status.code(), Some(2));
+    assert!(!other.exists());
+}

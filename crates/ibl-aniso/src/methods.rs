@@ -8,8 +8,6 @@ use crate::major_axis;
 use crate::material::{iso_roughness, Material};
 use crate::scene::Frame;
 use glam::Vec3;
-use ibl_brdf::microfacet::Microfacet;
-use ibl_brdf::Ggx;
 use ibl_core::bordered::BorderedMips;
 use ibl_core::sampling::{hammersley, Pcg32};
 use ibl_core::{Cubemap, Rgb};
@@ -88,6 +86,14 @@ pub enum Method {
     /// Colbert 2008 with Heitz 2018's visible normals), N taps.
     Fis {
         /// Taps.
+        taps: usize,
+    },
+    /// M3b: the isotropic split sum corrected by VNDF FIS as a control variate: split sum at
+    /// r_iso + FIS(α_t, α_b) − FIS(α_iso, α_iso), both FIS sums over the same N rotated points
+    /// (2N pyramid taps + 1 chain tap). At η = 0 the two sums are the same numbers and cancel
+    /// exactly: the method *is* the isotropic floor there.
+    Cv {
+        /// Taps of each FIS sum.
         taps: usize,
     },
     /// M4a: Ashikhmin–Shirley as the thesis writes it (Marcolongo 2020 §4.3): N fixed
@@ -179,6 +185,7 @@ impl Method {
                 s
             }
             Method::Fis { taps } => format!("fis-{taps}"),
+            Method::Cv { taps } => format!("cv-{taps}"),
             Method::AsThesis { taps } => format!("as-thesis-{taps}"),
             Method::AsWeighted { taps } => format!("as-weighted-{taps}"),
         }
@@ -187,7 +194,7 @@ impl Method {
     /// Parses `iso`, `bent-lg18`, `bent-filament`, `bent-khr`, `major-N[-bBETA][-kK][-cC]`, `fis-N`.
     pub fn parse(s: &str) -> Result<Method, String> {
         let bad = || {
-            format!("unknown method '{s}' (iso, bent-lg18, bent-filament, bent-khr, major-N[-bBETA][-kK][-cC], fis-N, as-thesis-N, as-weighted-N)")
+            format!("unknown method '{s}' (iso, bent-lg18, bent-filament, bent-khr, major-N[-bBETA][-kK][-cC], fis-N, cv-N, as-thesis-N, as-weighted-N)")
         };
         let taps = |t: &str| -> Result<usize, String> {
             let n: usize = t.parse().map_err(|_| bad())?;
@@ -205,6 +212,9 @@ impl Method {
             _ => {
                 if let Some(rest) = s.strip_prefix("fis-") {
                     return Ok(Method::Fis { taps: taps(rest)? });
+                }
+                if let Some(rest) = s.strip_prefix("cv-") {
+                    return Ok(Method::Cv { taps: taps(rest)? });
                 }
                 if let Some(rest) = s.strip_prefix("as-thesis-") {
                     return Ok(Method::AsThesis { taps: taps(rest)? });
@@ -246,6 +256,7 @@ impl Method {
             Method::Iso | Method::BentLg18 | Method::BentFilament | Method::BentKhr => (1, 1),
             Method::MajorAxis(p) => (p.taps, 1),
             Method::Fis { taps } => (*taps, 0),
+            Method::Cv { taps } => (2 * *taps + 1, 1),
             Method::AsThesis { taps } => (*taps, *taps + 1),
             Method::AsWeighted { taps } => (*taps, *taps),
         }
@@ -399,6 +410,17 @@ pub fn evaluate(
             split(acc.map(|c| c * inv), inp.dfg, nv, r_iso)
         }
         Method::Fis { taps } => fis(inp.pyramid, frame, v, at, ab, *taps, seed),
+        Method::Cv { taps } => {
+            let l = inp.lookup.radiance(reflect_view(v, n), r_iso, buf);
+            let base = split(l, inp.dfg, nv, r_iso);
+            let a_iso = r_iso * r_iso;
+            let an = fis(inp.pyramid, frame, v, at, ab, *taps, seed);
+            let is = fis(inp.pyramid, frame, v, a_iso, a_iso, *taps, seed);
+            let cv = |b: [f32; 3], x: [f32; 3], y: [f32; 3]| -> [f32; 3] {
+                std::array::from_fn(|k| (b[k] + (x[k] - y[k])).max(0.0))
+            };
+            (cv(base.0, an.0, is.0), cv(base.1, an.1, is.1))
+        }
         Method::AsThesis { .. } | Method::AsWeighted { .. } => ([0.0; 3], [0.0; 3]),
     }
 }
@@ -449,10 +471,8 @@ fn as_route(
     }
 }
 
-/// VNDF filtered importance sampling: N visible normals (a Hammersley set with a per-pixel
-/// rotation), each tap weighted G2/G1 (and the Schlick tail for E1), read from the box pyramid
-/// at lod = ½log2(Ω_s/Ω_p) + 1 with Ω_s = 1/(N p_l), p_l = G1(v) D(m)/(4 n·v) (Křivánek &
-/// Colbert 2008 eq. 13, the +1 their recommended bias).
+/// VNDF filtered importance sampling (`fis-N`): the shipped method's emulation
+/// ([`crate::ship`]) at N taps, with a per-pixel Cranley–Patterson rotation drawn from `seed`.
 fn fis(
     pyr: &BorderedMips,
     frame: &Frame,
@@ -462,41 +482,14 @@ fn fis(
     taps: usize,
     seed: u64,
 ) -> E01 {
-    let g = Ggx::new(at, ab);
-    let vl = frame.to_local(v).normalize();
-    let lambda_v = g.lambda(vl);
-    let g1 = 1.0 / (1.0 + lambda_v);
+    crate::ship::shade_n(pyr, frame, v, at, ab, taps as u32, fis_rotation(seed))
+}
+
+/// The per-pixel rotation of `fis-N` at `seed`.
+pub(crate) fn fis_rotation(seed: u64) -> glam::Vec2 {
     let mut rng = Pcg32::new(seed, 0xf15);
     let (s1, s2) = (rng.next_f32(), rng.next_f32());
-    let omega_p = pyr.base_log2_texel_solid_angle();
-    let max_lod = pyr.max_lod() as f32;
-    let (mut e0, mut e1) = ([0.0f32; 3], [0.0f32; 3]);
-    let n = taps as u32;
-    for i in 0..n {
-        let (h1, h2) = hammersley(i, n);
-        let Some(m) = g.sample_visible(vl, (h1 + s1).fract(), (h2 + s2).fract()) else {
-            continue;
-        };
-        let l = ibl_brdf::reflect(vl, m);
-        if l.z <= 0.0 {
-            continue;
-        }
-        let pl = g1 * g.d(m) / (4.0 * vl.z);
-        let lod = if pl > 0.0 {
-            (0.5 * (-(n as f32 * pl).log2() - omega_p) + 1.0).clamp(0.0, max_lod)
-        } else {
-            max_lod
-        };
-        let c = pyr.sample(frame.to_world(l), lod);
-        let w = (1.0 + lambda_v) / (1.0 + lambda_v + g.lambda(l));
-        let chi = (1.0 - vl.dot(m).clamp(0.0, 1.0)).powi(5);
-        for k in 0..3 {
-            e0[k] += w * c[k];
-            e1[k] += w * chi * c[k];
-        }
-    }
-    let inv = 1.0 / n as f32;
-    (e0.map(|c| c * inv), e1.map(|c| c * inv))
+    glam::Vec2::new(s1, s2)
 }
 
 #[cfg(test)]
@@ -674,8 +667,43 @@ mod tests {
             "major-16-c1.4"
         );
         assert_eq!(Method::parse("fis-32").unwrap(), Method::Fis { taps: 32 });
+        assert_eq!(Method::parse("cv-8").unwrap(), Method::Cv { taps: 8 });
+        assert_eq!(Method::Cv { taps: 8 }.taps(), (17, 1));
         for bad in ["major-0", "major-x", "fis-", "bent", "major-4-q1"] {
             assert!(Method::parse(bad).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn control_variate_is_exactly_the_isotropic_floor_at_eta_zero() {
+        // A non-constant environment, so that FIS and the split sum differ: at η = 0 the two
+        // FIS sums cancel bit for bit; at η = 0.8 the correction is non-zero.
+        let cube = Cubemap::from_fn(16, |d| [1.0 + 4.0 * d.x.max(0.0), d.y.abs(), 0.3]);
+        let lookup = Lookup::Engine {
+            chain: BorderedMips::new(&CubeMips::build(cube.clone(), 4)),
+            mapping: LodMapping::Linear,
+        };
+        let dfg = ibl_shexp::dfg::Dfg::standard().clone();
+        let pyr = BorderedMips::new(&CubeMips::build(cube.clone(), 1));
+        let inp = Inputs {
+            lookup: &lookup,
+            dfg: &dfg,
+            pyramid: &pyr,
+            cube: &cube,
+            as_tables: None,
+        };
+        let f = frame();
+        let v = f.to_world(Vec3::new(0.5, 0.2, 0.8).normalize());
+        let mut buf = TreeBuffers::default();
+        for r in [0.05, 0.3, 0.7, 1.0] {
+            let mat = Material::ggx_kc(r, 0.0);
+            let iso = evaluate(&Method::Iso, &inp, &f, v, &mat, 5, &mut buf);
+            let cv = evaluate(&Method::Cv { taps: 8 }, &inp, &f, v, &mat, 5, &mut buf);
+            assert_eq!(iso, cv, "r {r}");
+            let mat = Material::ggx_kc(r, 0.8);
+            let iso = evaluate(&Method::Iso, &inp, &f, v, &mat, 5, &mut buf);
+            let cv = evaluate(&Method::Cv { taps: 8 }, &inp, &f, v, &mat, 5, &mut buf);
+            assert_ne!(iso, cv, "r {r}");
         }
     }
 }

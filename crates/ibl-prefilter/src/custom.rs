@@ -422,4 +422,37 @@ mod tests {
         assert_eq!(ja, jb);
         assert!(ja.contains("\"custom_lookup\":{"), "{ja}");
     }
+
+    /// Pipelines and scenes reach the custom target through the same Params (RON keys), and
+    /// --custom-alpha0 is checked before any work.
+    #[test]
+    fn ron_params_select_the_custom_lookup_and_bad_knees_are_refused() {
+        let p: Params =
+            ron::from_str("(target: custom, custom_alpha0: Some(0.02), size: 64)").unwrap();
+        p.validate().unwrap();
+        assert_eq!(p.lookup(), LodMapping::Custom { alpha0: 0.02 });
+        assert_eq!(p.chain_levels(), 5, "down to 4×4 faces");
+        let lk = p.custom_lookup().unwrap();
+        assert_eq!((lk.levels, lk.size, lk.alpha0), (5, 64, 0.02));
+        let d: Params = ron::from_str("(target: custom)").unwrap();
+        assert_eq!(
+            d.lookup(),
+            LodMapping::Custom {
+                alpha0: ibl_target::lod::CUSTOM_ALPHA0
+            }
+        );
+        for bad in [
+            "(target: gltf, custom_alpha0: Some(0.02))",
+            "(target: custom, custom_alpha0: Some(0.0))",
+            "(target: custom, custom_alpha0: Some(NaN))",
+            "(target: custom, custom_alpha0: Some(100.0))",
+        ] {
+            let p: Params = ron::from_str(bad).unwrap();
+            let e = p.validate().unwrap_err().to_string();
+            assert!(
+                e.contains("--custom-alpha0") && !e.contains('\n'),
+                "{bad}: {e}"
+            );
+        }
+    }
 }
