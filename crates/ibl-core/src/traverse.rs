@@ -169,6 +169,42 @@ mod tests {
     use crate::progress::NoProgress;
 
     #[test]
+    fn tiles_cover_every_texel_once_with_partial_tiles_at_the_edges() {
+        // 7×7 faces in 3×3 tiles (the last row and column of tiles partial), two outputs.
+        let cubes = map_cube_tiles_with(
+            7,
+            3,
+            2,
+            &NoProgress,
+            || 0usize,
+            |calls, face, i0, j0, w, h, out| {
+                *calls += 1;
+                assert!(w <= 3 && h <= 3 && i0 + w <= 7 && j0 + h <= 7);
+                for c in 0..2 {
+                    for jj in 0..h {
+                        for ii in 0..w {
+                            let v =
+                                (c * 1000 + face as usize * 100 + (j0 + jj) * 10 + i0 + ii) as f32;
+                            out[(c * h + jj) * w + ii] = [v, -v, 1.0];
+                        }
+                    }
+                }
+            },
+        );
+        assert_eq!(cubes.len(), 2);
+        for (c, cube) in cubes.iter().enumerate() {
+            for face in Face::ALL {
+                for j in 0..7 {
+                    for i in 0..7 {
+                        let v = (c * 1000 + face as usize * 100 + j * 10 + i) as f32;
+                        assert_eq!(cube.texel(face, i, j), [v, -v, 1.0]);
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
     fn image_rows_are_filled_and_reported_in_order() {
         let (w, h, ch) = (7, 33, 2);
         let mut data = vec![0.0f32; w * h * ch];
