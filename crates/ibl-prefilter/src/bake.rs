@@ -759,6 +759,7 @@ pub fn run(
     }
     if let Some(lk) = &chain.report.custom_lookup {
         for (name, text) in lk.shaders() {
+            outputs.lookup.push(name.to_string());
             files.push((out_dir.join(name), text.into_bytes()));
         }
     }

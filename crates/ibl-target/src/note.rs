@@ -61,6 +61,8 @@ pub struct Outputs {
     pub sidecars: Vec<String>,
     /// The sidecar recording the cube's orientation (DDS, EXR faces in an engine's frame).
     pub orientation: Option<String>,
+    /// The custom target's lookup function (`lookup.glsl`, `.hlsl`, `.wgsl`).
+    pub lookup: Vec<String>,
 }
 
 /// The file names (inside the output folder) of the files a writer encoded.
@@ -101,6 +103,7 @@ fn orientation_text(spec: &TargetSpec) -> &'static str {
         Target::Three => "x mirrored, as three.js samples CubeTextures (flipEnvMap = -1)",
         Target::Babylon => "z negated, for Babylon's default left-handed scene",
         Target::Unity => "z negated, for Unity's left-handed frame",
+        Target::Custom => "our frame (+Y up; faces +X -X +Y -Y +Z -Z, rows top first), as the emitted lookup samples it",
     }
 }
 
@@ -129,6 +132,10 @@ pub fn load_note(target: Target, writer: Writer, out: &Outputs) -> String {
             spec.lod.name()
         ),
         files(&out.chain),
+    );
+    line(
+        "the lookup function that reads the chain (GLSL, HLSL, WGSL)",
+        files(&out.lookup),
     );
     if let Some(e) = &out.env {
         line(
@@ -208,6 +215,7 @@ fn units_text(target: Target) -> &'static str {
         Target::Babylon => "the panorama's own values; scene.environmentIntensity scales them (Babylon's default 1).",
         Target::Unity => "the panorama's own values; the reflection probe's / RenderSettings.reflectionIntensity and ambientIntensity scale them (Unity's default 1).",
         Target::Gltf => "the panorama's own values (linear RGB); the viewer's environment intensity / exposure scales them.",
+        Target::Custom => "the panorama's own values (linear RGB); your renderer's exposure scales them.",
     }
 }
 
@@ -234,6 +242,9 @@ fn usage(target: Target, writer: Writer, out: &Outputs) -> String {
         (Target::Babylon, Writer::Cube) => format!("{cube}: the environment cube as Babylon's left-handed scene samples it; Babylon's lighting comes from the .env `prefilter --target babylon` writes."),
         (Target::Unity, Writer::Prefilter) => format!("{chain}: import as a Cubemap (Texture Shape: Cube, keep its mips, no 'Convolution' re-filtering) and assign it as a custom reflection probe / RenderSettings.customReflectionTexture; mip m holds the roughness Unity's mip = 6 r(1.7 - 0.7 r) lands on."),
         (Target::Unity, Writer::Irradiance) => format!("{} is the ambient probe (RenderSettings.ambientProbe, SphericalHarmonicsL2).", out.engine_sh.clone().unwrap_or_default()),
+        (Target::Custom, Writer::Prefilter) => format!("{chain} is read by the function in {} written beside it: lod = clamp(s log2(1 + r^2/a0), 0, N-1), then one trilinear textureLod (a linear mipmap filter); s, a0 and N are in prefilter.json (custom_lookup) and the KTX2 key/value data (ibl.lookup.*), see docs/CUSTOM_LOOKUP.md.", files(&out.lookup)),
+        (Target::Custom, Writer::Irradiance) => format!("{irr} is the Lambertian cube (E/pi), sampled by the normal and multiplied by the diffuse colour."),
+        (Target::Custom, Writer::Cube) => format!("{cube} is the environment (background) cube."),
         (Target::Unity, Writer::Cube) => format!("{cube}: import as a Cubemap for a skybox (Skybox/Cubemap shader)."),
     }
 }
