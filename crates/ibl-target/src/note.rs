@@ -244,7 +244,7 @@ fn engine_snippet(target: Target, writer: Writer, out: &Outputs) -> String {
     match target {
         Target::Bevy => bevy_snippet(writer, out),
         Target::Unity => unity_snippet(writer, out),
-        _ => format!("{}", snippet::load_snippet(target)),
+        _ => snippet::load_snippet(target).to_string(),
     }
 }
 
