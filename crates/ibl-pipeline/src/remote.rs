@@ -754,11 +754,12 @@ mod tests {
             (irr.prefix.as_str(), irr.args[0].as_str()),
             ("cube", "cube")
         );
-        let faces: Vec<&str> = irr.files.iter().map(|f| f.rel.as_str()).collect();
-        assert_eq!(faces.len(), 6);
-        assert!(faces
-            .iter()
-            .all(|f| f.starts_with("cube/") && f.ends_with(".exr")));
+        let files: Vec<&str> = irr.files.iter().map(|f| f.rel.as_str()).collect();
+        // The six faces and the stage's how-to-load note (every cube writer writes one).
+        assert!(files.contains(&"cube/LOAD.txt"), "{files:?}");
+        let faces: Vec<&&str> = files.iter().filter(|f| f.ends_with(".exr")).collect();
+        assert_eq!((faces.len(), files.len()), (6, 7), "{files:?}");
+        assert!(faces.iter().all(|f| f.starts_with("cube/")));
         assert_eq!(e[2].reads[0].args, ["b.exr"]);
         assert_eq!(e[2].reads[0].files[0].rel, "b.exr");
         assert_eq!(e[3].reads[0].args, ["hdri"]);

@@ -84,7 +84,9 @@ fn roughness_zero_is_the_source_and_roughness_one_matches_the_reference() {
         100.0 * e.max_abs_rel
     );
     assert!(e.mean_abs_rel < 0.01 && all_finite_non_negative(&chain.mips.levels[1]));
-    // --max-roughness 0 keeps only the mirror level.
+    // --max-roughness 0 bakes only the mirror level to the contract; the chain keeps its
+    // level count (the engine's lod needs it, issue 22), the rest exact and unfitted.
+    let n_chain = p.chain_levels();
     let only0 = bake_chain(
         &Params {
             max_roughness: Some(0.0),
@@ -94,7 +96,10 @@ fn roughness_zero_is_the_source_and_roughness_one_matches_the_reference() {
         &NoProgress,
     )
     .unwrap();
-    assert_eq!(only0.mips.levels.len(), 1);
+    assert_eq!(only0.mips.levels.len(), n_chain);
+    assert!(only0.report.level[1..]
+        .iter()
+        .all(|l| l.beyond_max_roughness));
 }
 
 #[test]

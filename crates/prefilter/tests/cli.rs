@@ -31,7 +31,8 @@ fn faces_layout_writes_every_level_and_the_report() {
             assert!(img.data.iter().all(|v| v.is_finite() && *v >= 0.0));
         }
     }
-    assert_eq!(files_in(&out).len(), 4 * 6 + 1, "{:?}", files_in(&out));
+    // The faces, prefilter.json and LOAD.txt.
+    assert_eq!(files_in(&out).len(), 4 * 6 + 2, "{:?}", files_in(&out));
     let r = report(&out);
     assert_eq!(r["size"], 32);
     assert_eq!(r["levels"], 4);
@@ -142,7 +143,11 @@ fn ktx2_layout_reads_back_equal_to_the_faces() {
     }
     assert_eq!(
         files_in(&b),
-        vec!["prefilter.json".to_string(), "prefilter.ktx2".to_string()]
+        vec![
+            "LOAD.txt".to_string(),
+            "prefilter.json".to_string(),
+            "prefilter.ktx2".to_string()
+        ]
     );
     let ktx = ibl_core::envmap::read_cube_chain(&b.join("prefilter.ktx2")).unwrap();
     let faces = ibl_core::envmap::read_cube_chain(&a).unwrap();
@@ -187,7 +192,7 @@ fn half_json_reference_and_folder_input() {
     let o = BIN.bake(fixture("hdri/city_512.exr"), &out, &flags);
     let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(summary["tool"], "prefilter");
-    assert_eq!(summary["outputs"].as_array().unwrap().len(), 3 * 6 + 1);
+    assert_eq!(summary["outputs"].as_array().unwrap().len(), 3 * 6 + 2);
     // The written chain is a face folder: it is a valid input (its level 0 is read).
     let again = tmp.path().join("again");
     let flags = ["--size", "8", "--levels", "2", "--reference", "-q"];
@@ -288,7 +293,15 @@ fn every_container_and_format_reads_back_within_the_reported_error() {
             }
             quick_sized(&input, &dir, "64", "4", &args);
             let file = dir.join(format!("prefilter.{ext}"));
-            let mut want = vec!["prefilter.json".to_string(), format!("prefilter.{ext}")];
+            let mut want = vec![
+                "LOAD.txt".to_string(),
+                "prefilter.json".to_string(),
+                format!("prefilter.{ext}"),
+            ];
+            if ext == "dds" {
+                // DDS has no key/value data: the orientation sidecar (issue 22).
+                want.push("prefilter.orientation.json".to_string());
+            }
             want.sort();
             assert_eq!(files_in(&dir), want);
             let back = ibl_core::envmap::read_cube_chain(&file).unwrap();
@@ -333,13 +346,26 @@ fn changing_the_layout_leaves_only_this_run_s_files() {
     let input = fixture("hdri/sunset_256.exr");
     let out = tmp.path().join("o");
     quick_container(&input, &out, &[]);
-    assert_eq!(files_in(&out).len(), 6 * 5 + 1);
+    assert_eq!(files_in(&out).len(), 6 * 5 + 2);
     quick_container(&input, &out, &["--layout", "ktx2", "--format", "bc6h"]);
-    assert_eq!(files_in(&out), vec!["prefilter.json", "prefilter.ktx2"]);
+    assert_eq!(
+        files_in(&out),
+        vec!["LOAD.txt", "prefilter.json", "prefilter.ktx2"]
+    );
     quick_container(&input, &out, &["--layout", "dds", "--half"]);
-    assert_eq!(files_in(&out), vec!["prefilter.dds", "prefilter.json"]);
+    assert_eq!(
+        files_in(&out),
+        vec![
+            "LOAD.txt",
+            "prefilter.dds",
+            "prefilter.json",
+            "prefilter.orientation.json"
+        ]
+    );
     quick_container(&input, &out, &[]);
-    assert!(!files_in(&out).iter().any(|f| f.ends_with(".dds")));
+    assert!(!files_in(&out)
+        .iter()
+        .any(|f| f.ends_with(".dds") || f.ends_with(".orientation.json")));
 }
 
 #[test]
