@@ -108,7 +108,7 @@ impl Drop for Reservation {
     }
 }
 
-/// Reserves `bytes` for reading `path` (`what` says what they hold: "a 16384x16384 RGB
+/// Reserves `bytes` for reading `path` (`what` says for what: "decoding a 16384x8192 JPEG
 /// image"), or refuses naming the need, the budget and how to raise it.
 pub fn reserve(path: &Path, what: &str, bytes: u64) -> Result<Reservation> {
     let limit = max_memory();
@@ -124,7 +124,7 @@ pub fn reserve(path: &Path, what: &str, bytes: u64) -> Result<Reservation> {
             return Err(Error::Memory {
                 path: Some(path.to_path_buf()),
                 reason: format!(
-                    "decoding {what} needs {}{others}, over the memory budget of {} \
+                    "{what} needs {}{others}, over the memory budget of {} \
                      (raise it with --max-memory, e.g. --max-memory {}G)",
                     human(bytes),
                     human(limit),
@@ -167,7 +167,7 @@ pub fn read_file(path: &Path) -> Result<Vec<u8>> {
     use std::io::Read;
     let mut f = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
     let len = f.metadata().map_err(|e| Error::io(path, e))?.len();
-    let _r = reserve(path, "the file", len)?;
+    let _r = reserve(path, "reading the file", len)?;
     let mut v = Vec::new();
     v.try_reserve_exact(len as usize)
         .map_err(|_| out_of_memory(path, len))?;
@@ -206,7 +206,7 @@ mod tests {
         let limit = max_memory();
         let p = Path::new("x.exr");
         let a = reserve(p, "a", limit / 2).unwrap();
-        let e = reserve(p, "a 2:1 image", limit / 2 + limit / 4)
+        let e = reserve(p, "decoding a 2:1 image", limit / 2 + limit / 4)
             .unwrap_err()
             .to_string();
         assert!(

@@ -132,7 +132,7 @@ pub fn decode(path: &Path, bytes: &[u8]) -> Result<Image> {
         .sum();
     let _budget = super::budget::reserve(
         path,
-        &format!("a {}x{} EXR image", size.0, size.1),
+        &format!("decoding a {}x{} EXR image", size.0, size.1),
         texels.saturating_mul(plane_bytes + 16),
     )?;
 

@@ -46,13 +46,19 @@ impl Huffman {
     }
 }
 
-/// Bits of one entropy-coded segment (between markers), stuffed zeros removed.
+/// Bits of one entropy-coded segment (between markers), stuffed zeros removed, read through
+/// a 64-bit accumulator kept at least 16 bits full (a Huffman code and its extra bits are at
+/// most 16 each): past the segment's end it is filled with 1 bits (what encoders pad with),
+/// and reading any of those counts in `over`, which the walk refuses.
 struct Bits<'a> {
     data: &'a [u8],
     at: usize,
     acc: u64,
+    /// Bits in `acc` not yet read.
     n: u32,
-    /// Bits read past the segment's end (padding the reader made up).
+    /// How many of the lowest of those are made-up padding.
+    pad: u32,
+    /// Made-up bits read.
     over: u32,
 }
 
@@ -63,6 +69,7 @@ impl<'a> Bits<'a> {
             at,
             acc: 0,
             n: 0,
+            pad: 0,
             over: 0,
         }
     }
@@ -81,49 +88,63 @@ impl<'a> Bits<'a> {
         self.at += 1;
         Some(b)
     }
-    fn bit(&mut self) -> u32 {
-        if self.n == 0 {
-            match self.byte() {
-                Some(b) => {
-                    self.acc = b as u64;
-                    self.n = 8;
-                }
-                None => {
-                    // Made-up 1 bits (what encoders pad with): counted, refused by the caller.
-                    self.over += 1;
-                    return 1;
-                }
-            }
+    fn fill(&mut self) {
+        while self.n <= 56 {
+            let b = if self.pad > 0 { None } else { self.byte() };
+            let b = b.unwrap_or_else(|| {
+                self.pad += 8;
+                0xFF
+            });
+            self.acc = (self.acc << 8) | b as u64;
+            self.n += 8;
         }
-        self.n -= 1;
-        ((self.acc >> self.n) & 1) as u32
+    }
+    #[inline]
+    fn peek(&self, k: u32) -> u32 {
+        ((self.acc >> (self.n - k)) & ((1u64 << k) - 1)) as u32
+    }
+    #[inline]
+    fn consume(&mut self, k: u32) {
+        self.n -= k;
+        if self.n < self.pad {
+            self.over = self.pad - self.n;
+        }
     }
     fn bits(&mut self, k: u32) -> u32 {
-        (0..k).fold(0, |v, _| (v << 1) | self.bit())
+        if k == 0 {
+            return 0;
+        }
+        self.fill();
+        let v = self.peek(k);
+        self.consume(k);
+        v
     }
     /// One Huffman symbol; `None` for a code no table entry has (corrupt data).
     fn decode(&mut self, h: &Huffman) -> Option<u8> {
-        let mut code = 0u32;
-        for l in 1..=16 {
-            code = (code << 1) | self.bit();
-            if code.wrapping_sub(h.mincode[l]) < h.count[l] {
+        self.fill();
+        for l in 1..=16u32 {
+            let code = self.peek(l);
+            let li = l as usize;
+            if code.wrapping_sub(h.mincode[li]) < h.count[li] {
+                self.consume(l);
                 return h
                     .symbols
-                    .get(h.valptr[l] + (code - h.mincode[l]) as usize)
+                    .get(h.valptr[li] + (code - h.mincode[li]) as usize)
                     .copied();
-            }
-            if self.over > 16 {
-                return None;
             }
         }
         None
     }
-    /// Drops the bits left in the current byte and skips a restart marker if one is next.
+    /// Drops the rest of the current byte and skips the restart marker that must come next
+    /// (T.81 B.2.4.4); false when data or padding was read past it, or no marker follows.
     fn restart(&mut self) -> bool {
-        self.n = 0;
-        if self.over > 0 {
+        // Real bits still unread: only the current byte's padding may be left.
+        if self.over > 0 || self.n - self.pad >= 8 {
             return false;
         }
+        self.acc = 0;
+        self.n = 0;
+        self.pad = 0;
         match (self.data.get(self.at), self.data.get(self.at + 1)) {
             (Some(0xFF), Some(0xD0..=0xD7)) => {
                 self.at += 2;
@@ -356,7 +377,7 @@ impl Scan<'_> {
     fn block(&self, bits: &mut Bits, dc: &Huffman, ac: &Huffman, eobrun: &mut u32) -> bool {
         if !self.progressive || self.ss == 0 {
             if self.dc_refine {
-                bits.bit();
+                bits.bits(1);
                 return true;
             }
             let Some(s) = bits.decode(dc) else {

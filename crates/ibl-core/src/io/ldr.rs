@@ -180,7 +180,7 @@ fn decode_jpeg(path: &Path, bytes: &[u8]) -> Result<(usize, usize, usize, Vec<u8
     // The decoder's component planes and output (a few bytes a sample) and our f32 image.
     let _budget = super::budget::reserve(
         path,
-        &format!("a {w}x{h} JPEG image"),
+        &format!("decoding a {w}x{h} JPEG image"),
         (w as u64 * h as u64 * channels as u64).saturating_mul(4 + 4),
     )?;
     d.set_options(options.jpeg_set_out_colorspace(out));
@@ -221,7 +221,7 @@ pub fn decode(path: &Path, bytes: &[u8], color: ColorSpace) -> Result<Image> {
     let decoded = png.map_or(8, |(_, _, d)| d);
     let _budget = super::budget::reserve(
         path,
-        &format!("a {w}x{h} image"),
+        &format!("decoding a {w}x{h} image"),
         (w as u64 * h as u64).saturating_mul(decoded + 8 + 16),
     )?;
     let mut reader = image::ImageReader::new(Cursor::new(bytes))

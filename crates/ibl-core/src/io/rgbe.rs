@@ -28,7 +28,7 @@ pub fn decode(path: &Path, bytes: &[u8]) -> Result<Image> {
     // The decoder's RGB f32 buffer (which becomes the image without a copy).
     let _budget = super::budget::reserve(
         path,
-        &format!("a {w}x{h} Radiance HDR image"),
+        &format!("decoding a {w}x{h} Radiance HDR image"),
         (w as u64 * h as u64).saturating_mul(12),
     )?;
     let dynimg = image::DynamicImage::from_decoder(decoder).map_err(bad)?;

@@ -54,7 +54,7 @@ impl Payload {
             texels = texels.saturating_add(w as u64 * h as u64 * self.faces as u64);
         }
         let what = format!(
-            "a {}x{} {container} {} of {levels} level(s) in {}",
+            "decoding a {}x{} {container} {} of {levels} level(s) in {}",
             self.width,
             self.height,
             if self.faces == 6 { "cube" } else { "image" },
