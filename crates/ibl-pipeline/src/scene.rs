@@ -8,7 +8,10 @@
 //! served by SH-exp, and one half-vector LUT (`hv-lut/<nu>x<nv>`) and one size/bias table
 //! (`as-size-bias/<nu>x<nv>`) per distinct (n_u, n_v) among anisotropic materials. For every
 //! material: a quaternion map (`<material>/quat-map`) only when it is anisotropic and
-//! bump-mapped, a TPR map (`<material>/tpr-map`) only when it uses one.
+//! bump-mapped, a TPR map (`<material>/tpr-map`) only when it uses one. An anisotropic GGX material
+//! (`AnisotropicGgx(roughness, eta)`) is lit by the shipped VNDF filtered-importance-sampling
+//! snippet (`aniso-eval --emit-shader`), which reads the probe's cube with its box mips: it
+//! needs no chain, no DFG table and no Ashikhmin–Shirley table of its own.
 //!
 //! Every candidate is listed, needed or not, so `bake plan` shows each decision.
 
@@ -244,7 +247,7 @@ pub fn derive(
                 kind.into(),
                 kind,
                 vec![],
-                NotNeeded("not needed by the scene: no anisotropic material".into()),
+                NotNeeded("not needed by the scene: no Ashikhmin-Shirley material".into()),
                 &[],
                 scene.offset,
             );
@@ -450,6 +453,24 @@ mod tests {
         );
         assert!(!needed(&d, "dfg") && needed(&d, "hv-lut/1x2"));
         assert!(!needed(&d, "fresnel-tail"));
+    }
+
+    #[test]
+    fn an_anisotropic_ggx_material_needs_the_cube_and_no_split_sum_or_as_table() {
+        // The shipped anisotropic method (VNDF FIS) reads the probe's cube and its box mips.
+        let d = derive_from(
+            r#"(probes: [(id: "p", env: "b.exr")], materials: [
+                (id: "brushed", folder: "f", model: AnisotropicGgx(roughness: 0.4, eta: 0.8), bump_mapped: true),
+                (id: "satin", folder: "g", model: AnisotropicGgx(roughness: 0.6, eta: -0.3)),
+            ])"#,
+        );
+        assert!(needed(&d, "p/cube"));
+        assert!(!needed(&d, "dfg"), "no isotropic GGX material");
+        assert_eq!(
+            find(&d, "hv-lut").need,
+            Need::NotNeeded("not needed by the scene: no Ashikhmin-Shirley material".into())
+        );
+        assert!(needed(&d, "brushed/quat-map") && !needed(&d, "satin/quat-map"));
     }
 
     #[test]

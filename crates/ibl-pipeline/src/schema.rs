@@ -88,6 +88,16 @@ pub enum Model {
         /// Exponent along the bitangent.
         n_v: f64,
     },
+    /// Anisotropic GGX as (perceptual roughness r, anisotropy η) in the Kulla–Conty /
+    /// Filament convention: α_t = r²(1+η), α_b = r²(1−η) (docs/ANISOTROPY.md). Rendered by
+    /// the shipped `aniso-eval --emit-shader` snippet, which reads the probe's cube and its
+    /// box mips only (no prefiltered chain, no DFG table).
+    AnisotropicGgx {
+        /// Perceptual roughness in [0, 1] (α = r²).
+        roughness: f64,
+        /// Anisotropy in (−1, 1): > 0 stretches the lobe along the tangent.
+        eta: f64,
+    },
 }
 
 /// A material of the scene.
@@ -559,6 +569,19 @@ fn parse_scene(
                 ));
             }
         }
+        if let Model::AnisotropicGgx { roughness, eta } = rm.model {
+            if !((0.0..=1.0).contains(&roughness) && eta > -1.0 && eta < 1.0) {
+                diags.push(Diagnostic::at(
+                    file,
+                    src,
+                    at,
+                    format!(
+                        "material '{}': AnisotropicGgx needs roughness in [0, 1] and eta in (-1, 1), got ({roughness}, {eta})",
+                        rm.id
+                    ),
+                ));
+            }
+        }
         let tpr_keys = rm
             .tpr_params
             .and_then(|raw| ron_options().from_str::<Keys>(raw.get_ron()).ok())
@@ -737,5 +760,32 @@ mod tests {
             r#"(scene: (probes: [(id: "p", env: "a", max_roughness: 1.5)], materials: [(id: "m", folder: "f", model: Ggx, shiny: true)], params: {"nope": ()}))"#,
         );
         assert_eq!(d.len(), 3, "{d:?}");
+    }
+
+    #[test]
+    fn anisotropic_ggx_parses_and_checks_its_range() {
+        let p = parse_str(
+            r#"(scene: (probes: [(id: "p", env: "a")], materials: [(id: "m", folder: "f", model: AnisotropicGgx(roughness: 0.5, eta: -0.9))]))"#,
+        )
+        .unwrap();
+        assert_eq!(
+            p.scene.unwrap().materials[0].model,
+            Model::AnisotropicGgx {
+                roughness: 0.5,
+                eta: -0.9
+            }
+        );
+        for (r, eta) in [(1.5, 0.0), (0.5, 1.0), (0.5, -1.2), (-0.1, 0.0)] {
+            let d = diags(&format!(
+                r#"(scene: (probes: [(id: "p", env: "a")], materials: [(id: "m", folder: "f", model: AnisotropicGgx(roughness: {r:?}, eta: {eta:?}))]))"#
+            ));
+            assert!(
+                d.len() == 1
+                    && d[0]
+                        .to_string()
+                        .contains("AnisotropicGgx needs roughness in [0, 1]"),
+                "{d:?}"
+            );
+        }
     }
 }
