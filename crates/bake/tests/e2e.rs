@@ -201,7 +201,7 @@ fn a_changed_input_or_parameter_reruns_exactly_what_is_downstream() {
 }
 
 #[test]
-fn outputs_deleted_or_edited_by_hand_are_rebuilt() {
+fn outputs_deleted_are_rebuilt_and_edited_ones_with_overwrite() {
     let w = chains();
     w.run_ok("p.ron", &[]);
     let px = std::fs::read(w.path("out/a1/px.exr")).unwrap();
@@ -212,7 +212,16 @@ fn outputs_deleted_or_edited_by_hand_are_rebuilt() {
     let plan = stdout(&w.bake(&["plan", "p.ron"]));
     assert!(plan.contains("outputs missing: px.exr"), "{plan}");
     assert!(plan.contains("outputs modified: nx.exr"), "{plan}");
-    let st = w.run_ok("p.ron", &[]);
+    // The hand edit is not bake's to replace: refused before any stage runs, edit kept.
+    let refused = w.bake(&["run", "p.ron"]);
+    let line = ibl_testkit::assert_one_line_error(&refused, 2, "a2/nx.exr");
+    assert!(line.contains("--overwrite"), "{line}");
+    assert_eq!(
+        std::fs::read(w.path("out/a2/nx.exr")).unwrap(),
+        b"edited by hand"
+    );
+    assert!(!w.path("out/a1/px.exr").exists(), "nothing ran");
+    let st = w.run_ok("p.ron", &["--overwrite"]);
     assert_eq!(ids_with(&st, "up-to-date"), ["b1"]);
     assert_eq!(std::fs::read(w.path("out/a1/px.exr")).unwrap(), px);
     assert_eq!(std::fs::read(w.path("out/b2/sh.json")).unwrap(), sh);

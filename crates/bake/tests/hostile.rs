@@ -46,7 +46,16 @@ fn clis() -> Vec<(&'static str, Vec<String>)> {
         ("irradiance", v(&[&h, "-o", "OUT", "--size", "8"])),
         (
             "hv-lut",
-            v(&["-o", "OUT", "--nu", "10", "--nv", "10", "--size", "8"]),
+            v(&[
+                "-o",
+                "OUT/hv.exr",
+                "--nu",
+                "10",
+                "--nv",
+                "10",
+                "--size",
+                "8",
+            ]),
         ),
         (
             "brdf-lut",

@@ -139,9 +139,10 @@ fn bake_once<B: Bake>(
 ) -> Outcome {
     bake.validate(params, out)?;
     let kind = bake.output_kind(params, out);
-    check_output(out, kind)?;
+    // Where first (a system folder is refused as such, before any probe is written there).
     let dir = record_dir(out, kind);
     ownership::check_output_folder(&dir, "-o", kind == OutputKind::Folder)?;
+    check_output(out, kind)?;
     let overwrite = ctx.common.overwrite;
     let planned = bake.outputs(params, inputs, out)?;
     ownership::check_writes(&dir, &planned, overwrite)?;

@@ -499,10 +499,10 @@ mod tests {
         let t: T = try_parse_from(["t", "--x", "-0.5", "--list", "-0.1,0.5", "--flag"]).unwrap();
         assert_eq!(t.x, Some(-0.5));
         assert_eq!(t.list, vec![-0.1, 0.5]);
+        assert!(t.flag);
         // A pair parsed whole (tpr-map's --roughness RX,RY) takes a leading minus too.
         let t: T = try_parse_from(["t", "--pair", "-0.1,0.5"]).unwrap();
         assert_eq!(t.pair.as_deref(), Some("-0.1,0.5"));
-        assert!(t.flag);
         let t: T = try_parse_from(["t", "s", "--n", "-1"]).unwrap();
         assert!(matches!(t.sub, Some(Sub::S { n: Some(-1) })));
         // A real flag after a numeric option is still a flag, and a word still an error.

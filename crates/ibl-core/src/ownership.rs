@@ -350,16 +350,16 @@ mod tests {
         r.add(d, "t", &[(a.clone(), b"mine".to_vec())]);
         r.save(d).unwrap();
         check_writes(d, &[a.clone(), d.join("new.exr")], false).unwrap();
-        let e = check_writes(d, &[b.clone()], false)
+        let e = check_writes(d, std::slice::from_ref(&b), false)
             .unwrap_err()
             .to_string();
         assert!(
             e.contains("was not written by this tool") && e.contains("--overwrite"),
             "{e}"
         );
-        check_writes(d, &[b.clone()], true).unwrap();
+        check_writes(d, std::slice::from_ref(&b), true).unwrap();
         std::fs::write(&a, b"edited").unwrap();
-        let e = check_writes(d, &[a.clone()], false)
+        let e = check_writes(d, std::slice::from_ref(&a), false)
             .unwrap_err()
             .to_string();
         assert!(e.contains("changed since"), "{e}");

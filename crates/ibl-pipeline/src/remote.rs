@@ -152,9 +152,11 @@ pub fn entries(graph: &Graph, plan: &Plan) -> Result<Vec<Option<StageEntry>>> {
                     let prefix = rel_dir(&up.dir)?;
                     let product = uk.product(up_params, &up.dir);
                     // Hashes of the read stage's files when it is built and will not change.
-                    let built = (plan.stages[*j].decision == Decision::UpToDate)
-                        .then(|| plan.manifest.stages.get(&up.id))
-                        .flatten();
+                    let built = if plan.stages[*j].decision == Decision::UpToDate {
+                        plan.manifest.stages.get(&up.id)
+                    } else {
+                        None
+                    };
                     let files = uk
                         .outputs(up_params, &graph.input_args(*j), &up.dir)
                         .map_err(|e| Error::Core(ibl_core::Error::invalid(&up.dir, e.message)))?

@@ -146,8 +146,8 @@ pub fn check_output(path: &std::path::Path, kind: OutputKind) -> Result<()> {
             return Err(Error::invalid(
                 path,
                 format!(
-                    "the output must be a folder, but {shown} is an existing file in the way: \
-                     choose another name or remove the file"
+                    "the output must be a folder, but {shown} is an existing file (a file in the \
+                     way): choose another name or remove the file"
                 ),
             ))
         }
@@ -187,8 +187,8 @@ pub fn check_output(path: &std::path::Path, kind: OutputKind) -> Result<()> {
         return Err(Error::invalid(
             path,
             format!(
-                "the output must be a folder, but {} is an existing file in the way: choose \
-                 another name or remove the file",
+                "the output must be a folder, but {} is an existing file (a file in the way): \
+                 choose another name or remove the file",
                 existing.display()
             ),
         ));

@@ -57,8 +57,8 @@ impl Session {
     pub fn open_output(output: &Path) -> Result<Session> {
         // Before anything is baked: an `output:` that is a file, lies under a file or cannot
         // be written is said now, with what to do, not as "File exists" after the work.
-        ibl_core::io::check_output(output, ibl_core::io::OutputKind::Folder)?;
         crate::owned::check_output_folder(output)?;
+        ibl_core::io::check_output(output, ibl_core::io::OutputKind::Folder)?;
         let cache = CacheDir::new(output);
         std::fs::create_dir_all(&cache.root).map_err(|e| Error::io(&cache.root, e))?;
         let lock = take_lock(&cache.lock_path())?;
