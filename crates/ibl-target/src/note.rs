@@ -255,7 +255,14 @@ fn engine_snippet(target: Target, writer: Writer, out: &Outputs) -> String {
     match target {
         Target::Bevy => bevy_snippet(writer, out),
         Target::Unity => unity_snippet(writer, out),
-        _ => snippet::fenced(target),
+        // The web engines' snippets load what the harness reads from each run: three's the
+        // cube faces and LightProbe.json (irradiance's note), Filament's and Babylon's the chain
+        // (prefilter's note); a note never names a file its run did not write.
+        Target::Three if writer == Writer::Irradiance => snippet::fenced(target),
+        Target::Filament | Target::Babylon if writer == Writer::Prefilter => {
+            snippet::fenced(target)
+        }
+        _ => String::new(),
     }
 }
 
