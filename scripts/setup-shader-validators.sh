@@ -3,7 +3,8 @@
 # with: Khronos glslang (Debian apt, GLSL and HLSL) and naga (crates.io, WGSL).
 set -e
 if ! command -v glslangValidator >/dev/null 2>&1; then
-    apt-get install -y --no-install-recommends glslang-tools
+    apt-get install -y --no-install-recommends glslang-tools ||
+        { apt-get update -qq && apt-get install -y --no-install-recommends glslang-tools; }
 fi
 if ! command -v naga >/dev/null 2>&1; then
     cargo install --locked naga-cli

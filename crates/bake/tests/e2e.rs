@@ -310,12 +310,24 @@ fn the_scene_decides_what_is_baked_and_plan_says_why() {
     );
     let out = w.path("out/anisotropic-scene");
     assert!(!out.join("sky/prefilter").exists());
-    // 32² chain down to 4×4, levels at r = 0, 1/3, 2/3, 1: max roughness 0.5 keeps two.
+    // 32² chain down to 4×4, levels at r = 0, 1/3, 2/3, 1: max roughness 0.5 keeps the
+    // level count the engine's lod = r(N-1) needs, the two levels past it exact and marked.
     let chain: Vec<String> = files_under(&out.join("lobby/prefilter"))
         .into_iter()
         .filter(|f| f.ends_with("_px.exr"))
         .collect();
-    assert_eq!(chain, ["m0_px.exr", "m1_px.exr"]);
+    assert_eq!(chain, ["m0_px.exr", "m1_px.exr", "m2_px.exr", "m3_px.exr"]);
+    let report: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(out.join("lobby/prefilter/prefilter.json")).unwrap(),
+    )
+    .unwrap();
+    let beyond: Vec<bool> = report["level"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|l| l["beyond_max_roughness"].as_bool().unwrap_or(false))
+        .collect();
+    assert_eq!(beyond, [false, false, true, true], "{report}");
     assert!(out.join("brushed-steel/quat-map/quaternion.png").is_file());
     assert!(
         out.join("hv-lut/1000x20/hv.exr").is_file() && out.join("hv-lut/1000x20/hv.json").is_file()
@@ -624,8 +636,8 @@ fn an_interrupted_run_leaves_only_complete_outputs_and_the_next_run_resumes() {
     assert_eq!(status.code(), Some(130), "{status:?}");
     assert_eq!(
         files_under(&w.path("out")).len(),
-        6,
-        "only s1's six faces: {:?}",
+        7,
+        "only s1's six faces and its LOAD.txt: {:?}",
         files_under(&w.path("out"))
     );
     assert!(!w.path("out/s2").exists());

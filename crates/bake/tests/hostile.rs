@@ -393,3 +393,23 @@ fn bake_run_and_clean_do_not_follow_a_symlink_out_of_the_output() {
         assert_one_line_error(&o, 2, why);
     }
 }
+
+#[test]
+fn bake_takes_the_memory_budget_of_every_tool() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    pipeline(d);
+    let bake = tool("bake");
+    // studio_256.hdr decodes to 256×128 RGB f32 (384 KiB): a 64 KiB budget refuses it before
+    // decoding, naming the budget; the default budget bakes it.
+    let o = run(&bake, &["run", "p.ron", "-q", "--max-memory", "64K"], d);
+    assert!(!o.status.success());
+    let err = stderr(&o);
+    assert!(err.contains("budget") && err.contains("--max-memory"), "{err}");
+    assert!(!d.join("scratch/px.exr").exists(), "nothing of the cube written");
+    let o = run(&bake, &["run", "p.ron", "-q", "--max-memory", "1G"], d);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(d.join("scratch/px.exr").is_file());
+    let o = run(&bake, &["run", "p.ron", "--max-memory", "lots"], d);
+    assert_one_line_error(&o, 2, "not a size");
+}

@@ -23,6 +23,11 @@ use std::path::{Path, PathBuf};
 struct Cli {
     #[command(subcommand)]
     cmd: Cmd,
+    /// Memory the stages' inputs may take once decoded (512M, 8G, ...): a file whose header
+    /// declares more is refused before it is decoded [default: min(4 GiB, half the machine's
+    /// memory), or $IBL_MAX_MEMORY].
+    #[arg(long, global = true, value_name = "SIZE", value_parser = ibl_core::io::budget::parse_size)]
+    max_memory: Option<u64>,
 }
 
 #[derive(Subcommand)]
@@ -142,6 +147,9 @@ fn exit_code(class: ErrorClass) -> i32 {
 /// or its one-line error, and exits with its code.
 pub fn main() -> ! {
     let cli = ibl_cli::parse::<Cli>("bake");
+    if let Some(m) = cli.max_memory {
+        ibl_core::io::budget::set_max_memory(m);
+    }
     let json = matches!(
         cli.cmd,
         Cmd::Plan { json: true, .. }

@@ -258,8 +258,19 @@ fn engine_snippet(target: Target, writer: Writer, out: &Outputs) -> String {
         // The web engines' snippets load what the harness reads from each run: three's the
         // cube faces and LightProbe.json (irradiance's note), Filament's and Babylon's the chain
         // (prefilter's note); a note never names a file its run did not write.
-        Target::Three if writer == Writer::Irradiance => snippet::fenced(target),
-        Target::Filament | Target::Babylon if writer == Writer::Prefilter => {
+        // and only when that run wrote the container the snippet names.
+        Target::Three
+            if writer == Writer::Irradiance
+                && out.engine_sh.as_deref() == Some("LightProbe.json") =>
+        {
+            snippet::fenced(target)
+        }
+        Target::Filament
+            if writer == Writer::Prefilter && out.chain.iter().any(|f| f == "env_ibl.ktx") =>
+        {
+            snippet::fenced(target)
+        }
+        Target::Babylon if writer == Writer::Prefilter && out.env.is_some() => {
             snippet::fenced(target)
         }
         _ => String::new(),

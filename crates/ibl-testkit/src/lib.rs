@@ -231,11 +231,17 @@ pub fn assert_note_names_only_existing_files(dir: &Path) -> String {
     note
 }
 
-/// Names of the entries of `dir`, sorted; empty when `dir` does not exist.
+/// The record of what a CLI wrote (`ibl_core::ownership`): [`files_in`] leaves it out, since
+/// it is in every output folder; `crates/bake/tests/hostile.rs` checks it.
+pub const OWNERSHIP_RECORD: &str = ".ibl-outputs.json";
+
+/// Names of the entries of `dir` but the ownership record, sorted; empty when `dir` does not
+/// exist.
 pub fn files_in(dir: &Path) -> Vec<String> {
     let mut v: Vec<String> = std::fs::read_dir(dir)
         .map(|r| {
             r.map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+                .filter(|n| n != OWNERSHIP_RECORD)
                 .collect()
         })
         .unwrap_or_default();

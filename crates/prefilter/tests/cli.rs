@@ -511,7 +511,7 @@ fn negative_values_reach_the_range_check_and_outputs_are_checked_first() {
     // to do, in one line.
     let notes = dir.path().join("notes.txt");
     std::fs::write(&notes, "x").unwrap();
-    let says = "is an existing file: choose another name";
+    let says = "is an existing file (a file in the way): choose another name";
     BIN.refused_bake(&input, &notes, &[], 2, says);
 }
 

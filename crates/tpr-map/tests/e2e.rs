@@ -283,7 +283,12 @@ fn non_finite_maps_are_refused_unless_sanitized_and_inputs_are_not_overwritten()
     // Writing over an input map is refused and leaves it as it was.
     let before = std::fs::read(&rough).unwrap();
     let over = ["--preset", "wave", "--size", "4", "--roughness-map", r];
-    BIN.refused_generate(&rough, &over, 2, "is the input");
+    // The ownership check (a file the tool did not write) comes first; with --overwrite the
+    // input check still refuses it.
+    BIN.refused_generate(&rough, &over, 2, "was not written by this tool");
+    let mut forced = over.to_vec();
+    forced.push("--overwrite");
+    BIN.refused_generate(&rough, &forced, 2, "is the input");
     assert_eq!(std::fs::read(&rough).unwrap(), before);
 }
 
