@@ -317,10 +317,9 @@ fn the_scene_decides_what_is_baked_and_plan_says_why() {
         .filter(|f| f.ends_with("_px.exr"))
         .collect();
     assert_eq!(chain, ["m0_px.exr", "m1_px.exr", "m2_px.exr", "m3_px.exr"]);
-    let report: serde_json::Value = serde_json::from_slice(
-        &std::fs::read(out.join("lobby/prefilter/prefilter.json")).unwrap(),
-    )
-    .unwrap();
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("lobby/prefilter/prefilter.json")).unwrap())
+            .unwrap();
     let beyond: Vec<bool> = report["level"]
         .as_array()
         .unwrap()

@@ -405,8 +405,14 @@ fn bake_takes_the_memory_budget_of_every_tool() {
     let o = run(&bake, &["run", "p.ron", "-q", "--max-memory", "64K"], d);
     assert!(!o.status.success());
     let err = stderr(&o);
-    assert!(err.contains("budget") && err.contains("--max-memory"), "{err}");
-    assert!(!d.join("scratch/px.exr").exists(), "nothing of the cube written");
+    assert!(
+        err.contains("budget") && err.contains("--max-memory"),
+        "{err}"
+    );
+    assert!(
+        !d.join("scratch/px.exr").exists(),
+        "nothing of the cube written"
+    );
     let o = run(&bake, &["run", "p.ron", "-q", "--max-memory", "1G"], d);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(d.join("scratch/px.exr").is_file());
