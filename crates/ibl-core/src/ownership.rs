@@ -26,8 +26,9 @@ pub fn hash_file(path: &Path) -> std::io::Result<String> {
     Ok(h.finalize().to_hex().to_string())
 }
 
-/// Removes `.` and resolves `..` lexically; a `..` above the root stays at the root.
-fn normalize(p: &Path) -> PathBuf {
+/// Removes `.` and resolves `..` lexically (`pipelines/../out` → `out`); a `..` above the root
+/// stays at the root, a leading `..` of a relative path is kept. The runner's paths use it too.
+pub fn normalize(p: &Path) -> PathBuf {
     let mut out: Vec<Component> = Vec::new();
     for c in p.components() {
         match c {

@@ -1,29 +1,10 @@
 //! Lexical path helpers: normalising `a/../b`, relative paths for ninja files, and the
 //! hidden staging names the runner uses.
 
-use std::path::{Component, Path, PathBuf};
+use std::path::{Path, PathBuf};
 
 /// Removes `.` and resolves `..` lexically (`pipelines/../out` → `out`); keeps leading `..`.
-pub(crate) fn normalize(p: &Path) -> PathBuf {
-    let mut out: Vec<Component> = Vec::new();
-    for c in p.components() {
-        match c {
-            Component::CurDir => {}
-            Component::ParentDir => match out.last() {
-                Some(Component::Normal(_)) => {
-                    out.pop();
-                }
-                Some(Component::RootDir) | Some(Component::Prefix(_)) => {}
-                _ => out.push(c),
-            },
-            c => out.push(c),
-        }
-    }
-    if out.is_empty() {
-        return PathBuf::from(".");
-    }
-    out.iter().collect()
-}
+pub(crate) use ibl_core::ownership::normalize;
 
 /// An absolute, normalised form of `p` (relative to the current folder).
 pub fn absolute(p: &Path) -> PathBuf {
