@@ -69,6 +69,37 @@ impl Bin {
         self.exec(&bake_args(input, out, flags))
     }
 
+    /// Issue 22: bakes `input` for every target × layout (8² faces) and checks that each run
+    /// writes a `LOAD.txt` for its target naming only files that run wrote
+    /// ([`assert_note_names_only_existing_files`]).
+    pub fn assert_every_target_writes_a_true_note(&self, input: &Path) {
+        let tmp = tempfile::tempdir().unwrap();
+        let layouts: [&[&str]; 5] = [
+            &[],
+            &["--layout", "faces", "--format", "rgba16f"],
+            &["--layout", "ktx2", "--format", "rgba16f"],
+            &["--layout", "dds", "--format", "rgba16f"],
+            &["--layout", "ktx1", "--format", "rgba16f"],
+        ];
+        for t in [
+            "gltf", "bevy", "filament", "three", "babylon", "unity", "custom",
+        ] {
+            for (k, layout) in layouts.iter().enumerate() {
+                let out = tmp.path().join(format!("{t}-{k}"));
+                let mut flags = vec!["--target", t, "--size", "8", "-q"];
+                flags.extend_from_slice(layout);
+                let o = self.run_bake(input, &out, &flags);
+                assert!(
+                    o.status.success(),
+                    "{t} {layout:?}: {}",
+                    String::from_utf8_lossy(&o.stderr)
+                );
+                let note = assert_note_names_only_existing_files(&out);
+                assert!(note.contains(&format!("--target {t}")), "{note}");
+            }
+        }
+    }
+
     /// [`Bin::run_bake`], asserting it succeeded as [`Bin::run_ok`] does.
     pub fn bake(&self, input: impl AsRef<OsStr>, out: impl AsRef<OsStr>, flags: &[&str]) -> Output {
         self.exec_ok(&bake_args(input, out, flags))
