@@ -31,6 +31,15 @@ fn run(bin: &Path, args: &[&str], cwd: &Path) -> Output {
         .unwrap()
 }
 
+/// A first run of `bin` with `args` and `--json`, which must succeed.
+fn run_json_ok(bin: &Path, name: &str, args: &[String], cwd: &Path) -> Output {
+    let mut argv: Vec<&str> = args.iter().map(String::as_str).collect();
+    argv.push("--json");
+    let o = run(bin, &argv, cwd);
+    assert!(o.status.success(), "{name}: {}", stderr(&o));
+    o
+}
+
 /// Every bake CLI with a small run writing into `OUT` (a folder or, for single-file tools, a
 /// file in it); `OUT` is replaced by the output path.
 fn clis() -> Vec<(&'static str, Vec<String>)> {
@@ -93,16 +102,7 @@ fn every_cli_refuses_to_replace_a_users_file_and_keeps_its_own_record() {
         let bin = tool(name);
         let first = tmp.path().join(format!("{name}-first"));
         let a = args_for(&args, &first);
-        let o = run(
-            &bin,
-            &[
-                &a.iter().map(String::as_str).collect::<Vec<_>>()[..],
-                &["--json"],
-            ]
-            .concat(),
-            tmp.path(),
-        );
-        assert!(o.status.success(), "{name}: {}", stderr(&o));
+        let o = run_json_ok(&bin, name, &a, tmp.path());
         let outputs: Vec<PathBuf> = stdout_json(&o)["outputs"]
             .as_array()
             .unwrap()
@@ -163,16 +163,7 @@ fn no_cli_writes_through_a_symlink_or_outside_its_output() {
         // An output file that is a symlink to a file outside: refused, even with --overwrite.
         let first = tmp.path().join(format!("{name}-first-link"));
         let a = args_for(&args, &first);
-        let o = run(
-            &bin,
-            &[
-                &a.iter().map(String::as_str).collect::<Vec<_>>()[..],
-                &["--json"],
-            ]
-            .concat(),
-            tmp.path(),
-        );
-        assert!(o.status.success(), "{name}: {}", stderr(&o));
+        let o = run_json_ok(&bin, name, &a, tmp.path());
         let out0 = PathBuf::from(stdout_json(&o)["outputs"][0].as_str().unwrap());
         std::fs::remove_file(&out0).unwrap();
         std::os::unix::fs::symlink(&precious, &out0).unwrap();
