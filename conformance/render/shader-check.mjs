@@ -3,14 +3,15 @@
 //! SwiftShader's WebGL2, as render.mjs does), and writes the page's float outputs as an
 //! `ibl-shader-check/1` grid (crates/shader-emulate) for `shader-emulate compare`.
 //!
-//! usage: node shader-check.mjs KIND GLSL CUBE.ktx2 INPUTS.json OUT.json   (paths in the repo)
+//! usage: node shader-check.mjs KIND GLSL CUBE.ktx2 INPUTS.json OUT.json [generate|box32]
+//! (paths inside the repository; the last argument as the page's "mips")
 import http from "node:http";
 import fs from "node:fs";
 import path from "node:path";
 import { chromium } from "playwright-core";
 
 const root = path.resolve(path.dirname(new URL(import.meta.url).pathname), "../..");
-const [kind, glsl, cube, inputs, out] = process.argv.slice(2);
+const [kind, glsl, cube, inputs, out, mips] = process.argv.slice(2);
 if (!out) {
   console.error("usage: node shader-check.mjs KIND GLSL CUBE.ktx2 INPUTS.json OUT.json");
   process.exit(2);
@@ -46,7 +47,7 @@ try {
   const log = [];
   page.on("console", (m) => log.push(`${m.type()}: ${m.text()}`));
   page.on("pageerror", (e) => log.push(`pageerror: ${e.message}`));
-  const q = new URLSearchParams({ p: JSON.stringify({ kind, glsl: url(glsl), cube: url(cube), inputs: url(inputs) }) });
+  const q = new URLSearchParams({ p: JSON.stringify({ kind, glsl: url(glsl), cube: url(cube), inputs: url(inputs), mips: mips || "generate" }) });
   await page.goto(`${base}/conformance/render/pages/shader-check.html?${q}`);
   await page.waitForFunction(() => window.__result || window.__error, null, { timeout: 300000, polling: 200 });
   const err = await page.evaluate(() => window.__error && String(window.__error));

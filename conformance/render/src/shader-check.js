@@ -5,7 +5,9 @@
 //! renders into an RGBA32F target and hands the floats back. No engine, no bundler: plain
 //! WebGL2, so what runs is the emitted text and the GPU's (here SwiftShader's) sampler.
 //!
-//! ?p={"kind":"custom"|"aniso","glsl":URL,"cube":URL (KTX2),"inputs":URL (grid JSON)}
+//! ?p={"kind":"custom"|"aniso","glsl":URL,"cube":URL (KTX2),"inputs":URL (grid JSON),
+//!     "mips":"generate"|"box32" (aniso; box32, for diagnosis: the 2x2 box chain computed here
+//!     in float32 and uploaded as RGBA32F, the emulation's pyramid, instead of generateMipmap)}
 
 const ROW = 256; // cases per row, as crates/shader-emulate (ROW)
 const params = JSON.parse(new URLSearchParams(location.search).get("p") || "{}");
@@ -38,6 +40,33 @@ function parseKtx2Cube(buf, url) {
     levels.push(facesData);
   }
   return { size: width, half, levels };
+}
+
+/** IEEE half to float. */
+function halfToFloat(h) {
+  const e = (h >> 10) & 31, m = h & 1023;
+  const v = e === 0 ? m * 2 ** -24 : e === 31 ? (m ? NaN : Infinity) : (1 + m / 1024) * 2 ** (e - 15);
+  return h & 0x8000 ? -v : v;
+}
+
+/** Level 0 of the cube and its 2x2 box means down to 1x1, in float32 (ibl_core's
+ *  Cubemap::downsample, the emulation's pyramid). */
+function boxChain(cube) {
+  let cur = cube.levels[0].map((d) => (cube.half ? Float32Array.from(d, halfToFloat) : Float32Array.from(d)));
+  const out = [cur];
+  for (let s = cube.size; s > 1; s >>= 1) {
+    const m = s >> 1;
+    cur = cur.map((a) => {
+      const o = new Float32Array(m * m * 4);
+      for (let j = 0; j < m; j++) for (let i = 0; i < m; i++) for (let c = 0; c < 4; c++) {
+        const at = (x, y) => a[(y * s + x) * 4 + c];
+        o[(j * m + i) * 4 + c] = 0.25 * (at(2 * i, 2 * j) + at(2 * i + 1, 2 * j) + at(2 * i, 2 * j + 1) + at(2 * i + 1, 2 * j + 1));
+      }
+      return o;
+    });
+    out.push(cur);
+  }
+  return out;
 }
 
 // GLSL ES 3.00 (WebGL2) has no bitfieldReverse (ES 3.10 / GLSL 4.00): the emitted aniso
@@ -134,13 +163,18 @@ async function main() {
   // custom: every level of the chain, the lod clamped to its last level (TEXTURE_MAX_LEVEL,
   // else a chain that stops above 1x1 is incomplete). aniso: level 0 and generateMipmap, the
   // full box chain the snippet's header asks for.
-  const upload = kind === "custom" ? cubeData.levels : cubeData.levels.slice(0, 1);
+  const box32 = kind === "aniso" && params.mips === "box32";
+  const upload = kind === "custom" ? cubeData.levels : box32 ? boxChain(cubeData) : cubeData.levels.slice(0, 1);
+  if (box32 && !gl.getExtension("OES_texture_float_linear")) throw new Error("no OES_texture_float_linear");
   upload.forEach((faces, l) => {
     const s = Math.max(1, cubeData.size >> l);
-    faces.forEach((data, f) => gl.texImage2D(gl.TEXTURE_CUBE_MAP_POSITIVE_X + f, l, ifmt, s, s, 0, gl.RGBA, type, data));
+    const [fi, ty] = box32 ? [gl.RGBA32F, gl.FLOAT] : [ifmt, type];
+    faces.forEach((data, f) => gl.texImage2D(gl.TEXTURE_CUBE_MAP_POSITIVE_X + f, l, fi, s, s, 0, gl.RGBA, ty, data));
   });
   let maxLod;
-  if (kind === "custom") {
+  if (box32) {
+    maxLod = upload.length - 1;
+  } else if (kind === "custom") {
     maxLod = upload.length - 1;
     gl.texParameteri(gl.TEXTURE_CUBE_MAP, gl.TEXTURE_MAX_LEVEL, maxLod);
   } else {

@@ -273,6 +273,27 @@ pub fn aniso_inputs(normals: usize) -> Grid {
     Grid::new(Kind::Aniso, Role::Inputs, data)
 }
 
+/// The grid with every input moved by a relative `eps` (uniform in ±eps, seeded): for
+/// diagnosis, how much the emulation itself moves under perturbations of the size of float
+/// rounding (the conditioning a GPU's differently rounded arithmetic meets). Materials (α, F0)
+/// are kept.
+pub fn jitter(inputs: &Grid, eps: f32, seed: u64) -> Grid {
+    let mut g = inputs.clone();
+    let keep: &[usize] = match g.kind {
+        Kind::Custom => &[3],
+        Kind::Aniso => &[3, 7, 11, 15, 18, 19],
+    };
+    let n = 4 * g.fields;
+    let mut rng = Pcg32::new(seed, 99);
+    for (k, v) in g.data.iter_mut().enumerate() {
+        let u = 2.0 * rng.next_f32() - 1.0;
+        if !keep.contains(&(k % n)) {
+            *v *= 1.0 + eps * u;
+        }
+    }
+    g
+}
+
 /// The custom lookup of a chain as its `prefilter.json` states it, rebuilt by
 /// [`CustomLookup::new`] from α₀ and the chain's shape, and refused when the sidecar's
 /// constants are not the ones that rebuild gives (the shader text carries those).

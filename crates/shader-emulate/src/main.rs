@@ -51,6 +51,10 @@ enum Cmd {
         /// of the three (the GL specification's recommendation) instead of the emulation.
         #[arg(long)]
         gl_corners: bool,
+        /// Diagnosis: move every input by this relative amount first (seeded, uniform), to
+        /// measure how much the emulation itself moves under float-rounding-sized changes.
+        #[arg(long)]
+        jitter: Option<f32>,
         /// Output JSON.
         #[arg(short, long)]
         output: PathBuf,
@@ -107,9 +111,13 @@ fn run(cli: Cli) -> Result<bool> {
             chain,
             sidecar,
             gl_corners,
+            jitter,
             output,
         } => {
-            let inp = Grid::read(&inputs)?;
+            let mut inp = Grid::read(&inputs)?;
+            if let Some(eps) = jitter {
+                inp = shader_emulate::jitter(&inp, eps, 1);
+            }
             if inp.role != shader_emulate::Role::Inputs {
                 return Err(shader_emulate::Error::Invalid {
                     path: inputs.display().to_string(),
@@ -166,7 +174,7 @@ fn run(cli: Cli) -> Result<bool> {
                 let Some(s) = st else { continue };
                 let ok = gm.is_none_or(|m| s.mean <= m) && gp.is_none_or(|m| s.p99 <= m);
                 pass &= ok;
-                let gate = |m: Option<f64>| m.map_or("-".into(), |m| format!("{m:.0e}"));
+                let gate = |m: Option<f64>| m.map_or("-".into(), |m| format!("{m:.1e}"));
                 println!(
                     "{label} {group}: {} cases, relative difference mean {:.2e} p99 {:.2e} max {:.2e} (gates mean {} p99 {}: {}); worst case {}: cpu {:?} gpu {:?}{}",
                     s.count,
