@@ -257,7 +257,7 @@ pub fn aniso_inputs(normals: usize) -> Grid {
             for r in ANISO_R {
                 for eta in ANISO_ETA {
                     let (at, ab) = Material::ggx_kc(r, eta).ggx_alphas().expect("GGX");
-                    let f0 = if case % 2 == 0 { 1.0 } else { 0.04 };
+                    let f0 = if case.is_multiple_of(2) { 1.0 } else { 0.04 };
                     let mut rng = Pcg32::new(case, 23);
                     let rot = [rng.next_f32(), rng.next_f32()];
                     data.extend([n.x, n.y, n.z, at]);

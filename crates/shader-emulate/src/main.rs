@@ -208,7 +208,7 @@ fn main() {
         Ok(true) => {}
         Ok(false) => std::process::exit(1),
         Err(e) => {
-            eprintln!("shader-emulate: {e}");
+            eprintln!("shader-emulate: error: {e}");
             std::process::exit(2);
         }
     }
