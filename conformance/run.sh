@@ -54,3 +54,4 @@ CARGO_TARGET_DIR="$PWD/$WORK/bevy-target" cargo build --release -q --manifest-pa
 xargs "$WORK/bevy-target/release/bevy-conformance" < "$T/bevy-args.txt"
 bash conformance/engines/run.sh
 bash conformance/render/run.sh
+bash conformance/render/shader-check.sh

@@ -1,0 +1,792 @@
+//! The CPU side of `conformance/render/shader-check.sh`: input grids for the two emitted
+//! shaders (the custom lookup of `prefilter --target custom`, the shipped anisotropic VNDF
+//! filtered importance sampling of `aniso-eval --emit-shader`), their CPU emulation — the very
+//! functions the Rust tests hold the shaders to (`ibl_prefilter::custom::CustomLookup::read`,
+//! `ibl_aniso::ship::shade`) — and the GPU-against-CPU comparison.
+//!
+//! The exchange format ([`Grid`], JSON): `count` cases of `fields` RGBA float vectors each,
+//! flat in `data`. The browser page lays case i out at texel (i mod [`ROW`], i div [`ROW`]) of
+//! the output, and its field k at row (i div [`ROW`])·fields + k of the input texture.
+
+#![warn(missing_docs)]
+
+use glam::{Vec2, Vec3};
+use ibl_aniso::material::Material;
+use ibl_aniso::scene::Frame;
+use ibl_aniso::ship;
+use ibl_core::bordered::BorderedMips;
+use ibl_core::cube::{face_texel_index, Face};
+use ibl_core::sampling::Pcg32;
+use ibl_core::{CubeMips, Cubemap, Rgb};
+use ibl_prefilter::custom::CustomLookup;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// The `format` tag of every grid file.
+pub const FORMAT: &str = "ibl-shader-check/1";
+
+/// Cases per row of the page's textures.
+pub const ROW: usize = 256;
+
+/// Errors of the tool, by cause.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// A file that is not what it should be (names the file).
+    #[error("{path}: {msg}")]
+    Invalid {
+        /// The file.
+        path: String,
+        /// What is wrong with it.
+        msg: String,
+    },
+    /// Reading a chain or an environment failed (ibl-core names the file).
+    #[error(transparent)]
+    Core(#[from] ibl_core::Error),
+}
+
+/// A result of this crate.
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+fn invalid(path: &Path, msg: impl Into<String>) -> Error {
+    Error::Invalid {
+        path: path.display().to_string(),
+        msg: msg.into(),
+    }
+}
+
+/// Which emitted shader a grid is for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Kind {
+    /// `iblCustomSpecular(chain, R, roughness)` of lookup.glsl: one field (R.xyz, roughness).
+    Custom,
+    /// `anisoFisSpecular(...)` of aniso_fis.glsl: five fields (n, α_t), (t, α_b), (b, F0),
+    /// (v, 0), (rotation.xy, 0, 0).
+    Aniso,
+}
+
+impl Kind {
+    /// RGBA vectors per input case.
+    pub fn fields(self) -> usize {
+        match self {
+            Kind::Custom => 1,
+            Kind::Aniso => 5,
+        }
+    }
+}
+
+/// Inputs of the shader, or its outputs (one RGBA vector a case, alpha 1).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Role {
+    /// What the page uploads.
+    Inputs,
+    /// What the shader (or its emulation) returns.
+    Outputs,
+}
+
+/// A grid of cases (the exchange format, JSON).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Grid {
+    /// Always [`FORMAT`].
+    pub format: String,
+    /// Which shader.
+    pub kind: Kind,
+    /// Inputs or outputs.
+    pub role: Role,
+    /// RGBA vectors per case.
+    pub fields: usize,
+    /// Cases.
+    pub count: usize,
+    /// count · fields · 4 floats.
+    pub data: Vec<f32>,
+}
+
+impl Grid {
+    /// A grid of `data.len() / (4·fields)` cases.
+    pub fn new(kind: Kind, role: Role, data: Vec<f32>) -> Self {
+        let fields = match role {
+            Role::Inputs => kind.fields(),
+            Role::Outputs => 1,
+        };
+        Grid {
+            format: FORMAT.to_string(),
+            kind,
+            role,
+            fields,
+            count: data.len() / (4 * fields),
+            data,
+        }
+    }
+
+    /// The 4·fields floats of case `i`.
+    pub fn case(&self, i: usize) -> &[f32] {
+        let n = 4 * self.fields;
+        &self.data[i * n..(i + 1) * n]
+    }
+
+    /// Checks the header against the data; `path` names the file in the error.
+    pub fn validate(&self, path: &Path) -> Result<()> {
+        if self.format != FORMAT {
+            return Err(invalid(
+                path,
+                format!("format {:?}, expected {FORMAT:?}", self.format),
+            ));
+        }
+        let want = match self.role {
+            Role::Inputs => self.kind.fields(),
+            Role::Outputs => 1,
+        };
+        if self.fields != want {
+            return Err(invalid(
+                path,
+                format!(
+                    "{} fields per case, {:?} {:?} have {want}",
+                    self.fields, self.kind, self.role
+                ),
+            ));
+        }
+        if self.count == 0 || self.data.len() != self.count * self.fields * 4 {
+            return Err(invalid(
+                path,
+                format!(
+                    "{} floats for {} cases of {} fields",
+                    self.data.len(),
+                    self.count,
+                    self.fields
+                ),
+            ));
+        }
+        if self.role == Role::Inputs && self.data.iter().any(|v| !v.is_finite()) {
+            return Err(invalid(path, "non-finite input value"));
+        }
+        Ok(())
+    }
+
+    /// Reads and validates a grid file.
+    pub fn read(path: &Path) -> Result<Grid> {
+        let text = std::fs::read_to_string(path).map_err(|e| invalid(path, e.to_string()))?;
+        let g: Grid = serde_json::from_str(&text).map_err(|e| invalid(path, e.to_string()))?;
+        g.validate(path)?;
+        Ok(g)
+    }
+
+    /// Writes the grid atomically (a temporary beside it, renamed over).
+    pub fn write(&self, path: &Path) -> Result<()> {
+        let text = serde_json::to_string(self).map_err(|e| invalid(path, e.to_string()))?;
+        let tmp = path.with_extension("json.partial");
+        std::fs::write(&tmp, text).map_err(|e| invalid(&tmp, e.to_string()))?;
+        std::fs::rename(&tmp, path).map_err(|e| invalid(path, e.to_string()))
+    }
+}
+
+/// `n` directions on a Fibonacci lattice tilted off the cube's axes, then the 26 directions
+/// towards the cube's face centres, edges and corners (where seamless filtering matters).
+pub fn directions(n: usize) -> Vec<Vec3> {
+    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+    let (s, c) = (0.61f64.sin(), 0.61f64.cos());
+    let mut out: Vec<Vec3> = (0..n)
+        .map(|k| {
+            let z = 1.0 - (2 * k + 1) as f64 / n as f64;
+            let r = (1.0 - z * z).sqrt();
+            let phi = golden * k as f64 + 0.3;
+            let (x, y) = (r * phi.cos(), r * phi.sin());
+            Vec3::new(x as f32, (y * c - z * s) as f32, (y * s + z * c) as f32)
+        })
+        .collect();
+    for x in -1..=1 {
+        for y in -1..=1 {
+            for z in -1..=1 {
+                if (x, y, z) != (0, 0, 0) {
+                    out.push(Vec3::new(x as f32, y as f32, z as f32).normalize());
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The custom lookup's inputs: every direction of [`directions`]`(dirs)` at `roughness`
+/// values k/(roughness − 1), 0 and 1 included.
+pub fn custom_inputs(dirs: usize, roughness: usize) -> Grid {
+    let mut data = Vec::new();
+    for d in directions(dirs) {
+        for k in 0..roughness {
+            let r = k as f32 / (roughness.max(2) - 1) as f32;
+            data.extend([d.x, d.y, d.z, r]);
+        }
+    }
+    Grid::new(Kind::Custom, Role::Inputs, data)
+}
+
+/// Perceptual roughness and η of the anisotropic grid (η = ±1 and r near 0 are the edges).
+pub const ANISO_R: [f32; 7] = [0.02, 0.1, 0.25, 0.4, 0.6, 0.8, 1.0];
+/// η of the anisotropic grid.
+pub const ANISO_ETA: [f32; 5] = [-1.0, -0.5, 0.0, 0.5, 1.0];
+/// Polar angles (radians) of the views about each normal.
+pub const ANISO_VIEW_POLAR: [f32; 3] = [0.25, 0.8, 1.25];
+
+/// The anisotropic method's inputs: `normals` frames (normal of [`directions`], tangent turned
+/// about it) × [`ANISO_VIEW_POLAR`] views × the (r, η) grid (Kulla–Conty α_t, α_b through
+/// `ibl_aniso::material::Material::ggx_kc`, the evaluator's conversion), F0 alternating 1 and
+/// 0.04, a per-case rotation of the Hammersley set.
+pub fn aniso_inputs(normals: usize) -> Grid {
+    let mut data = Vec::new();
+    let helpers = directions(normals + 7);
+    let mut case = 0u64;
+    for (k, n) in directions(normals).into_iter().take(normals).enumerate() {
+        let h = helpers[(k * 5 + 3) % normals.max(1)];
+        let h = if h.cross(n).length() < 0.2 {
+            n.any_orthonormal_vector()
+        } else {
+            h
+        };
+        let t = (h - n * n.dot(h)).normalize();
+        let frame = Frame {
+            t,
+            b: n.cross(t),
+            n,
+        };
+        for (j, theta) in ANISO_VIEW_POLAR.into_iter().enumerate() {
+            let phi = 2.4 * k as f32 + 1.7 * j as f32;
+            let v = frame.to_world(Vec3::new(
+                theta.sin() * phi.cos(),
+                theta.sin() * phi.sin(),
+                theta.cos(),
+            ));
+            for r in ANISO_R {
+                for eta in ANISO_ETA {
+                    let (at, ab) = Material::ggx_kc(r, eta).ggx_alphas().expect("GGX");
+                    let f0 = if case.is_multiple_of(2) { 1.0 } else { 0.04 };
+                    let mut rng = Pcg32::new(case, 23);
+                    let rot = [rng.next_f32(), rng.next_f32()];
+                    data.extend([n.x, n.y, n.z, at]);
+                    data.extend([t.x, t.y, t.z, ab]);
+                    data.extend([frame.b.x, frame.b.y, frame.b.z, f0]);
+                    data.extend([v.x, v.y, v.z, 0.0]);
+                    data.extend([rot[0], rot[1], 0.0, 0.0]);
+                    case += 1;
+                }
+            }
+        }
+    }
+    Grid::new(Kind::Aniso, Role::Inputs, data)
+}
+
+/// The grid with every input moved by a relative `eps` (uniform in ±eps, seeded): for
+/// diagnosis, how much the emulation itself moves under perturbations of the size of float
+/// rounding (the conditioning a GPU's differently rounded arithmetic meets). Materials (α, F0)
+/// are kept.
+pub fn jitter(inputs: &Grid, eps: f32, seed: u64) -> Grid {
+    let mut g = inputs.clone();
+    let keep: &[usize] = match g.kind {
+        Kind::Custom => &[3],
+        Kind::Aniso => &[3, 7, 11, 15, 18, 19],
+    };
+    let n = 4 * g.fields;
+    let mut rng = Pcg32::new(seed, 99);
+    for (k, v) in g.data.iter_mut().enumerate() {
+        let u = 2.0 * rng.next_f32() - 1.0;
+        if !keep.contains(&(k % n)) {
+            *v *= 1.0 + eps * u;
+        }
+    }
+    g
+}
+
+/// The custom lookup of a chain as its `prefilter.json` states it, rebuilt by
+/// [`CustomLookup::new`] from α₀ and the chain's shape, and refused when the sidecar's
+/// constants are not the ones that rebuild gives (the shader text carries those).
+pub fn custom_lookup_from_sidecar(path: &Path, chain: &CubeMips) -> Result<CustomLookup> {
+    let text = std::fs::read_to_string(path).map_err(|e| invalid(path, e.to_string()))?;
+    let v: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| invalid(path, e.to_string()))?;
+    let c = v
+        .get("custom_lookup")
+        .ok_or_else(|| invalid(path, "no \"custom_lookup\" (not a --target custom bake)"))?;
+    let num = |k: &str| {
+        c.get(k)
+            .and_then(|x| x.as_f64())
+            .ok_or_else(|| invalid(path, format!("custom_lookup.{k} missing")))
+    };
+    let lk = CustomLookup::new(
+        num("alpha0")? as f32,
+        chain.levels.len(),
+        chain.levels[0].size,
+    );
+    let stated = [num("scale")?, num("inv_alpha0")?, num("max_lod")?].map(|x| x as f32);
+    if stated != [lk.scale, lk.inv_alpha0, lk.max_lod]
+        || num("levels")? as usize != lk.levels
+        || num("size")? as usize != lk.size
+    {
+        return Err(invalid(
+            path,
+            format!(
+                "custom_lookup {stated:?} is not the lookup of this {}-level {}² chain {:?}",
+                lk.levels,
+                lk.size,
+                [lk.scale, lk.inv_alpha0, lk.max_lod]
+            ),
+        ));
+    }
+    Ok(lk)
+}
+
+/// Whether a bilinear read of an n×n level at face coordinates (sc, tc) needs a texel beyond
+/// two face edges at once, the cube-corner texel. OpenGL leaves it to the implementation
+/// (OpenGL 4.2 §3.10.10, seamless cube map filtering: "The recommended method to generate this
+/// texel is to average the values of the three available samples. However, implementations are
+/// free to construct this fourth texel in another way"); ibl-core's emulation
+/// (`ibl_core::bordered`) re-projects a single texel there instead.
+pub fn corner_footprint(n: usize, sc: f32, tc: f32) -> bool {
+    let n = n as f32;
+    let out = |c: f32| {
+        let x0 = ((c + 1.0) * 0.5 * n - 0.5).floor();
+        x0 < 0.0 || x0 + 1.0 > n - 1.0
+    };
+    out(sc) && out(tc)
+}
+
+/// Whether a trilinear read (`BorderedMips::sample`) of a chain of face sizes `sizes` at `lod`
+/// in direction `d` touches a cube-corner texel on either level it blends.
+pub fn read_touches_corner(sizes: &[usize], d: Vec3, lod: f32) -> bool {
+    let lod = lod.clamp(0.0, (sizes.len() - 1) as f32);
+    let l0 = lod.floor() as usize;
+    let (_, sc, tc) = Face::from_direction(d);
+    corner_footprint(sizes[l0], sc, tc)
+        || (lod > l0 as f32 && l0 + 1 < sizes.len() && corner_footprint(sizes[l0 + 1], sc, tc))
+}
+
+/// Alpha of an emulated output: 1 when every texel the reads use is defined by the GL
+/// specification, 0 when one is a cube-corner texel ([`corner_footprint`]).
+fn corner_alpha(corner: bool) -> f32 {
+    if corner {
+        0.0
+    } else {
+        1.0
+    }
+}
+
+/// The custom lookup's CPU emulation ([`CustomLookup::read`]) at every input case; alpha
+/// flags the cases whose read touches a cube-corner texel ([`corner_alpha`]).
+pub fn emulate_custom(inputs: &Grid, chain: &BorderedMips, lk: &CustomLookup) -> Grid {
+    let mut data = Vec::with_capacity(inputs.count * 4);
+    let sizes = chain.sizes();
+    for i in 0..inputs.count {
+        let c = inputs.case(i);
+        let d = Vec3::new(c[0], c[1], c[2]);
+        let rgb = lk.read(chain, d, c[3]);
+        let corner = read_touches_corner(&sizes, d, lk.lod(c[3]));
+        data.extend([rgb[0], rgb[1], rgb[2], corner_alpha(corner)]);
+    }
+    Grid::new(Kind::Custom, Role::Outputs, data)
+}
+
+/// The box pyramid the shipped anisotropic snippet reads: `base` and its 2×2 box mips down to
+/// 1×1 (what `generateMipmap` builds; the evaluator's pyramid, `ibl_aniso::eval`).
+pub fn aniso_pyramid(base: ibl_core::Cubemap) -> BorderedMips {
+    BorderedMips::new(&CubeMips::build(base, 1))
+}
+
+/// The shipped anisotropic method's CPU emulation (`ibl_aniso::ship::shade`, then
+/// `ship::specular`) at every input case.
+pub fn emulate_aniso(inputs: &Grid, pyramid: &BorderedMips) -> Grid {
+    let mut data = Vec::with_capacity(inputs.count * 4);
+    for i in 0..inputs.count {
+        let c = inputs.case(i);
+        let v3 = |k: usize| Vec3::new(c[4 * k], c[4 * k + 1], c[4 * k + 2]);
+        let frame = Frame {
+            n: v3(0),
+            t: v3(1),
+            b: v3(2),
+        };
+        let e = ship::shade(pyramid, &frame, v3(3), c[3], c[7], Vec2::new(c[16], c[17]));
+        let rgb = ship::specular(&e, [c[11]; 3]);
+        let corner =
+            aniso_touches_corner(pyramid, &frame, v3(3), c[3], c[7], Vec2::new(c[16], c[17]));
+        data.extend([rgb[0], rgb[1], rgb[2], corner_alpha(corner)]);
+    }
+    Grid::new(Kind::Aniso, Role::Outputs, data)
+}
+
+/// Whether any of the shipped method's taps (`ibl_aniso::ship::shade`'s loop, its geometry
+/// only: the same pub steps in the same order) reads a cube-corner texel.
+fn aniso_touches_corner(
+    pyr: &BorderedMips,
+    frame: &Frame,
+    v: Vec3,
+    at: f32,
+    ab: f32,
+    rotation: Vec2,
+) -> bool {
+    let c = ship::SHIPPED;
+    let (at, ab) = (at.max(c.alpha_min), ab.max(c.alpha_min));
+    let vl = frame.to_local(v).normalize();
+    if vl.z <= 0.0 {
+        return false;
+    }
+    let g1 = 1.0 / (1.0 + ship::lambda(vl, at, ab));
+    let sizes = pyr.sizes();
+    let max_lod = pyr.max_lod() as f32;
+    (0..c.taps).any(|i| {
+        let m = ship::sample_vndf(vl, ship::hammersley(i, rotation), at, ab);
+        let l = 2.0 * vl.dot(m) * m - vl;
+        if l.z <= 0.0 {
+            return false;
+        }
+        let pl = g1 * ship::d_ggx(m, at, ab) / (4.0 * vl.z);
+        let lod = if pl > 0.0 {
+            (0.5 * (-(c.taps as f32 * pl).log2() - pyr.base_log2_texel_solid_angle()) + c.lod_bias)
+                .clamp(0.0, max_lod)
+        } else {
+            max_lod
+        };
+        read_touches_corner(&sizes, frame.to_world(l), lod)
+    })
+}
+
+/// A GPU model of the custom lookup's read for diagnosis, independent of `ibl_core::bordered`:
+/// trilinear, seamless across edges (the neighbour face's texel through its direction), and
+/// the cube-corner texel the average of the three available ones, as the GL specification
+/// recommends. Not the emulation: it only explains where the emulation and a GPU part.
+pub fn gl_corner_read(chain: &CubeMips, d: Vec3, lod: f32) -> Rgb {
+    let lod = lod.clamp(0.0, (chain.levels.len() - 1) as f32);
+    let l0 = lod.floor() as usize;
+    let a = gl_bilinear(&chain.levels[l0], d);
+    if lod <= l0 as f32 || l0 + 1 >= chain.levels.len() {
+        return a;
+    }
+    let b = gl_bilinear(&chain.levels[l0 + 1], d);
+    let f = lod - l0 as f32;
+    std::array::from_fn(|k| a[k] + (b[k] - a[k]) * f)
+}
+
+fn gl_texel(cube: &Cubemap, face: Face, i: isize, j: isize) -> Rgb {
+    let n = cube.size as isize;
+    let inside = |x: isize| (0..n).contains(&x);
+    let clamp = |x: isize| x.clamp(0, n - 1);
+    let wrapped = |i: isize, j: isize| {
+        let c = |x: isize| 2.0 * (x as f32 + 0.5) / n as f32 - 1.0;
+        let (f2, sc, tc) = Face::from_direction(face.direction(c(i), c(j)));
+        let (i2, j2) = face_texel_index(sc, tc, cube.size);
+        cube.texel(f2, i2, j2)
+    };
+    match (inside(i), inside(j)) {
+        (true, true) => cube.texel(face, i as usize, j as usize),
+        (false, false) => {
+            let t = [
+                cube.texel(face, clamp(i) as usize, clamp(j) as usize),
+                wrapped(i, clamp(j)),
+                wrapped(clamp(i), j),
+            ];
+            std::array::from_fn(|k| (t[0][k] + t[1][k] + t[2][k]) / 3.0)
+        }
+        _ => wrapped(i, j),
+    }
+}
+
+fn gl_bilinear(cube: &Cubemap, d: Vec3) -> Rgb {
+    let (face, sc, tc) = Face::from_direction(d);
+    let n = cube.size as f32;
+    let (x, y) = ((sc + 1.0) * 0.5 * n - 0.5, (tc + 1.0) * 0.5 * n - 0.5);
+    let (x0, y0) = (x.floor(), y.floor());
+    let (fx, fy) = (x - x0, y - y0);
+    let (i, j) = (x0 as isize, y0 as isize);
+    let (a, b) = (gl_texel(cube, face, i, j), gl_texel(cube, face, i + 1, j));
+    let (c, e) = (
+        gl_texel(cube, face, i, j + 1),
+        gl_texel(cube, face, i + 1, j + 1),
+    );
+    std::array::from_fn(|k| {
+        let top = a[k] + (b[k] - a[k]) * fx;
+        let bot = c[k] + (e[k] - c[k]) * fx;
+        top + (bot - top) * fy
+    })
+}
+
+/// The custom lookup read through [`gl_corner_read`] (diagnosis), alpha as
+/// [`emulate_custom`]'s.
+pub fn emulate_custom_gl_corners(inputs: &Grid, chain: &CubeMips, lk: &CustomLookup) -> Grid {
+    let sizes: Vec<usize> = chain.levels.iter().map(|l| l.size).collect();
+    let mut data = Vec::with_capacity(inputs.count * 4);
+    for i in 0..inputs.count {
+        let c = inputs.case(i);
+        let d = Vec3::new(c[0], c[1], c[2]);
+        let rgb = gl_corner_read(chain, d, lk.lod(c[3]));
+        let corner = read_touches_corner(&sizes, d, lk.lod(c[3]));
+        data.extend([rgb[0], rgb[1], rgb[2], corner_alpha(corner)]);
+    }
+    Grid::new(Kind::Custom, Role::Outputs, data)
+}
+
+/// GPU against CPU: per case the largest relative difference over R, G, B,
+/// |gpu − cpu| / max(|cpu|, floor), floor = 10⁻³ × the mean |cpu| (black texels do not divide
+/// by zero); a non-finite GPU value counts as infinite.
+#[derive(Clone, Debug, Serialize)]
+pub struct Stats {
+    /// Cases compared.
+    pub count: usize,
+    /// Mean of the per-case relative difference.
+    pub mean: f64,
+    /// Its 99th percentile.
+    pub p99: f64,
+    /// Its maximum.
+    pub max: f64,
+    /// The case of the maximum (index in the grid).
+    pub worst: usize,
+}
+
+/// The comparison, split as the emulation's alpha flags the cases: reads of texels the GL
+/// specification defines, and reads touching a cube-corner texel (implementation-defined).
+#[derive(Clone, Debug, Serialize)]
+pub struct Comparison {
+    /// The denominator's floor.
+    pub floor: f64,
+    /// Cases whose reads touch no cube-corner texel.
+    pub exact: Option<Stats>,
+    /// Cases whose reads touch one.
+    pub corner: Option<Stats>,
+}
+
+fn stats(rel: &[(usize, f64)]) -> Option<Stats> {
+    if rel.is_empty() {
+        return None;
+    }
+    let worst = rel.iter().max_by(|a, b| a.1.total_cmp(&b.1)).unwrap();
+    let mut sorted: Vec<f64> = rel.iter().map(|r| r.1).collect();
+    sorted.sort_by(f64::total_cmp);
+    let k = ((sorted.len() as f64 * 0.99).ceil() as usize).clamp(1, sorted.len()) - 1;
+    Some(Stats {
+        count: rel.len(),
+        mean: sorted.iter().sum::<f64>() / sorted.len() as f64,
+        p99: sorted[k],
+        max: worst.1,
+        worst: worst.0,
+    })
+}
+
+/// Compares the shader's outputs `gpu` with the emulation's `cpu` (same kind, same count).
+pub fn compare(cpu: &Grid, gpu: &Grid, gpu_path: &Path) -> Result<Comparison> {
+    if cpu.kind != gpu.kind || cpu.count != gpu.count || gpu.role != Role::Outputs {
+        return Err(invalid(
+            gpu_path,
+            format!(
+                "{:?} {:?} of {} cases, the emulation has {:?} outputs of {}",
+                gpu.kind, gpu.role, gpu.count, cpu.kind, cpu.count
+            ),
+        ));
+    }
+    let mut sum = 0.0f64;
+    for i in 0..cpu.count {
+        sum += cpu.case(i)[..3].iter().map(|v| v.abs() as f64).sum::<f64>();
+    }
+    let floor = (1e-3 * sum / (3 * cpu.count) as f64).max(f64::MIN_POSITIVE);
+    let (mut exact, mut corner) = (Vec::new(), Vec::new());
+    for i in 0..cpu.count {
+        let (c, g) = (cpu.case(i), gpu.case(i));
+        let rel = (0..3)
+            .map(|k| {
+                if !g[k].is_finite() {
+                    f64::INFINITY
+                } else {
+                    (g[k] as f64 - c[k] as f64).abs() / (c[k].abs() as f64).max(floor)
+                }
+            })
+            .fold(0.0, f64::max);
+        if c[3] == 0.0 {
+            corner.push((i, rel));
+        } else {
+            exact.push((i, rel));
+        }
+    }
+    Ok(Comparison {
+        floor,
+        exact: stats(&exact),
+        corner: stats(&corner),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tmp(name: &str) -> std::path::PathBuf {
+        let d = std::env::temp_dir().join(format!("shader-emulate-{}", std::process::id()));
+        std::fs::create_dir_all(&d).unwrap();
+        d.join(name)
+    }
+
+    /// Inputs and outputs survive the file bit for bit, as JSON (what the page parses: a
+    /// JS number of the shortest f32 form, stored back into a Float32Array).
+    #[test]
+    fn grids_round_trip_through_their_files() {
+        let mut odd = custom_inputs(8, 3);
+        odd.data[0] = f32::MIN_POSITIVE;
+        odd.data[1] = 1.0 + f32::EPSILON;
+        odd.data[2] = -3.4e38;
+        odd.data[5] = 1e-45; // subnormal
+        for g in [odd, aniso_inputs(2)] {
+            let p = tmp(&format!("{:?}.json", g.kind));
+            g.write(&p).unwrap();
+            let back = Grid::read(&p).unwrap();
+            assert_eq!(back.count, g.count);
+            assert!(back
+                .data
+                .iter()
+                .zip(&g.data)
+                .all(|(a, b)| a.to_bits() == b.to_bits()));
+            assert_eq!(back, g);
+            // The JS side: each number parsed as f64 and rounded to f32 is the same float.
+            let v: serde_json::Value =
+                serde_json::from_str(&std::fs::read_to_string(&p).unwrap()).unwrap();
+            for (x, want) in v["data"].as_array().unwrap().iter().zip(&g.data) {
+                assert_eq!((x.as_f64().unwrap() as f32).to_bits(), want.to_bits());
+            }
+        }
+        // The page's outputs: JSON.stringify of a Float32Array's values (f64 printing of f32s).
+        let js = r#"{"format":"ibl-shader-check/1","kind":"custom","role":"outputs","fields":1,"count":1,"data":[0.10000000149011612,3.4028234663852886e+38,1.401298464324817e-45,1]}"#;
+        let p = tmp("gpu.json");
+        std::fs::write(&p, js).unwrap();
+        let g = Grid::read(&p).unwrap();
+        assert_eq!(g.data, vec![0.1f32, f32::MAX, 1e-45, 1.0]);
+    }
+
+    #[test]
+    fn malformed_grids_are_refused_with_one_line() {
+        let good = custom_inputs(4, 2);
+        let p = tmp("bad.json");
+        let mut cases: Vec<(String, String)> = Vec::new();
+        let mut g = good.clone();
+        g.data.pop();
+        cases.push(("short".into(), serde_json::to_string(&g).unwrap()));
+        let mut g = good.clone();
+        g.format = "other/2".into();
+        cases.push(("format".into(), serde_json::to_string(&g).unwrap()));
+        let mut g = good.clone();
+        g.fields = 5;
+        cases.push(("fields".into(), serde_json::to_string(&g).unwrap()));
+        cases.push(("truncated".into(), "{\"format\":".into()));
+        let s = serde_json::to_string(&good)
+            .unwrap()
+            .replacen("\"data\":[", "\"data\":[1e999,", 1);
+        cases.push(("inf".into(), s));
+        for (what, text) in cases {
+            std::fs::write(&p, text).unwrap();
+            let e = Grid::read(&p).unwrap_err().to_string();
+            assert!(e.contains("bad.json") && !e.contains('\n'), "{what}: {e}");
+        }
+    }
+
+    /// The comparison is not a rubber stamp: equal outputs give 0, a 2% error anywhere shows as
+    /// 2%, a NaN as infinite, a mismatched grid is refused.
+    #[test]
+    fn compare_sees_a_wrong_output() {
+        let cpu = Grid::new(
+            Kind::Custom,
+            Role::Outputs,
+            (0..400)
+                .flat_map(|i| [1.0 + i as f32, 0.5, 0.0, 1.0])
+                .collect(),
+        );
+        let p = Path::new("gpu.json");
+        let s = compare(&cpu, &cpu, p).unwrap().exact.unwrap();
+        assert_eq!((s.mean, s.max), (0.0, 0.0));
+        let mut gpu = cpu.clone();
+        gpu.data[4 * 17 + 1] *= 1.02;
+        let s = compare(&cpu, &gpu, p).unwrap().exact.unwrap();
+        assert!((s.max - 0.02).abs() < 1e-6 && s.worst == 17, "{s:?}");
+        gpu.data[4 * 3] = f32::NAN;
+        assert!(compare(&cpu, &gpu, p)
+            .unwrap()
+            .exact
+            .unwrap()
+            .max
+            .is_infinite());
+        // Cases the emulation flags (alpha 0) are reported apart.
+        let mut flagged = cpu.clone();
+        flagged.data[4 * 3 + 3] = 0.0;
+        let c = compare(&flagged, &gpu, p).unwrap();
+        assert!(c.corner.unwrap().max.is_infinite() && c.exact.unwrap().max < 0.03);
+        gpu.data.truncate(8);
+        gpu.count = 2;
+        assert!(compare(&cpu, &gpu, p).is_err());
+    }
+
+    /// The emulation reads the inputs it is given: a lookup of a constant chain returns the
+    /// constant, and the anisotropic method under a constant sky returns F0 × its albedo-like
+    /// E0 (positive, finite), zero below the horizon.
+    #[test]
+    fn emulations_on_constant_environments() {
+        let cube = ibl_core::Cubemap::constant(8, [2.0, 1.0, 0.5]);
+        let mips = CubeMips::build(cube.clone(), 4);
+        let chain = BorderedMips::new(&mips);
+        let lk = CustomLookup::new(0.01, mips.levels.len(), 8);
+        let out = emulate_custom(&custom_inputs(16, 5), &chain, &lk);
+        assert!(out
+            .data
+            .chunks(4)
+            .all(|c| (c[0] - 2.0).abs() < 1e-5 && (c[2] - 0.5).abs() < 1e-5));
+        // The GPU model agrees with the emulation off the corners, and on a constant cube
+        // everywhere (the GL rule: three equal corner samples give that value).
+        let gl = emulate_custom_gl_corners(&custom_inputs(16, 5), &mips, &lk);
+        assert!(gl
+            .data
+            .chunks(4)
+            .zip(out.data.chunks(4))
+            .all(|(a, b)| (a[0] - b[0]).abs() < 1e-5 && a[3] == b[3]));
+        let inp = aniso_inputs(3);
+        let out = emulate_aniso(&inp, &aniso_pyramid(cube));
+        for i in 0..inp.count {
+            let c = out.case(i);
+            assert!(
+                c[..3].iter().all(|v| v.is_finite() && *v > 0.0 && *v < 2.1),
+                "{c:?}"
+            );
+            // Frames are orthonormal and the views above the surface.
+            let x = inp.case(i);
+            let n = Vec3::new(x[0], x[1], x[2]);
+            let t = Vec3::new(x[4], x[5], x[6]);
+            let v = Vec3::new(x[12], x[13], x[14]);
+            assert!(n.dot(t).abs() < 1e-5 && v.dot(n) > 0.3);
+        }
+    }
+
+    /// The diagnostic GPU model and ibl-core's sampler read the same values wherever no
+    /// cube-corner texel is involved, and the corner flag is where they may part.
+    #[test]
+    fn gl_model_matches_the_emulation_off_the_corners() {
+        let cube = Cubemap::from_fn(8, |d| {
+            [
+                d.x.max(0.0) * 3.0 + 0.1,
+                (d.y * 4.0).sin().abs(),
+                0.2 + d.z * d.z,
+            ]
+        });
+        let mips = CubeMips::build(cube, 1);
+        let b = BorderedMips::new(&mips);
+        let sizes = b.sizes();
+        let (mut exact, mut corner, mut parted) = (0, 0, 0);
+        for d in directions(400) {
+            for k in 0..9 {
+                let lod = k as f32 * 0.45;
+                let (e, g) = (b.sample(d, lod), gl_corner_read(&mips, d, lod));
+                let diff = (0..3).map(|c| (e[c] - g[c]).abs()).fold(0.0, f32::max);
+                if read_touches_corner(&sizes, d, lod) {
+                    corner += 1;
+                    parted += (diff > 1e-4) as usize;
+                } else {
+                    exact += 1;
+                    assert!(diff < 1e-5, "{d} lod {lod}: {e:?} vs {g:?}");
+                }
+            }
+        }
+        assert!(
+            exact > 1000 && corner > 300 && parted > 100,
+            "{exact} {corner} {parted}"
+        );
+        assert!(corner_footprint(4, 0.9, -0.8));
+        assert!(!corner_footprint(4, 0.9, 0.0));
+        assert!(corner_footprint(1, 0.0, 0.0));
+        assert!(!corner_footprint(64, 0.97, 0.97));
+    }
+}

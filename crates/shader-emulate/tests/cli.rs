@@ -1,0 +1,149 @@
+//! End-to-end tests of the `shader-emulate` binary: inputs → emulate → compare on small cubes
+//! written here, the gate's exit codes, and one-line refusals of bad files.
+
+use ibl_core::io::{write_image, WriteOptions};
+use ibl_core::{Cubemap, Face, Image};
+use ibl_testkit::{assert_one_line_error, stdout, Bin};
+use shader_emulate::Grid;
+use std::path::Path;
+
+const BIN: Bin = Bin::new(env!("CARGO_BIN_EXE_shader-emulate"), "shader-emulate");
+
+/// Writes `cube`'s faces as `{prefix}{face}.exr` into `dir`.
+fn write_faces(dir: &Path, prefix: &str, cube: &Cubemap) {
+    std::fs::create_dir_all(dir).unwrap();
+    for f in Face::ALL {
+        let n = cube.size;
+        let mut img = Image::new(n, n, 3);
+        for j in 0..n {
+            for i in 0..n {
+                img.texel_mut(i, j).copy_from_slice(&cube.texel(f, i, j));
+            }
+        }
+        let p = dir.join(format!("{prefix}{}.exr", f.name()));
+        write_image(&p, &img, &WriteOptions::default()).unwrap();
+    }
+}
+
+fn sky(n: usize) -> Cubemap {
+    Cubemap::from_fn(n, |d| {
+        [0.2 + d.y.max(0.0), 0.3 + 0.5 * d.x.abs(), 0.1 + d.z * d.z]
+    })
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+#[test]
+fn inputs_emulate_compare_and_the_gate() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // Aniso: a single cube (px.exr …), box-mipped by the tool.
+    write_faces(&d.join("env"), "", &sky(8));
+    let (inp, cpu) = (d.join("in.json"), d.join("cpu.json"));
+    BIN.run_ok(&["inputs", "aniso", "--normals", "2", "-o", s(&inp)]);
+    BIN.run_ok(&[
+        "emulate",
+        s(&inp),
+        "--chain",
+        s(&d.join("env")),
+        "-o",
+        s(&cpu),
+    ]);
+    let g = Grid::read(&cpu).unwrap();
+    assert_eq!(g.count, 2 * 3 * 7 * 5);
+    assert!(g.data.iter().all(|v| v.is_finite()));
+    let ok = BIN.run_ok(&[
+        "compare",
+        s(&cpu),
+        s(&cpu),
+        "--max-mean",
+        "0",
+        "--max-p99",
+        "0",
+    ]);
+    assert!(stdout(&ok).contains(": ok"), "{}", stdout(&ok));
+    // A wrong output fails the gate with exit 1 (not 2: the files are fine).
+    // (A case whose reads touch no cube-corner texel: alpha 1.)
+    let k = (0..g.count).find(|&i| g.case(i)[3] == 1.0).unwrap();
+    let mut bad = g.clone();
+    bad.data[4 * k] *= 1.5;
+    let badp = d.join("bad.json");
+    bad.write(&badp).unwrap();
+    let out = BIN.run(&[
+        "compare",
+        s(&cpu),
+        s(&badp),
+        "--max-mean",
+        "1e-6",
+        "--max-p99",
+        "1e-6",
+    ]);
+    assert_eq!(out.status.code(), Some(1), "{}", stdout(&out));
+    assert!(stdout(&out).contains("FAIL"));
+}
+
+#[test]
+fn custom_emulation_checks_its_sidecar() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let chain = d.join("chain");
+    let mips = ibl_core::CubeMips::build(sky(8), 2);
+    for (l, c) in mips.levels.iter().enumerate() {
+        write_faces(&chain, &format!("m{l}_"), c);
+    }
+    let lk = ibl_prefilter::custom::CustomLookup::new(0.01, mips.levels.len(), 8);
+    let sidecar = d.join("prefilter.json");
+    std::fs::write(
+        &sidecar,
+        serde_json::json!({ "custom_lookup": lk }).to_string(),
+    )
+    .unwrap();
+    let (inp, cpu) = (d.join("in.json"), d.join("cpu.json"));
+    BIN.run_ok(&[
+        "inputs",
+        "custom",
+        "--dirs",
+        "8",
+        "--roughness",
+        "3",
+        "-o",
+        s(&inp),
+    ]);
+    let args = |side: &Path| {
+        vec![
+            "emulate".to_string(),
+            s(&inp).into(),
+            "--chain".into(),
+            s(&chain).into(),
+            "--sidecar".into(),
+            s(side).into(),
+            "-o".into(),
+            s(&cpu).into(),
+        ]
+    };
+    let run = |side: &Path| {
+        let a = args(side);
+        BIN.run(&a.iter().map(String::as_str).collect::<Vec<_>>())
+    };
+    assert!(run(&sidecar).status.success());
+    assert_eq!(Grid::read(&cpu).unwrap().count, (8 + 26) * 3);
+    // A sidecar whose constants are not this chain's lookup is refused before any output.
+    let mut wrong = lk;
+    wrong.scale *= 1.01;
+    let bad = d.join("wrong.json");
+    std::fs::write(
+        &bad,
+        serde_json::json!({ "custom_lookup": wrong }).to_string(),
+    )
+    .unwrap();
+    std::fs::remove_file(&cpu).unwrap();
+    assert_one_line_error(&run(&bad), 2, "wrong.json");
+    assert!(!cpu.exists());
+    // No sidecar, a malformed input grid: one line naming the file, exit 2.
+    let out = BIN.run(&["emulate", s(&inp), "--chain", s(&chain), "-o", s(&cpu)]);
+    assert_one_line_error(&out, 2, "--sidecar");
+    std::fs::write(&inp, "{\"format\":\"ibl-shader-check/1\"").unwrap();
+    assert_one_line_error(&run(&sidecar), 2, "in.json");
+}
