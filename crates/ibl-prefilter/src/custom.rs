@@ -394,9 +394,11 @@ mod tests {
         for a0 in [0.003f32, 0.05] {
             let p = Params {
                 custom_alpha0: Some(a0),
-                ..params(Target::Custom, 16, 3)
+                ..params(Target::Custom, 32, 4)
             };
-            let chain = bake_chain(&p, &Environment::Cube(sky(16)), &NoProgress).unwrap();
+            // Four levels: level 1's coarser neighbour and level 2's both are inner levels,
+            // whose roughness depends on α₀ (a three-level chain's are 0 and 1 whatever α₀).
+            let chain = bake_chain(&p, &Environment::Cube(sky(32)), &NoProgress).unwrap();
             let rl = &chain.report.level_roughness;
             let mut fitted = 0;
             for (l, lv) in chain.report.level.iter().enumerate() {
@@ -408,12 +410,13 @@ mod tests {
                 }
                 let top = fit.neighbours.last().copied().unwrap();
                 assert!(
-                    fit.roughness.iter().all(|r| *r > rl[l - 1] && *r <= top),
+                    fit.roughness.iter().all(|r| *r > rl[l - 1] && *r <= top)
+                        && fit.roughness.iter().any(|r| *r > rl[l]),
                     "a0 {a0} level {l}: nodes {:?} levels {rl:?}",
                     fit.roughness
                 );
             }
-            assert!(fitted > 0, "a0 {a0}: no level fitted");
+            assert_eq!(fitted, 2, "a0 {a0}: levels 1 and 2 fitted");
         }
     }
 
