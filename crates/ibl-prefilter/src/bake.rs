@@ -920,7 +920,7 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
         // With the lookup fit, the kernel at the fit's nodes too, in the same pass (the
         // tree shares its cuts and cell geometry between them).
         let plan = (fits && l < n_baked.min(n_chain - 1))
-            .then(|| fit::plan(params.target.spec().lod, l, n_chain, size, fit::FIT_NODES));
+            .then(|| fit::plan(params.lookup(), l, n_chain, size, fit::FIT_NODES));
         let mut rs = vec![r];
         rs.extend(
             plan.iter()
@@ -992,7 +992,19 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
     reports.truncate(n_written);
     level_seconds.truncate(n_written);
     level_work.truncate(n_written);
-    let levels: Vec<Cubemap> = stages.iter().map(Stage::stored).collect();
+    let mut levels: Vec<Cubemap> = stages.iter().map(Stage::stored).collect();
+    // The custom lookup promises a sun's power at every roughness: that is the power of the
+    // read, which on a small level differs from the texels' (crate::spatial::keep_read_power;
+    // 0.28% on the 4² last level before). Each small level's read is given the source's power.
+    if params.target == Target::Custom {
+        let power = spatial::texel_power(&source);
+        for level in &mut levels {
+            if level.size <= spatial::READ_POWER_MAX_SIZE {
+                let w = spatial::read_weights(level.size);
+                spatial::keep_read_power(level, power, &w);
+            }
+        }
+    }
     for (report, st) in reports.iter_mut().zip(&stages) {
         if let Some((plan, _)) = &st.fitting {
             report.fit = Some(fit::LevelFit::new(plan, &st.values, &st.exact));

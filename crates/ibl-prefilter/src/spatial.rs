@@ -212,6 +212,87 @@ fn solve_pinned(
     v.iter().all(|v| v.is_finite()).then_some(v)
 }
 
+/// Levels of at most this many texels an edge have their read's power kept (the custom target,
+/// [`keep_read_power`]). The read's power differs from the texels' by O(1/n²): on random
+/// texels +0.11% at 4², +0.012% at 8², −0.002% at 16² (`read_weights_give_the_power_of_the_read`),
+/// and a 10⁵ one-texel sun through a 4² last level lost 0.28% at r = 1 (bench/runtime.md); past
+/// 32² the weights would cost more than they change.
+pub const READ_POWER_MAX_SIZE: usize = 32;
+
+/// W_p = ∫ (texel p's weight in the seamless bilinear read) dω over the sphere, for an n×n
+/// cube (face·n² + j·n + i, as [`bilinear_taps`]): the read is linear in the texels, so the
+/// power of what an engine reads of a level is Σ_p W_p v_p, not the texels' Σ_p Ω_p v_p. They
+/// differ because a texel's bilinear tent spreads over its neighbours, whose solid angles
+/// differ (most at the face corners), and past the face edges the taps are re-projected from
+/// the neighbour face. Midpoint rule on a grid at least 256² a face and an even multiple of n,
+/// so the read's kinks (the texel-centre lines) fall on the grid's cell edges and the rule is
+/// exact up to the solid angle's curvature within a cell. Sequential sums: deterministic.
+pub fn read_weights(n: usize) -> Vec<f64> {
+    let k = (256usize.div_ceil(n.max(1))).max(2).next_multiple_of(2);
+    let m = n * k;
+    let sa = solid_angle_table(m);
+    let mut w = vec![0.0f64; 6 * n * n];
+    for face in Face::ALL {
+        for j in 0..m {
+            for i in 0..m {
+                let o = sa[j * m + i] as f64;
+                for (p, wp) in bilinear_taps(n, texel_direction(face, i, j, m)) {
+                    w[p] += o * wp as f64;
+                }
+            }
+        }
+    }
+    w
+}
+
+/// The texels' power per channel, Σ_p Ω_p v_p.
+pub fn texel_power(level: &Cubemap) -> [f64; 3] {
+    let sa = solid_angle_table(level.size);
+    let mut p = [0.0f64; 3];
+    for face in &level.faces {
+        for (t, s) in face.data.chunks_exact(3).zip(&sa) {
+            for c in 0..3 {
+                p[c] += t[c] as f64 * *s as f64;
+            }
+        }
+    }
+    p
+}
+
+/// Rescales each channel of `level` so that the power of its bilinear read, Σ_p W_p v_p with
+/// `w` from [`read_weights`], is `power` (the exact level's texel power, which is the
+/// environment's): then a linear blend of two such levels has that power at every lod in
+/// between, which is the custom lookup's promise of a sun's power at every roughness (issue 26
+/// item 3: 0.1%). One factor per channel and level (within 0.3% of 1 on a 4² level), so no
+/// texel changes sign and a level's shape, fitted to the read and the blend, is kept.
+/// Channels with no power are left as they are.
+pub fn keep_read_power(level: &mut Cubemap, power: [f64; 3], w: &[f64]) {
+    let n = level.size;
+    assert_eq!(w.len(), 6 * n * n, "read weights of this level's size");
+    let mut read = [0.0f64; 3];
+    for (f, face) in level.faces.iter().enumerate() {
+        for (p, t) in face.data.chunks_exact(3).enumerate() {
+            for c in 0..3 {
+                read[c] += w[f * n * n + p] * t[c] as f64;
+            }
+        }
+    }
+    let scale: [f64; 3] = std::array::from_fn(|c| {
+        if read[c] > 0.0 && power[c] > 0.0 && (power[c] / read[c]).is_finite() {
+            power[c] / read[c]
+        } else {
+            1.0
+        }
+    });
+    for face in &mut level.faces {
+        for t in face.data.chunks_exact_mut(3) {
+            for c in 0..3 {
+                t[c] = (t[c] as f64 * scale[c]) as f32;
+            }
+        }
+    }
+}
+
 type Sample = ([(usize, f32); 4], [f32; 3], f64);
 
 /// Solid-angle-weighted mean |read − exact| / exact of luminance at the samples (exact values
@@ -393,6 +474,100 @@ mod tests {
         }
         eprintln!("4×4 read: centre values {e_centres:.5}, fitted {e_fitted:.5}");
         assert!(e_fitted < 0.5 * e_centres, "{e_fitted} vs {e_centres}");
+    }
+
+    /// ∫ read dω of `level` through `Cubemap::sample_bilinear` (not the taps the weights
+    /// use), midpoint rule on an m×m grid a face.
+    fn read_power_by_sampling(level: &Cubemap, m: usize) -> [f64; 3] {
+        let sa = solid_angle_table(m);
+        let mut p = [0.0f64; 3];
+        for face in Face::ALL {
+            for j in 0..m {
+                for i in 0..m {
+                    let v = level.sample_bilinear(texel_direction(face, i, j, m));
+                    for c in 0..3 {
+                        p[c] += v[c] as f64 * sa[j * m + i] as f64;
+                    }
+                }
+            }
+        }
+        p
+    }
+
+    /// The read weights integrate the read: Σ W = 4π, Σ W·v equals the read's power sampled
+    /// through the sampler on another grid, and on a 4² level they differ from the texels'
+    /// solid angles by more than the 0.1% a sun's power must keep (why they exist).
+    #[test]
+    fn read_weights_give_the_power_of_the_read() {
+        for n in [1usize, 2, 4, 8, 16] {
+            let w = read_weights(n);
+            let total: f64 = w.iter().sum();
+            assert!(
+                (total / (4.0 * std::f64::consts::PI) - 1.0).abs() < 1e-5,
+                "n {n}: {total}"
+            );
+            let mut rng = Pcg32::new(n as u64, 3);
+            let mut level = Cubemap::new(n);
+            for face in &mut level.faces {
+                for v in &mut face.data {
+                    *v = rng.next_f32() * 10.0;
+                }
+            }
+            let by_weights: f64 = level
+                .faces
+                .iter()
+                .enumerate()
+                .flat_map(|(f, face)| {
+                    let w = &w;
+                    face.data
+                        .chunks_exact(3)
+                        .enumerate()
+                        .map(move |(p, t)| w[f * n * n + p] * t[0] as f64)
+                })
+                .sum();
+            let sampled = read_power_by_sampling(&level, 480);
+            assert!(
+                (by_weights / sampled[0] - 1.0).abs() < 2e-5,
+                "n {n}: weights {by_weights} sampled {}",
+                sampled[0]
+            );
+            let texels = texel_power(&level)[0];
+            eprintln!(
+                "n {n}: read power / texel power − 1 = {:+.5}%",
+                100.0 * (sampled[0] / texels - 1.0)
+            );
+            if n == 4 {
+                let sa = solid_angle_table(n);
+                let worst = (0..6 * n * n)
+                    .map(|p| (w[p] / sa[p % (n * n)] as f64 - 1.0).abs())
+                    .fold(0.0, f64::max);
+                assert!(worst > 1e-3, "4²: W/Ω − 1 at most {worst}");
+            }
+        }
+    }
+
+    /// After `keep_read_power` the read (sampled through the sampler) has the power asked
+    /// for, per channel, on a level holding a bright texel (a sun) and a dim rest.
+    #[test]
+    fn keep_read_power_sets_the_power_of_the_read() {
+        for n in [2usize, 4, 8] {
+            let mut level = Cubemap::constant(n, [0.05, 0.04, 0.03]);
+            let k = 3 * (n * n / 2 + 1);
+            level.faces[2].data[k..k + 3].copy_from_slice(&[1e5, 5e4, 2e4]);
+            let want = [1.0f64, 2.0, 3.0].map(|x| x * 1000.0);
+            keep_read_power(&mut level, want, &read_weights(n));
+            let got = read_power_by_sampling(&level, 480);
+            for c in 0..3 {
+                assert!(
+                    (got[c] / want[c] - 1.0).abs() < 2e-5,
+                    "n {n} c {c}: {got:?}"
+                );
+            }
+        }
+        // Black stays black.
+        let mut black = Cubemap::new(4);
+        keep_read_power(&mut black, [1.0; 3], &read_weights(4));
+        assert!(black.faces.iter().all(|f| f.data.iter().all(|v| *v == 0.0)));
     }
 
     #[test]
