@@ -88,6 +88,13 @@ pub enum Method {
         /// Taps.
         taps: usize,
     },
+    /// M3c: the shipped method (`crate::ship::shade`): the isotropic split sum at r_iso
+    /// mixed into `fis-N` by the fitted weight w(|η|) (w = 0 at η = 0: exactly the floor).
+    /// N pyramid taps + 1 chain tap (none of the N at η = 0).
+    FisBlend {
+        /// FIS taps.
+        taps: usize,
+    },
     /// M3b: the isotropic split sum corrected by VNDF FIS as a control variate: split sum at
     /// r_iso + FIS(α_t, α_b) − FIS(α_iso, α_iso), both FIS sums over the same N rotated points
     /// (2N pyramid taps + 1 chain tap). At η = 0 the two sums are the same numbers and cancel
@@ -186,6 +193,7 @@ impl Method {
             }
             Method::Fis { taps } => format!("fis-{taps}"),
             Method::Cv { taps } => format!("cv-{taps}"),
+            Method::FisBlend { taps } => format!("fisb-{taps}"),
             Method::AsThesis { taps } => format!("as-thesis-{taps}"),
             Method::AsWeighted { taps } => format!("as-weighted-{taps}"),
         }
@@ -194,7 +202,7 @@ impl Method {
     /// Parses `iso`, `bent-lg18`, `bent-filament`, `bent-khr`, `major-N[-bBETA][-kK][-cC]`, `fis-N`.
     pub fn parse(s: &str) -> Result<Method, String> {
         let bad = || {
-            format!("unknown method '{s}' (iso, bent-lg18, bent-filament, bent-khr, major-N[-bBETA][-kK][-cC], fis-N, cv-N, as-thesis-N, as-weighted-N)")
+            format!("unknown method '{s}' (iso, bent-lg18, bent-filament, bent-khr, major-N[-bBETA][-kK][-cC], fis-N, fisb-N, cv-N, as-thesis-N, as-weighted-N)")
         };
         let taps = |t: &str| -> Result<usize, String> {
             let n: usize = t.parse().map_err(|_| bad())?;
@@ -212,6 +220,9 @@ impl Method {
             _ => {
                 if let Some(rest) = s.strip_prefix("fis-") {
                     return Ok(Method::Fis { taps: taps(rest)? });
+                }
+                if let Some(rest) = s.strip_prefix("fisb-") {
+                    return Ok(Method::FisBlend { taps: taps(rest)? });
                 }
                 if let Some(rest) = s.strip_prefix("cv-") {
                     return Ok(Method::Cv { taps: taps(rest)? });
@@ -257,6 +268,7 @@ impl Method {
             Method::MajorAxis(p) => (p.taps, 1),
             Method::Fis { taps } => (*taps, 0),
             Method::Cv { taps } => (2 * *taps + 1, 1),
+            Method::FisBlend { taps } => (*taps + 1, 1),
             Method::AsThesis { taps } => (*taps, *taps + 1),
             Method::AsWeighted { taps } => (*taps, *taps),
         }
@@ -410,6 +422,12 @@ pub fn evaluate(
             split(acc.map(|c| c * inv), inp.dfg, nv, r_iso)
         }
         Method::Fis { taps } => fis(inp.pyramid, frame, v, at, ab, *taps, seed),
+        Method::FisBlend { taps } => {
+            let l = inp.lookup.radiance(reflect_view(v, n), r_iso, buf);
+            let iso = split(l, inp.dfg, nv, r_iso);
+            let rot = fis_rotation(seed);
+            crate::ship::shade_blend_n(inp.pyramid, frame, v, at, ab, *taps as u32, rot, iso)
+        }
         Method::Cv { taps } => {
             let l = inp.lookup.radiance(reflect_view(v, n), r_iso, buf);
             let base = split(l, inp.dfg, nv, r_iso);
