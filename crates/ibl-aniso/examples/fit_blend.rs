@@ -84,7 +84,7 @@ fn main() {
         (&["sunset_256", "interior_256"], &["city_512", "studio_256"])
     };
     let params = Params {
-        sphere_size: if quick { 12 } else { 20 },
+        sphere_size: if quick { 12 } else { 16 },
         roughness: if quick {
             vec![0.2, 0.6]
         } else {
@@ -93,13 +93,13 @@ fn main() {
         eta: if quick {
             vec![0.0, 0.1, 0.5]
         } else {
-            vec![0.0, 0.05, 0.1, 0.2, 0.3, 0.5, 0.8]
+            vec![0.0, 0.1, 0.2, 0.35, 0.5, 0.8]
         },
         views: vec![30.0],
         elevations: vec![15.0],
         methods: vec!["iso".into(), "fis-16".into()],
         lookup: LookupChoice::Engine,
-        truth_samples: if quick { 16384 } else { 65536 },
+        truth_samples: if quick { 16384 } else { 32768 },
         no_pixels: true,
         ..Default::default()
     };
