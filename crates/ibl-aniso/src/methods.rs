@@ -116,6 +116,15 @@ pub enum Method {
         /// Taps.
         taps: usize,
     },
+    /// M4c: the weighted taps placed and filtered: the N Hammersley points shifted per pixel
+    /// (Cranley–Patterson, as `fis-N`) through the LUT's inverse CDF — equal-mass strata of
+    /// p_h that differ from pixel to pixel instead of one fixed pattern — and each tap read
+    /// from the box pyramid at the filtered-importance-sampling lod of its pdf
+    /// p_l = A·p_h(n)/(4 v·h) (Křivánek & Colbert 2008 eq. 13, +1 bias, as `fis-N`).
+    AsFis {
+        /// Taps.
+        taps: usize,
+    },
 }
 
 /// The Ashikhmin–Shirley tables a lobe's runtime reads, baked in memory by `ibl-lut` exactly
@@ -125,6 +134,9 @@ pub struct AsTables {
     pub hv: ibl_core::Image,
     /// The size/bias table (R = s, G = b) over (u, v) = (2/π·atan|v_y/v_x|, √(n·v)).
     pub size_bias: ibl_core::Image,
+    /// p_h at h = n, √((n_u+1)(n_v+1))/2π: the LUT's A channel times it is p_h (a uniform
+    /// of the shader).
+    pub pdf_h_n: f64,
 }
 
 impl AsTables {
@@ -137,6 +149,7 @@ impl AsTables {
         AsTables {
             hv: ibl_lut::hv::hv_table(&a, hv_size, &p),
             size_bias: ibl_lut::as_size_bias::size_bias_table(&set, 64, &p),
+            pdf_h_n: a.pdf_h_at_normal(),
         }
     }
 
@@ -196,13 +209,14 @@ impl Method {
             Method::FisBlend { taps } => format!("fisb-{taps}"),
             Method::AsThesis { taps } => format!("as-thesis-{taps}"),
             Method::AsWeighted { taps } => format!("as-weighted-{taps}"),
+            Method::AsFis { taps } => format!("as-fis-{taps}"),
         }
     }
 
     /// Parses `iso`, `bent-lg18`, `bent-filament`, `bent-khr`, `major-N[-bBETA][-kK][-cC]`, `fis-N`.
     pub fn parse(s: &str) -> Result<Method, String> {
         let bad = || {
-            format!("unknown method '{s}' (iso, bent-lg18, bent-filament, bent-khr, major-N[-bBETA][-kK][-cC], fis-N, fisb-N, cv-N, as-thesis-N, as-weighted-N)")
+            format!("unknown method '{s}' (iso, bent-lg18, bent-filament, bent-khr, major-N[-bBETA][-kK][-cC], fis-N, fisb-N, cv-N, as-thesis-N, as-weighted-N, as-fis-N)")
         };
         let taps = |t: &str| -> Result<usize, String> {
             let n: usize = t.parse().map_err(|_| bad())?;
@@ -229,6 +243,9 @@ impl Method {
                 }
                 if let Some(rest) = s.strip_prefix("as-thesis-") {
                     return Ok(Method::AsThesis { taps: taps(rest)? });
+                }
+                if let Some(rest) = s.strip_prefix("as-fis-") {
+                    return Ok(Method::AsFis { taps: taps(rest)? });
                 }
                 if let Some(rest) = s.strip_prefix("as-weighted-") {
                     return Ok(Method::AsWeighted { taps: taps(rest)? });
@@ -270,7 +287,7 @@ impl Method {
             Method::Cv { taps } => (2 * *taps + 1, 1),
             Method::FisBlend { taps } => (*taps + 1, 1),
             Method::AsThesis { taps } => (*taps, *taps + 1),
-            Method::AsWeighted { taps } => (*taps, *taps),
+            Method::AsWeighted { taps } | Method::AsFis { taps } => (*taps, *taps),
         }
     }
 
@@ -278,14 +295,17 @@ impl Method {
     pub fn reads_chain(&self) -> bool {
         !matches!(
             self,
-            Method::Fis { .. } | Method::AsThesis { .. } | Method::AsWeighted { .. }
+            Method::Fis { .. }
+                | Method::AsThesis { .. }
+                | Method::AsWeighted { .. }
+                | Method::AsFis { .. }
         )
     }
 
     /// Whether the method renders `mat` (the GGX methods GGX, the thesis route AS).
     pub fn applies_to(&self, mat: &Material) -> bool {
         match self {
-            Method::AsThesis { .. } | Method::AsWeighted { .. } => {
+            Method::AsThesis { .. } | Method::AsWeighted { .. } | Method::AsFis { .. } => {
                 matches!(mat, Material::AshikhminShirley { .. })
             }
             _ => matches!(mat, Material::Ggx { .. }),
@@ -354,6 +374,9 @@ pub fn evaluate(
     {
         let weighted = matches!(method, Method::AsWeighted { .. });
         return as_route(inp.cube, tab, frame, v, *taps, weighted);
+    }
+    if let (Method::AsFis { taps }, Some(tab)) = (method, inp.as_tables) {
+        return as_fis(inp.pyramid, tab, frame, v, *taps, fis_rotation(seed));
     }
     let Some((at, ab)) = mat.ggx_alphas() else {
         return ([0.0; 3], [0.0; 3]);
@@ -439,7 +462,9 @@ pub fn evaluate(
             };
             (cv(base.0, an.0, is.0), cv(base.1, an.1, is.1))
         }
-        Method::AsThesis { .. } | Method::AsWeighted { .. } => ([0.0; 3], [0.0; 3]),
+        Method::AsThesis { .. } | Method::AsWeighted { .. } | Method::AsFis { .. } => {
+            ([0.0; 3], [0.0; 3])
+        }
     }
 }
 
@@ -487,6 +512,54 @@ fn as_route(
         let (s, b) = tab.size_bias_at(vl);
         (e0.map(|c| c * inv * (s + b)), e0.map(|c| c * inv * b))
     }
+}
+
+/// `as-fis-N`: Ashikhmin–Shirley by the baked half-vector LUT, stratified per pixel and
+/// filtered. Taps h from the LUT at the rotated Hammersley point (bilinear: the inverse CDF of
+/// p_h, so each of the N cells of the point set holds 1/N of p_h's mass), l = reflect(v, h),
+/// weight F(v·h)(n·l)/max(n·v, n·l) (exact p_h importance sampling), the box pyramid read at
+/// lod ½(log2(1/(N p_l)) − log2 Ω_texel) + 1 with p_l = A·p_h(n)/(4 v·h).
+fn as_fis(
+    pyr: &BorderedMips,
+    tab: &AsTables,
+    frame: &Frame,
+    v: Vec3,
+    taps: usize,
+    rotation: glam::Vec2,
+) -> E01 {
+    let vl = frame.to_local(v).normalize();
+    let (mut e0, mut e1) = (Vec3::ZERO, Vec3::ZERO);
+    if vl.z <= 0.0 || taps == 0 {
+        return ([0.0; 3], [0.0; 3]);
+    }
+    let n = taps as u32;
+    let log2_sa = pyr.base_log2_texel_solid_angle();
+    let max_lod = pyr.max_lod() as f32;
+    for i in 0..n {
+        let (x1, x2) = hammersley(i, n);
+        let u = glam::Vec2::new(x1, x2) + rotation;
+        let u = u - u.floor();
+        let (h, a) = ibl_lut::hv::lookup(&tab.hv, u.x as f64, u.y as f64);
+        let h = h.as_vec3().normalize();
+        let vh = vl.dot(h);
+        let l = 2.0 * vh * h - vl;
+        if vh <= 0.0 || l.z <= 0.0 {
+            continue;
+        }
+        let pl = (a * tab.pdf_h_n) as f32 / (4.0 * vh);
+        let lod = if pl > 0.0 {
+            (0.5 * (-(n as f32 * pl).log2() - log2_sa) + 1.0).clamp(0.0, max_lod)
+        } else {
+            max_lod
+        };
+        let c = Vec3::from(pyr.sample(frame.to_world(l), lod));
+        let w = l.z / vl.z.max(l.z);
+        let chi = (1.0 - vh.min(1.0)).powi(5);
+        e0 += w * c;
+        e1 += w * chi * c;
+    }
+    let inv = 1.0 / n as f32;
+    ((e0 * inv).into(), (e1 * inv).into())
 }
 
 /// VNDF filtered importance sampling (`fis-N`): the shipped method's emulation
@@ -617,6 +690,25 @@ mod tests {
     }
 
     #[test]
+    fn as_fis_pdf_from_the_lut_is_the_exact_p_h() {
+        // The lod of as-fis-N reads p_h as the LUT's A channel times p_h(n): check it against
+        // ibl-brdf's closed form at the LUT's own taps (bilinear: a few percent at most).
+        for (nu, nv) in [(100.0, 10.0), (20.0, 700.0)] {
+            let tab = AsTables::bake(nu, nv, 128);
+            let a = ibl_brdf::AshikhminShirley::new(nu, nv);
+            let mut worst = 0.0f64;
+            for i in 0..64u32 {
+                let (x1, x2) = hammersley(i, 64);
+                let (h, q) = ibl_lut::hv::lookup(&tab.hv, x1 as f64, x2 as f64);
+                let h = h.normalize();
+                let exact = a.pdf_h(h);
+                worst = worst.max((q * tab.pdf_h_n - exact).abs() / exact.max(1e-9));
+            }
+            assert!(worst < 0.1, "({nu}, {nv}): {worst}");
+        }
+    }
+
+    #[test]
     fn as_routes_agree_with_each_other_and_the_truth_under_a_constant_environment() {
         let cube = Cubemap::constant(8, [1.0; 3]);
         let (lookup, dfg, pyr) = inputs_const();
@@ -661,6 +753,11 @@ mod tests {
             );
             // As written, the thesis's E0 is (s + b): the same expectation as M4b's weight.
             assert!((a.0[0] - b.0[0]).abs() < 0.01, "{a:?} {b:?}");
+            // Stratified, filtered taps: the same estimator (the pyramid of a constant is
+            // constant), so the same expectation.
+            let c = evaluate(&Method::AsFis { taps: 256 }, &inp, &f, v, &mat, 1, &mut buf);
+            assert!((c.0[0] - b.0[0]).abs() < 0.01, "{c:?} {b:?}");
+            assert!((c.1[0] - b.1[0]).abs() < 0.005, "{c:?} {b:?}");
             assert!(
                 (b.0[0] as f64 - t.e0[0]).abs() < 0.02 + 4.0 * t.se0[0],
                 "{b:?} {t:?}"

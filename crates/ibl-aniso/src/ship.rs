@@ -60,7 +60,8 @@ pub const SHIPPED: Shipped = Shipped {
     lod_bias: 1.0,
     schlick_power: 5.0,
     alpha_min: 1e-3,
-    blend_eta: 0.3,
+    // bench/aniso-blend.md: the training optimum over η₁ ∈ {0.02 … 1} × p ∈ {0.5, 1, 2}.
+    blend_eta: 0.6,
     blend_power: 1.0,
 };
 
