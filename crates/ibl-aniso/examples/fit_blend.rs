@@ -256,8 +256,8 @@ fn main() {
         let mut se = 0.0f64;
         for (t, e) in d.truth.iter().zip(est) {
             let c = t.radiance(1.0);
-            for k in 0..3 {
-                se += (e.0[k] as f64 - c[k]).powi(2);
+            for (x, y) in e.0.iter().zip(c) {
+                se += (*x as f64 - y).powi(2);
             }
         }
         se / (3 * d.truth.len()).max(1) as f64
