@@ -124,6 +124,9 @@ pub enum Method {
     AsFis {
         /// Taps.
         taps: usize,
+        /// Added to the lod (`as-fis-N`: 1, Křivánek & Colbert's; `as-fis-N-bB`: B); `None`
+        /// reads the raw cube bilinearly (`as-strat-N`: the stratification alone).
+        bias: Option<f32>,
     },
 }
 
@@ -209,7 +212,11 @@ impl Method {
             Method::FisBlend { taps } => format!("fisb-{taps}"),
             Method::AsThesis { taps } => format!("as-thesis-{taps}"),
             Method::AsWeighted { taps } => format!("as-weighted-{taps}"),
-            Method::AsFis { taps } => format!("as-fis-{taps}"),
+            Method::AsFis { taps, bias } => match bias {
+                None => format!("as-strat-{taps}"),
+                Some(b) if *b == 1.0 => format!("as-fis-{taps}"),
+                Some(b) => format!("as-fis-{taps}-b{b}"),
+            },
         }
     }
 
@@ -245,7 +252,26 @@ impl Method {
                     return Ok(Method::AsThesis { taps: taps(rest)? });
                 }
                 if let Some(rest) = s.strip_prefix("as-fis-") {
-                    return Ok(Method::AsFis { taps: taps(rest)? });
+                    let (n, bias) = match rest.split_once("-b") {
+                        Some((n, b)) => (
+                            n,
+                            b.parse::<f32>()
+                                .ok()
+                                .filter(|b| b.is_finite() && b.abs() <= 8.0)
+                                .ok_or_else(bad)?,
+                        ),
+                        None => (rest, 1.0),
+                    };
+                    return Ok(Method::AsFis {
+                        taps: taps(n)?,
+                        bias: Some(bias),
+                    });
+                }
+                if let Some(rest) = s.strip_prefix("as-strat-") {
+                    return Ok(Method::AsFis {
+                        taps: taps(rest)?,
+                        bias: None,
+                    });
                 }
                 if let Some(rest) = s.strip_prefix("as-weighted-") {
                     return Ok(Method::AsWeighted { taps: taps(rest)? });
@@ -287,7 +313,7 @@ impl Method {
             Method::Cv { taps } => (2 * *taps + 1, 1),
             Method::FisBlend { taps } => (*taps + 1, 1),
             Method::AsThesis { taps } => (*taps, *taps + 1),
-            Method::AsWeighted { taps } | Method::AsFis { taps } => (*taps, *taps),
+            Method::AsWeighted { taps } | Method::AsFis { taps, .. } => (*taps, *taps),
         }
     }
 
@@ -375,8 +401,9 @@ pub fn evaluate(
         let weighted = matches!(method, Method::AsWeighted { .. });
         return as_route(inp.cube, tab, frame, v, *taps, weighted);
     }
-    if let (Method::AsFis { taps }, Some(tab)) = (method, inp.as_tables) {
-        return as_fis(inp.pyramid, tab, frame, v, *taps, fis_rotation(seed));
+    if let (Method::AsFis { taps, bias }, Some(tab)) = (method, inp.as_tables) {
+        let rot = fis_rotation(seed);
+        return as_fis(inp.pyramid, tab, frame, v, *taps, *bias, rot);
     }
     let Some((at, ab)) = mat.ggx_alphas() else {
         return ([0.0; 3], [0.0; 3]);
@@ -525,6 +552,7 @@ fn as_fis(
     frame: &Frame,
     v: Vec3,
     taps: usize,
+    bias: Option<f32>,
     rotation: glam::Vec2,
 ) -> E01 {
     let vl = frame.to_local(v).normalize();
@@ -547,10 +575,10 @@ fn as_fis(
             continue;
         }
         let pl = (a * tab.pdf_h_n) as f32 / (4.0 * vh);
-        let lod = if pl > 0.0 {
-            (0.5 * (-(n as f32 * pl).log2() - log2_sa) + 1.0).clamp(0.0, max_lod)
-        } else {
-            max_lod
+        let lod = match bias {
+            None => 0.0,
+            Some(_) if pl <= 0.0 => max_lod,
+            Some(b) => (0.5 * (-(n as f32 * pl).log2() - log2_sa) + b).clamp(0.0, max_lod),
         };
         let c = Vec3::from(pyr.sample(frame.to_world(l), lod));
         let w = l.z / vl.z.max(l.z);
@@ -755,7 +783,8 @@ mod tests {
             assert!((a.0[0] - b.0[0]).abs() < 0.01, "{a:?} {b:?}");
             // Stratified, filtered taps: the same estimator (the pyramid of a constant is
             // constant), so the same expectation.
-            let c = evaluate(&Method::AsFis { taps: 256 }, &inp, &f, v, &mat, 1, &mut buf);
+            let fis = Method::parse("as-fis-256").unwrap();
+            let c = evaluate(&fis, &inp, &f, v, &mat, 1, &mut buf);
             assert!((c.0[0] - b.0[0]).abs() < 0.01, "{c:?} {b:?}");
             assert!((c.1[0] - b.1[0]).abs() < 0.005, "{c:?} {b:?}");
             assert!(
@@ -783,6 +812,16 @@ mod tests {
         );
         assert_eq!(Method::parse("fis-32").unwrap(), Method::Fis { taps: 32 });
         assert_eq!(Method::parse("cv-8").unwrap(), Method::Cv { taps: 8 });
+        for n in [
+            "as-fis-32",
+            "as-fis-32-b0",
+            "as-fis-16-b-1",
+            "as-strat-32",
+            "fisb-16",
+        ] {
+            assert_eq!(Method::parse(n).unwrap().name(), n);
+        }
+        assert!(Method::parse("as-fis-32-bx").is_err() && Method::parse("as-fis-32-b99").is_err());
         assert_eq!(Method::Cv { taps: 8 }.taps(), (17, 1));
         for bad in ["major-0", "major-x", "fis-", "bent", "major-4-q1"] {
             assert!(Method::parse(bad).is_err(), "{bad}");
