@@ -28,6 +28,9 @@
 //! Note on eq. 13: the chapter's pdf is that of the *light* direction (p_l = p_h/(4 v·h)); with
 //! visible normals p_h = D G1(v) (v·m)/(n·v), so p_l = D G1(v)/(4 n·v) — the v·h cancels. Using
 //! D(m)(n·m)/(4 v·h) (their GGX sampler's pdf) with VNDF taps would mis-size every tap.
+//! Reading, not corrected: Ω_p is one texel's *mean* solid angle 4π/(6 size²); on a cube a
+//! face-centre texel is 1.91× that and a corner texel 0.37×, so the lod is ~0.47 levels high at
+//! face centres and ~0.72 low at corners.
 
 use crate::methods::E01;
 use crate::scene::Frame;
