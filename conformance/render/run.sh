@@ -96,7 +96,10 @@ for name in $FIXTURES; do
 	job babylon "$d/babylon-own" "{\"route\":\"ownenv\",\"hdr\":\"$u/$name.hdr\",\"rotationY\":270}"
 	job babylon "$d/babylon-ours" "{\"route\":\"ours\",\"env\":\"$u/babylon/environment.env\",\"note\":\"$u/babylon/LOAD.txt\",\"rotationY\":270}"
 	# The Sample Renderer: its own .hdr route and our KTX2 cubes in one page (one filtering).
-	job gltf "[\"$d/gltf-own\",\"$d/gltf-ours\"]" "{\"routes\":[\"own\",\"ours\"],\"libPath\":\"/$R/node_modules/@khronosgroup/gltf-viewer/dist/libs/\",\"sheenLut\":\"/$R/build/sheen-lut.png\",\"glb\":\"/$R/build/spheres-camera.glb\",\"hdr\":\"$u/$name.hdr\",\"specular\":\"$u/gltf/prefilter.ktx2\",\"diffuse\":\"$u/gltf-irr/irradiance.ktx2\",\"environmentRotation\":${GLTF_ROTATION:-90}}"
+	# environmentRotation 0 (the viewer's default is 90, "front face +Z"): at 90 its own route
+	# shows city_512 turned 90° about +Y against the reference (measured on the mirror sphere);
+	# at 0 its panorama-to-cube mapping is our convention, and our cubes agree with it.
+	job gltf "[\"$d/gltf-own\",\"$d/gltf-ours\"]" "{\"routes\":[\"own\",\"ours\"],\"libPath\":\"/$R/node_modules/@khronosgroup/gltf-viewer/dist/libs/\",\"sheenLut\":\"/$R/build/sheen-lut.png\",\"glb\":\"/$R/build/spheres-camera.glb\",\"hdr\":\"$u/$name.hdr\",\"specular\":\"$u/gltf/prefilter.ktx2\",\"diffuse\":\"$u/gltf-irr/irradiance.ktx2\",\"environmentRotation\":${GLTF_ROTATION:-0}}"
 done
 {
 	echo "["

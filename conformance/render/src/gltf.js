@@ -63,7 +63,9 @@ run(async () => {
   rp.renderEnvironmentMap = false;
   rp.clearColor = [0, 0, 0, 0];
   // environmentRotation: degrees about +Y (the viewer's default is 90, "front face +Z"); the
-  // page's value makes its own route show the world as our convention maps the panorama.
+  // page's value (run.sh: 0, where its own route shows the world as our convention maps the
+  // panorama: u_EnvRotation = rotateY(environmentRotation) turns every lookup direction,
+  // source/Renderer/environment_renderer.js and renderer.js) applies to both routes alike.
   rp.environmentRotation = params.environmentRotation ?? 90;
   // Its own route: the .hdr filtered by its iblSampler (also makes the BRDF LUT both use).
   // lutFiles: the viewer reads its sheen albedo LUT from its app's assets/ (not in the npm
