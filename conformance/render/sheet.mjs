@@ -62,6 +62,7 @@ function main(argv) {
   const font = loadFont();
   const imgs = rows.map((r) => r.cells.map((c) => {
     const [p, caption = ""] = c.split("|");
+    if (p !== "-" && !fs.existsSync(p)) return { im: null, caption: "not rendered", path: p };
     return { im: p === "-" ? null : readPfm(p), caption, path: p };
   }));
   const first = imgs.flat().find((c) => c.im);

@@ -14,14 +14,13 @@ const read = (p) => (fs.existsSync(p) ? JSON.parse(fs.readFileSync(p, "utf8")) :
 const pct = (x) => (x === undefined || x === null ? "—" : (100 * x).toFixed(2));
 const cell = (c, g) => (c ? `${pct(c.groups[g].mean)} / ${pct(c.groups[g].p95)}` : "—");
 const gate = (c) => {
-  if (!c) return "—";
-  const parts = [];
-  for (const [g, v] of Object.entries(c.max || {})) parts.push(`${g} ${pct(v)}`);
-  for (const [g, v] of Object.entries(c.maxP95 || {})) parts.push(`${g} p95 ${pct(v)}`);
-  return parts.length ? parts.join(", ") : "report only";
+  if (!c || !c.max || !Object.keys(c.max).length) return "—";
+  const g = (k) => (c.max[k] === undefined ? "—" : pct(c.max[k]));
+  const q = (k) => (c.maxP95?.[k] === undefined ? "—" : pct(c.maxP95[k]));
+  return `${g("met-mirror")} / ${g("met-rough")} / ${g("diel-rough")} (p95 ${q("met-mirror")} / ${q("met-rough")} / ${q("diel-rough")})`;
 };
 const lines = [
-  "| engine | fixture | ours: metal mirror | ours: metal rough | ours: dielectric rough | own route: metal mirror | own route: metal rough | own route: dielectric rough | gate on ours (mean %) |",
+  "| engine | fixture | ours: metal mirror | ours: metal rough | ours: dielectric rough | own route: metal mirror | own route: metal rough | own route: dielectric rough | gate on ours, mean % mirror / rough / diel (p95) |",
   "|---|---|---|---|---|---|---|---|---|",
 ];
 for (const [e, name] of ENGINES) {
