@@ -3,10 +3,10 @@
 //! mirror (r = 0), metallic rough (r ≥ 0.2), dielectric mirror, dielectric rough — the mean
 //! relative luminance error |a − ref| / max(ref, eps) and its 95th percentile.
 //!
-//! usage: node compare.mjs REF.pfm A.pfm [--label NAME] [--max GROUP=MEAN ...] [--json OUT]
-//!          [--patches MIN]
+//! usage: node compare.mjs REF.pfm A.pfm [--label NAME] [--max GROUP=MEAN ...]
+//!          [--max-p95 GROUP=P95 ...] [--json OUT] [--patches MIN]
 //!   GROUP: met-mirror | met-rough | diel-mirror | diel-rough | all. Exits 1 when a group's mean
-//!   is above its --max (or, with --patches, when fewer than MIN of the metallic mirror sphere's
+//!   is above its --max or its 95th percentile above its --max-p95 (or, with --patches, when fewer than MIN of the metallic mirror sphere's
 //!   coloured pixels carry the reference's hue: the orientation panorama's ±X ±Y ±Z patches
 //!   seen where the reference sees them), 2 on bad input.
 import fs from "node:fs";
@@ -70,16 +70,16 @@ export function patchAgreement(ref, a) {
 }
 
 function main(argv) {
-  const pos = [], max = {};
+  const pos = [], max = {}, maxP95 = {};
   let label = null, json = null, patches = null;
   for (let k = 0; k < argv.length; k++) {
     if (argv[k] === "--label") label = argv[++k];
     else if (argv[k] === "--json") json = argv[++k];
     else if (argv[k] === "--patches") patches = +argv[++k];
-    else if (argv[k] === "--max") {
-      const [g, v] = argv[++k].split("=");
-      if (![...GROUPS, "all"].includes(g) || !(+v >= 0)) throw new Error(`--max ${argv[k]}: GROUP=MEAN with GROUP one of ${GROUPS.join(", ")}, all`);
-      max[g] = +v;
+    else if (argv[k] === "--max" || argv[k] === "--max-p95") {
+      const flag = argv[k], [g, v] = argv[++k].split("=");
+      if (![...GROUPS, "all"].includes(g) || !(+v >= 0)) throw new Error(`${flag} ${argv[k]}: GROUP=VALUE with GROUP one of ${GROUPS.join(", ")}, all`);
+      (flag === "--max" ? max : maxP95)[g] = +v;
     } else pos.push(argv[k]);
   }
   if (pos.length !== 2) throw new Error("usage: node compare.mjs REF.pfm A.pfm [--label NAME] [--max GROUP=MEAN ...] [--json OUT]");
@@ -92,10 +92,12 @@ function main(argv) {
   const pct = (x) => (100 * x).toFixed(2).padStart(7) + "%";
   const cells = GROUPS.map((g) => `${g} ${pct(r.groups[g].mean)} p95 ${pct(r.groups[g].p95)}`);
   console.log(`${(label || aPath).padEnd(28)} ${cells.join("  ")}`);
-  if (json) fs.writeFileSync(json, JSON.stringify({ label, ref: refPath, image: aPath, ...r }, null, 1));
+  if (json) fs.writeFileSync(json, JSON.stringify({ label, ref: refPath, image: aPath, max, maxP95, ...r }, null, 1));
   const over = Object.entries(max).filter(([g, m]) => !(r.groups[g].mean <= m));
   for (const [g, m] of over) console.error(`${label || aPath}: ${g} mean error ${pct(r.groups[g].mean)} is above ${pct(m)} (vs ${refPath})`);
-  let bad = over.length > 0;
+  const overP95 = Object.entries(maxP95).filter(([g, m]) => !(r.groups[g].p95 <= m));
+  for (const [g, m] of overP95) console.error(`${label || aPath}: ${g} p95 error ${pct(r.groups[g].p95)} is above ${pct(m)} (vs ${refPath})`);
+  let bad = over.length > 0 || overP95.length > 0;
   if (patches !== null) {
     const f = patchAgreement(ref, a);
     console.log(`${(label || aPath).padEnd(28)} orientation patches: ${pct(f)} of the mirror sphere's coloured pixels agree`);

@@ -3,11 +3,17 @@
 //! material (baseColor 1, metallic 1 top row / 0 bottom row, roughness i/5). For engines whose
 //! web build loads geometry only through glTF (Filament's npm build ships no material
 //! compiler: gltfio's ubershaders are its materials; the glTF Sample Renderer).
-//! usage: node spheres-glb.mjs OUT.glb
+//! With --camera D, also the contract's camera as a glTF orthographic camera (camera 0) at
+//! (0, 0, D) looking down −z (xmag 6, ymag 2), for viewers that draw through a glTF camera (the
+//! Sample Renderer): D large, because its shader takes V = normalize(camera − position) even
+//! for an orthographic camera, and the contract's V is (0, 0, 1).
+//! usage: node spheres-glb.mjs [--camera D] OUT.glb
 import fs from "node:fs";
 import { COLS, ROUGH } from "./lib.mjs";
 
-const out = process.argv[2];
+const args = process.argv.slice(2);
+const camD = args[0] === "--camera" ? +args[1] : null;
+const out = camD === null ? args[0] : args[2];
 const R = 0.9, SEG = 160, RINGS = 80;
 const pos = [], nrm = [], idx = [];
 for (let j = 0; j <= RINGS; j++) {
@@ -53,6 +59,11 @@ const gltf = {
     { bufferView: 2, componentType: 5125, count: I.length, type: "SCALAR" },
   ],
 };
+if (camD !== null) {
+  gltf.cameras = [{ type: "orthographic", orthographic: { xmag: 6, ymag: 2, znear: camD - 10, zfar: camD + 10 } }];
+  gltf.nodes.push({ name: "camera", camera: 0, translation: [0, 0, camD] });
+  gltf.scenes[0].nodes.push(gltf.nodes.length - 1);
+}
 let json = Buffer.from(JSON.stringify(gltf));
 json = Buffer.concat([json, Buffer.alloc((4 - (json.length % 4)) % 4, 0x20)]);
 const head = Buffer.alloc(12), jh = Buffer.alloc(8), bh = Buffer.alloc(8);

@@ -45,6 +45,11 @@ export function finish(w, h, rgba) {
   window.__result = { w, h, b64: b64(new Uint8Array(rgba.buffer, rgba.byteOffset, rgba.byteLength)) };
 }
 
+/** Hands several read-backs of one page (one per route, in the job's `outs` order). */
+export function finishAll(w, h, list) {
+  window.__results = list.map((rgba) => ({ w, h, b64: b64(new Uint8Array(rgba.buffer, rgba.byteOffset, rgba.byteLength)) }));
+}
+
 /** Runs `main`, reporting any failure to the driver. */
 export function run(main) {
   main().catch((e) => {
