@@ -131,11 +131,20 @@ fn scans(b: &[u8]) -> Vec<(usize, usize, u8, u8)> {
 #[test]
 fn every_progressive_scan_cut_short_is_refused() {
     let mut kinds = std::collections::BTreeSet::new();
-    let progressive: Vec<_> = seeds("jpeg")
+    let mut progressive: Vec<_> = seeds("jpeg")
         .into_iter()
         .filter(|(p, _)| p.to_string_lossy().contains("progressive"))
         .collect();
     assert_eq!(progressive.len(), 3);
+    // And a natural image (a normal map's colours, 256x128), whose refinement scans have
+    // long runs and end-of-band runs: whole, it decodes.
+    for name in ["progressive", "progressive-restart"] {
+        let p = ibl_testkit::fixture(&format!("jpeg/normals-0003-{name}.jpg"));
+        let b = std::fs::read(&p).unwrap();
+        let img = decode_image(Path::new("a.jpg"), &b, ColorSpace::Linear).unwrap();
+        assert_eq!((img.width, img.height), (256, 128));
+        progressive.push((p, b));
+    }
     for (p, b) in progressive {
         for (n, &(start, end, ss, ah)) in scans(&b).iter().enumerate() {
             let kind = match (ss > 0, ah > 0) {
