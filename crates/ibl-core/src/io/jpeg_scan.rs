@@ -282,7 +282,9 @@ pub(crate) fn check(path: &Path, b: &[u8]) -> Result<()> {
                     )?);
                     nonzero[k] = vec![0u64; n as usize];
                 }
-                if !comps.is_empty() && !(progressive && ss > 0 && !ac_band) {
+                // A progressive AC scan of several components is invalid: left to the decoder.
+                let walkable = !comps.is_empty() && (!progressive || ss == 0 || ac_band);
+                if walkable {
                     let walk = Scan {
                         comps: &comps,
                         scan: &scan,
