@@ -7,7 +7,7 @@ mod owned;
 #[cfg(feature = "pipeline")]
 mod pipeline;
 
-pub use images::{exr, hdr, jpeg, ktx2, png, run_image_target, IMAGE_TARGETS};
+pub use images::{container, exr, hdr, jpeg, png, run_image_target, IMAGE_TARGETS};
 pub use owned::{budget, ownership, Counting};
 #[cfg(feature = "pipeline")]
 pub use pipeline::pipeline;
