@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Fuzzes every input parser for a bounded time: `make fuzz`, or `scripts/fuzz.sh [TARGET...]`
-# (targets: exr hdr png jpeg ktx2 zstd dds ktx1 pipeline; default all).
+# (targets: exr hdr png jpeg ktx2 zstd dds ktx1 pipeline ownership budget; default all).
 #
 #   FUZZ_SECONDS=60     time per target
 #   FUZZ_ENGINE=auto    auto: cargo-fuzz (libFuzzer, coverage-guided) when it builds, else the
@@ -17,7 +17,7 @@ cd "$(dirname "$0")/.."
 SECS=${FUZZ_SECONDS:-60}
 ENGINE=${FUZZ_ENGINE:-auto}
 RSS=${FUZZ_RSS_MB:-4096}
-ALL=(exr hdr png jpeg ktx2 zstd dds ktx1 pipeline)
+ALL=(exr hdr png jpeg ktx2 zstd dds ktx1 pipeline ownership budget)
 if [ $# -gt 0 ]; then TARGETS=("$@"); else TARGETS=("${ALL[@]}"); fi
 for t in "${TARGETS[@]}"; do
     case " ${ALL[*]} " in *" $t "*) ;; *) echo "fuzz: unknown target '$t' (${ALL[*]})" >&2; exit 2 ;; esac
@@ -48,6 +48,9 @@ builtin() {
     if [ "$t" = pipeline ]; then
         FUZZ_SECONDS=$SECS FUZZ_TARGETS=$t cargo test --release --manifest-path fuzz/Cargo.toml \
             --test mutation -- --ignored mutation_fuzz_long --nocapture >"$log" 2>&1
+    elif [ "$t" = ownership ] || [ "$t" = budget ]; then
+        FUZZ_SECONDS=$SECS FUZZ_TARGETS=$t cargo test -p ibl-core --test fuzz_owned \
+            -- --ignored mutation_fuzz_long --nocapture >"$log" 2>&1
     else
         FUZZ_SECONDS=$SECS FUZZ_TARGETS=$t cargo test -p ibl-core --test fuzz_regressions \
             -- --ignored mutation_fuzz_long --nocapture >"$log" 2>&1

@@ -3,15 +3,26 @@
 
 mod images;
 pub mod mutate;
+mod owned;
 #[cfg(feature = "pipeline")]
 mod pipeline;
 
-pub use images::{exr, hdr, jpeg, ktx2, png, run_image_target, IMAGE_TARGETS};
+pub use images::{container, exr, hdr, jpeg, png, run_image_target, IMAGE_TARGETS};
+pub use owned::{budget, ownership, Counting};
 #[cfg(feature = "pipeline")]
 pub use pipeline::pipeline;
 
 /// Every target, in the order `scripts/fuzz.sh` runs them.
-pub const TARGETS: [&str; 6] = ["exr", "hdr", "png", "jpeg", "ktx2", "pipeline"];
+pub const TARGETS: [&str; 8] = [
+    "exr",
+    "hdr",
+    "png",
+    "jpeg",
+    "ktx2",
+    "pipeline",
+    "ownership",
+    "budget",
+];
 
 /// Runs the target called `name` on `data` (the pipeline target only with that feature).
 pub fn run_target(name: &str, data: &[u8]) {
@@ -20,6 +31,8 @@ pub fn run_target(name: &str, data: &[u8]) {
         "pipeline" => pipeline(data),
         #[cfg(not(feature = "pipeline"))]
         "pipeline" => {}
+        "ownership" => ownership(data),
+        "budget" => budget(data),
         _ => run_image_target(name, data),
     }
 }

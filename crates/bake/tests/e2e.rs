@@ -32,9 +32,7 @@ impl Work {
     }
     fn cmd(&self, args: &[&str]) -> Command {
         let mut c = Command::new(env!("CARGO_BIN_EXE_bake"));
-        c.args(args)
-            .current_dir(self.dir.path())
-            .env_remove("IBL_BAKE_TEST_DELAY_MS");
+        c.args(args).current_dir(self.dir.path());
         c
     }
     fn bake(&self, args: &[&str]) -> Output {
@@ -566,16 +564,18 @@ fn a_failing_stage_blocks_its_dependants_and_lets_the_others_finish() {
     assert_eq!(ids_with(&st, "ran"), ["b1", "b2"]);
 }
 
-/// A chain of three stages, each slowed down before its commit by the test hook.
+/// Three stages, the middle one slow by its real work (a brute-force prefiltered chain of
+/// 128² faces from a 64² cube: seconds of CPU), so a run can be interrupted while it bakes.
+/// No test hook in the shipped binary slows it down.
 fn slow_chain() -> Work {
     let w = Work::new();
     std::fs::copy(root().join("fixtures/hdri/studio_256.exr"), w.path("a.exr")).unwrap();
     w.write(
         "slow.ron",
         r#"(output: "out", inputs: {"a": File("a.exr")}, stages: [
-            (id: "s1", kind: "equirect-to-cube", reads: ["a"], params: (size: 16)),
-            (id: "s2", kind: "equirect-to-cube", reads: ["s1"], params: (size: 8)),
-            (id: "s3", kind: "equirect-to-cube", reads: ["s2"], params: (size: 4)),
+            (id: "s1", kind: "equirect-to-cube", reads: ["a"], params: (size: 64)),
+            (id: "s2", kind: "prefilter", reads: ["s1"], params: (size: 128, reference: true)),
+            (id: "s3", kind: "equirect-to-cube", reads: ["s1"], params: (size: 4)),
         ])"#,
     );
     w
@@ -608,10 +608,9 @@ fn no_temporaries(dir: &Path) {
 #[test]
 fn an_interrupted_run_leaves_only_complete_outputs_and_the_next_run_resumes() {
     let w = slow_chain();
-    // Ctrl-C (SIGINT) while s2 is between its bake and its commit.
+    // Ctrl-C (SIGINT) while s2 bakes.
     let mut child = w
         .cmd(&["run", "slow.ron", "--jobs", "1", "--quiet"])
-        .env("IBL_BAKE_TEST_DELAY_MS", "1500")
         .spawn()
         .unwrap();
     wait_for_stage_in_manifest(&w, "s1", &mut child);
@@ -648,20 +647,23 @@ fn an_interrupted_run_leaves_only_complete_outputs_and_the_next_run_resumes() {
 
     // SIGKILL (no handler can run) in the middle of a forced run: the outputs in place are
     // whole files, and the next run takes over the stale lock and finishes.
-    let before: Vec<Vec<u8>> = ["out/s2/px.exr", "out/s3/px.exr"]
+    let before: Vec<Vec<u8>> = ["out/s2/m0_px.exr", "out/s3/px.exr"]
         .iter()
         .map(|f| std::fs::read(w.path(f)).unwrap())
         .collect();
     std::fs::remove_dir_all(w.path("out/s3")).unwrap();
     let mut child = w
         .cmd(&["run", "slow.ron", "--jobs", "1", "--quiet", "--force"])
-        .env("IBL_BAKE_TEST_DELAY_MS", "1500")
         .spawn()
         .unwrap();
-    std::thread::sleep(Duration::from_millis(2000));
+    // s1 takes milliseconds, s2 seconds: the kill lands in s2 (or s1), before s3 commits.
+    std::thread::sleep(Duration::from_millis(500));
     child.kill().unwrap();
     child.wait().unwrap();
-    assert_eq!(std::fs::read(w.path("out/s2/px.exr")).unwrap(), before[0]);
+    assert_eq!(
+        std::fs::read(w.path("out/s2/m0_px.exr")).unwrap(),
+        before[0]
+    );
     no_temporaries(&w.path("out"));
     let st = w.run_ok("slow.ron", &[]);
     assert_eq!(st["s3"], "restored", "{st:?}");

@@ -26,7 +26,6 @@ fn run(bin: &Path, args: &[&str], cwd: &Path) -> Output {
     Command::new(bin)
         .args(args)
         .current_dir(cwd)
-        .env_remove("IBL_BAKE_TEST_DELAY_MS")
         .output()
         .unwrap()
 }
@@ -409,4 +408,56 @@ fn bake_takes_the_memory_budget_of_every_tool() {
     assert!(d.join("scratch/px.exr").is_file());
     let o = run(&bake, &["run", "p.ron", "--max-memory", "lots"], d);
     assert_one_line_error(&o, 2, "not a size");
+}
+
+#[test]
+fn a_pipelines_max_memory_is_its_budget_and_the_flag_wins() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    pipeline(d);
+    std::fs::write(d.join("notes.txt"), b"mine").unwrap();
+    let with = |budget: &str| {
+        std::fs::read_to_string(d.join("p.ron")).unwrap().replacen(
+            "(output: \".\",",
+            &format!("(output: \".\", max_memory: {budget},"),
+            1,
+        )
+    };
+    std::fs::write(d.join("m.ron"), with("\"64K\"")).unwrap();
+    let bake = tool("bake");
+    // The file's 64 KiB budget refuses the 384 KiB sky before decoding it, naming the budget.
+    let o = run(&bake, &["run", "m.ron", "-q"], d);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    let err = stderr(&o);
+    let lines: Vec<&str> = err.lines().filter(|l| l.contains("error")).collect();
+    assert_eq!(lines.len(), 1, "one error line: {err}");
+    assert!(
+        lines[0].contains("stage 'cube'")
+            && lines[0].contains("over the memory budget of 65 kB")
+            && lines[0].contains("sky.hdr"),
+        "{err}"
+    );
+    assert!(!d.join("scratch/px.exr").exists(), "nothing of the cube");
+    // The command line's budget wins over the file's.
+    let o = run(&bake, &["run", "m.ron", "-q", "--max-memory", "1G"], d);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(d.join("scratch/px.exr").is_file());
+    // A number of bytes is a size too; nonsense is refused at its place in the file.
+    std::fs::write(d.join("n.ron"), with("65536")).unwrap();
+    let o = run(&bake, &["run", "n.ron", "-q", "--force"], d);
+    assert!(
+        stderr(&o).contains("over the memory budget of 65 kB"),
+        "{}",
+        stderr(&o)
+    );
+    std::fs::write(d.join("bad.ron"), with("\"lots\"")).unwrap();
+    let o = run(&bake, &["plan", "bad.ron"], d);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    let err = stderr(&o);
+    assert!(
+        err.lines().next().unwrap().contains("bad.ron:1:")
+            && err.contains("max_memory: 'lots' is not a size"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read(d.join("notes.txt")).unwrap(), b"mine");
 }

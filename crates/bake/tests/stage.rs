@@ -12,7 +12,6 @@ fn bake(dir: &Path, args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_bake"))
         .args(args)
         .current_dir(dir)
-        .env_remove("IBL_BAKE_TEST_DELAY_MS")
         .output()
         .unwrap()
 }

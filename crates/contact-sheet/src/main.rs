@@ -1,9 +1,9 @@
 //! `contact-sheet`: parse, read the baked outputs, lay them out with `ibl_preview`, write
-//! the PNG atomically, report.
+//! the PNG atomically (only over a sheet it wrote: `ibl_core::ownership`), report.
 
 use clap::Parser;
-use ibl_core::io::{self, WriteOptions};
-use ibl_core::Error;
+use ibl_core::io::{self, OutputKind, WriteOptions};
+use ibl_core::{ownership, Error};
 use std::path::PathBuf;
 
 /// A labelled PNG contact sheet of baked outputs: the environment cube as a horizontal cross,
@@ -16,7 +16,8 @@ struct Cli {
     /// .ktx2/.ktx/.dds cube or a LUT image.
     #[arg(required = true)]
     inputs: Vec<PathBuf>,
-    /// The sheet (.png).
+    /// The sheet (.png). An existing file is replaced only if contact-sheet wrote it, bytes
+    /// unchanged (the `.ibl-outputs.json` beside it records it), or with `--overwrite`.
     #[arg(short, long)]
     output: PathBuf,
     /// Exposure in stops on top of the automatic one (log-average luminance → 0.18).
@@ -48,6 +49,16 @@ fn main() {
         if !(16..=2048).contains(&cli.height) {
             return Err(Error::param("--height must be within 16..=2048"));
         }
+        // Before any work: the sheet's folder is a place for outputs, and the sheet is ours to
+        // replace (absent, or written by us with its bytes unchanged) unless --overwrite.
+        let dir = ibl_cli::record_dir(&cli.output, OutputKind::File);
+        ownership::check_output_folder(&dir, "-o", false)?;
+        io::check_output(&cli.output, OutputKind::File)?;
+        ownership::check_writes(
+            &dir,
+            std::slice::from_ref(&cli.output),
+            cli.common.overwrite,
+        )?;
         let mut assets = Vec::new();
         for input in &cli.inputs {
             assets.extend(ibl_preview::assets::discover(input)?);
@@ -74,6 +85,7 @@ fn main() {
         };
         let bytes = io::encode_image(&cli.output, &sheet, &opts)?;
         io::write_atomic(&cli.output, &bytes)?;
+        ibl_cli::record_outputs("contact-sheet", &dir, &[(cli.output.clone(), bytes)])?;
         Ok::<_, Error>((
             vec![cli.output.display().to_string()],
             serde_json::json!({

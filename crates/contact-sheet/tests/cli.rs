@@ -203,3 +203,56 @@ fn missing_garbled_or_mismatched_inputs_fail_in_one_line_and_write_nothing() {
     let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
     assert_eq!(left.len(), 3, "only the inputs remain: {left:?}");
 }
+
+/// Issue 24: `-o` replaces only a sheet contact-sheet wrote (recorded in `.ibl-outputs.json`
+/// beside it, bytes unchanged); a user's file of that name, or a sheet edited since, is refused
+/// before any work and survives byte for byte; `--overwrite` replaces it; a second run over
+/// its own sheet (as `make demo` does) just works.
+#[test]
+fn the_sheet_replaces_only_its_own_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("out");
+    tree(&root);
+    let sheet = dir.path().join("sheets/sheet.png");
+    std::fs::create_dir_all(sheet.parent().unwrap()).unwrap();
+    let flags = ["--height", "16", "--no-spheres", "-q"];
+    // A user's file named like the sheet.
+    std::fs::write(&sheet, b"my drawing").unwrap();
+    let line = BIN.refused_bake(&root, &sheet, &flags, 2, "sheet.png");
+    assert!(
+        line.contains("was not written by this tool") && line.contains("--overwrite"),
+        "{line}"
+    );
+    assert_eq!(std::fs::read(&sheet).unwrap(), b"my drawing");
+    assert!(!sheet.with_file_name(".ibl-outputs.json").exists());
+    // --overwrite: the user means it; the sheet is then recorded as ours.
+    let mut forced = flags.to_vec();
+    forced.push("--overwrite");
+    BIN.bake(&root, &sheet, &forced);
+    let first = std::fs::read(&sheet).unwrap();
+    assert_ne!(first, b"my drawing");
+    let record: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(sheet.with_file_name(".ibl-outputs.json")).unwrap())
+            .unwrap();
+    assert_eq!(
+        record["files"]["sheet.png"].as_str().unwrap(),
+        ibl_core::ownership::hash_bytes(&first)
+    );
+    // Its own sheet: a second run replaces it without a flag (make demo runs it twice).
+    BIN.bake(&root, &sheet, &flags);
+    assert_eq!(std::fs::read(&sheet).unwrap(), first);
+    // Edited since: refused, the edit kept.
+    let mut edited = first.clone();
+    edited.extend_from_slice(b"edit");
+    std::fs::write(&sheet, &edited).unwrap();
+    let line = BIN.refused_bake(&root, &sheet, &flags, 2, "sheet.png");
+    assert!(line.contains("changed since"), "{line}");
+    assert_eq!(std::fs::read(&sheet).unwrap(), edited);
+    // A symlink where the sheet goes is never written through, --overwrite or not.
+    let target = dir.path().join("elsewhere.png");
+    std::fs::write(&target, b"not yours").unwrap();
+    let link = dir.path().join("sheets/link.png");
+    std::os::unix::fs::symlink(&target, &link).unwrap();
+    BIN.refused_bake(&root, &link, &forced, 2, "symlink");
+    assert_eq!(std::fs::read(&target).unwrap(), b"not yours");
+}

@@ -233,8 +233,9 @@ pub struct EncodedCube {
     pub warnings: Vec<String>,
 }
 
-/// Encodes a cube (or chain) for `dir`: faces are `px.exr`… (one level) or `m{l}_px.exr`…
-/// (a chain), a container `dir/<name>.<ext>`. `metadata` goes into KTX1/KTX2 key/value data.
+/// Encodes a cube for `dir`: faces are `px.exr`… (one level; a cube with mips is named as a
+/// chain), a container `dir/<name>.<ext>`. `metadata` goes into KTX1/KTX2 key/value data.
+/// A prefiltered chain uses [`encode_chain`], whose faces carry the level whatever the count.
 pub fn encode_cube(
     dir: &Path,
     mips: &CubeMips,
@@ -242,10 +243,34 @@ pub fn encode_cube(
     name: &str,
     metadata: &[(String, Vec<u8>)],
 ) -> Result<EncodedCube> {
+    encode(dir, mips, enc, name, metadata, mips.levels.len() > 1)
+}
+
+/// Encodes a mip chain for `dir`: faces are `m{l}_px.exr`… for every level, a one-level chain
+/// too (`m0_px.exr`: a reader tells a chain from a cube by the name, not by counting), a
+/// container `dir/<name>.<ext>`. `metadata` goes into KTX1/KTX2 key/value data.
+pub fn encode_chain(
+    dir: &Path,
+    mips: &CubeMips,
+    enc: &Encoding,
+    name: &str,
+    metadata: &[(String, Vec<u8>)],
+) -> Result<EncodedCube> {
+    encode(dir, mips, enc, name, metadata, true)
+}
+
+fn encode(
+    dir: &Path,
+    mips: &CubeMips,
+    enc: &Encoding,
+    name: &str,
+    metadata: &[(String, Vec<u8>)],
+    chain: bool,
+) -> Result<EncodedCube> {
     let (payload, levels) = texture::encode_chain(mips, enc.format, enc.bc6h_quality);
     let files = match (enc.layout.codec(), enc.layout.container_path(dir, name)) {
         (Some(codec), Some(path)) => vec![(path, codec.encode(&payload, enc.zstd, metadata)?)],
-        _ => encode_faces(dir, mips, enc.format)?,
+        _ => encode_faces(dir, mips, enc.format, chain)?,
     };
     let clamped: usize = levels.iter().map(|l| l.clamped).sum();
     let mut warnings = Vec::new();
@@ -284,6 +309,7 @@ fn encode_faces(
     dir: &Path,
     mips: &CubeMips,
     format: PixelFormat,
+    chain: bool,
 ) -> Result<Vec<(PathBuf, Vec<u8>)>> {
     use rayon::prelude::*;
     let opts = WriteOptions {
@@ -294,7 +320,6 @@ fn encode_faces(
         },
         ..Default::default()
     };
-    let chain = mips.levels.len() > 1;
     let jobs: Vec<(PathBuf, &Image)> = mips
         .levels
         .iter()
@@ -312,13 +337,28 @@ fn encode_faces(
 
 /// Paths [`encode_cube`] writes for a cube of `levels` levels (for planning and cleaning).
 pub fn cube_output_paths(dir: &Path, levels: usize, layout: Layout, name: &str) -> Vec<PathBuf> {
+    output_paths(dir, levels, layout, name, levels > 1)
+}
+
+/// Paths [`encode_chain`] writes for a chain of `levels` levels (for planning and cleaning).
+pub fn chain_output_paths(dir: &Path, levels: usize, layout: Layout, name: &str) -> Vec<PathBuf> {
+    output_paths(dir, levels, layout, name, true)
+}
+
+fn output_paths(
+    dir: &Path,
+    levels: usize,
+    layout: Layout,
+    name: &str,
+    chain: bool,
+) -> Vec<PathBuf> {
     match layout.container_path(dir, name) {
         Some(p) => vec![p],
         None => (0..levels)
             .flat_map(|l| {
                 Face::ALL
                     .iter()
-                    .map(move |f| dir.join(face_name(l, levels > 1, *f)))
+                    .map(move |f| dir.join(face_name(l, chain, *f)))
             })
             .collect(),
     }
@@ -513,5 +553,39 @@ mod tests {
         assert!(!stale
             .iter()
             .any(|p| p.ends_with("other.ktx2") || p.ends_with("notes.txt")));
+    }
+
+    #[test]
+    fn a_chain_names_its_level_whatever_the_count() {
+        use crate::cube::Cubemap;
+        let one = CubeMips {
+            levels: vec![Cubemap::new(2)],
+        };
+        let names = |files: &[(PathBuf, Vec<u8>)]| -> Vec<String> {
+            files
+                .iter()
+                .map(|f| f.0.file_name().unwrap().to_string_lossy().into_owned())
+                .collect()
+        };
+        let d = Path::new("out");
+        let enc = Encoding::default();
+        let chain = encode_chain(d, &one, &enc, "prefilter", &[]).unwrap();
+        assert_eq!(names(&chain.files)[0], "m0_px.exr");
+        assert!(names(&chain.files).iter().all(|n| n.starts_with("m0_")));
+        let paths: Vec<PathBuf> = chain.files.iter().map(|f| f.0.clone()).collect();
+        assert_eq!(paths, chain_output_paths(d, 1, Layout::Faces, "prefilter"));
+        // A cube stays a cube: px.exr…
+        let cube = encode_cube(d, &one, &enc, "cube", &[]).unwrap();
+        assert_eq!(names(&cube.files)[0], "px.exr");
+        assert_eq!(
+            cube.files.iter().map(|f| f.0.clone()).collect::<Vec<_>>(),
+            cube_output_paths(d, 1, Layout::Faces, "cube")
+        );
+        // …and the one-level chain reads back as a chain of one level.
+        let dir = tempfile::tempdir().unwrap();
+        let chain = encode_chain(dir.path(), &one, &enc, "prefilter", &[]).unwrap();
+        io::write_many_atomic(&chain.files).unwrap();
+        let back = crate::envmap::read_cube_chain(dir.path()).unwrap();
+        assert_eq!(back, one);
     }
 }

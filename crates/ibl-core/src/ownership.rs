@@ -74,6 +74,23 @@ pub fn resolve(p: &Path) -> PathBuf {
     }
 }
 
+/// `p` as the operating system walks it when the file is opened: like [`resolve`], except that
+/// a `..` is taken *after* the symlinks before it (`out/link/..` is the parent of where `link`
+/// points, not `out`), which is what `open(2)` does with a path that is not normalized.
+fn resolve_walked(p: &Path) -> PathBuf {
+    let abs = std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
+    let comps: Vec<Component> = abs.components().collect();
+    for n in (1..=comps.len()).rev() {
+        let prefix: PathBuf = comps[..n].iter().collect();
+        if let Ok(mut out) = std::fs::canonicalize(&prefix) {
+            // The rest does not exist yet: its folders will be created as real folders.
+            out.extend(&comps[n..]);
+            return normalize(&out);
+        }
+    }
+    normalize(&abs)
+}
+
 /// Folders no bake writes into, nor anywhere under them.
 const SYSTEM_TREES: &[&str] = &[
     "/bin", "/boot", "/dev", "/etc", "/lib", "/lib32", "/lib64", "/libx32", "/proc", "/sbin",
@@ -149,8 +166,22 @@ pub fn check_inside(file: &Path, dir: &Path) -> Result<()> {
             ),
         ));
     }
-    // The folder the file goes into, resolved: a symlink on the way must stay inside.
+    if file.file_name().is_none() {
+        return Err(Error::invalid(
+            file,
+            "does not end in a file name: an output is a file inside the output folder",
+        ));
+    }
+    // The folder the file goes into, resolved: a symlink on the way must stay inside, both
+    // for the path normalized and as the system walks the path as given (`link/../x.json`
+    // goes where `link` points, then up).
     let parent_resolved = resolve(lexical.parent().unwrap_or(Path::new("/")));
+    let walked = resolve_walked(file.parent().unwrap_or(Path::new("/")));
+    let parent_resolved = if parent_resolved.starts_with(&rd) {
+        walked
+    } else {
+        parent_resolved
+    };
     if !parent_resolved.starts_with(&rd) {
         return Err(Error::invalid(
             file,
@@ -337,6 +368,18 @@ mod tests {
             std::os::unix::fs::symlink(elsewhere.join("f"), out.join("px.exr")).unwrap();
             let e = check_inside(&out.join("px.exr"), &out).unwrap_err();
             assert!(e.to_string().contains("is a symlink"), "{e}");
+            // `..` after a link is taken where the link points (found while writing the
+            // `ownership` fuzz target): `out/deep/../sh.json` is `elsewhere/sh.json` to open(2).
+            std::fs::create_dir_all(elsewhere.join("deep")).unwrap();
+            std::os::unix::fs::symlink(elsewhere.join("deep"), out.join("deep")).unwrap();
+            let e = check_inside(&out.join("deep/../sh.json"), &out).unwrap_err();
+            assert!(e.to_string().contains("through a symlink"), "{e}");
+            // Without a link on the way, `..` inside the folder is fine.
+            std::fs::create_dir_all(out.join("sub")).unwrap();
+            check_inside(&out.join("sub/../sh.json"), &out).unwrap();
+            check_inside(&out.join("new/../sh.json"), &out).unwrap();
+            let e = check_inside(&out.join("sub/x/.."), &out).unwrap_err();
+            assert!(e.to_string().contains("file name"), "{e}");
         }
     }
 

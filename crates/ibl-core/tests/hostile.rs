@@ -103,6 +103,88 @@ fn scan_data_cut_out_is_refused_in_every_mode() {
     }
 }
 
+/// Each scan of a file: (its entropy-coded data's start and end, Ss, Ah).
+fn scans(b: &[u8]) -> Vec<(usize, usize, u8, u8)> {
+    let mut out = Vec::new();
+    let mut k = 2;
+    while k + 3 < b.len() {
+        if b[k] == 0xFF && b[k + 1] == 0xDA {
+            let len = u16::from_be_bytes([b[k + 2], b[k + 3]]) as usize;
+            let ns = b[k + 4] as usize;
+            let (ss, ah) = (b[k + 5 + 2 * ns], b[k + 7 + 2 * ns] >> 4);
+            let start = k + 2 + len;
+            let end = (start..b.len() - 1)
+                .find(|&j| b[j] == 0xFF && b[j + 1] != 0 && !(0xD0..=0xD7).contains(&b[j + 1]))
+                .unwrap();
+            out.push((start, end, ss, ah));
+            k = end;
+        } else {
+            k += 1;
+        }
+    }
+    out
+}
+
+/// Issue 24: every scan of libjpeg-turbo's progressive files (DC first, DC refinement, AC
+/// first, AC refinement), cut short at several points with every marker after it kept (the
+/// file still ends in EOI), is refused by the scan walk in one line, before decoding.
+#[test]
+fn every_progressive_scan_cut_short_is_refused() {
+    let mut kinds = std::collections::BTreeSet::new();
+    let mut progressive: Vec<_> = seeds("jpeg")
+        .into_iter()
+        .filter(|(p, _)| p.to_string_lossy().contains("progressive"))
+        .collect();
+    assert_eq!(progressive.len(), 3);
+    // And a natural image (a normal map's colours, 256x128), whose refinement scans have
+    // long runs and end-of-band runs: whole, it decodes.
+    for name in ["progressive", "progressive-restart"] {
+        let p = ibl_testkit::fixture(&format!("jpeg/normals-0003-{name}.jpg"));
+        let b = std::fs::read(&p).unwrap();
+        let img = decode_image(Path::new("a.jpg"), &b, ColorSpace::Linear).unwrap();
+        assert_eq!((img.width, img.height), (256, 128));
+        progressive.push((p, b));
+    }
+    for (p, b) in progressive {
+        for (n, &(start, end, ss, ah)) in scans(&b).iter().enumerate() {
+            let kind = match (ss > 0, ah > 0) {
+                (false, false) => "DC first",
+                (false, true) => "DC refinement",
+                (true, false) => "AC first",
+                (true, true) => "AC refinement",
+            };
+            kinds.insert(kind);
+            let len = end - start;
+            let mut keeps = vec![0, len / 4, len / 2, 3 * len / 4, len - 1];
+            keeps.dedup();
+            for keep in keeps {
+                let mut x = b[..start + keep].to_vec();
+                // A cut right after a 0xFF byte would leave half a stuffed pair.
+                if x.last() == Some(&0xFF) {
+                    x.pop();
+                }
+                x.extend(&b[end..]);
+                let e = decode_image(Path::new("a.jpg"), &x, ColorSpace::Linear)
+                    .err()
+                    .unwrap_or_else(|| {
+                        panic!(
+                            "{} scan {n} ({kind}) cut to {keep} of {len} bytes decoded",
+                            p.display()
+                        )
+                    })
+                    .to_string();
+                assert!(
+                    e.starts_with("a.jpg: truncated or corrupt JPEG: its scan data ends")
+                        && !e.contains('\n'),
+                    "{} scan {n} ({kind}) cut to {keep} of {len}: {e}",
+                    p.display()
+                );
+            }
+        }
+    }
+    assert_eq!(kinds.len(), 4, "{kinds:?}");
+}
+
 /// A PNG whose IDAT stream stops early but which still ends in IEND (CRCs recomputed): the
 /// structure check passes, the inflated rows are short, the decoder must fail.
 #[test]

@@ -173,6 +173,12 @@ pub fn main() -> ! {
 }
 
 fn run(cli: Cli) -> Result<i32, Error> {
+    // The pipeline's `max_memory` applies where the command line names no budget.
+    let file_budget = |graph: &Graph| {
+        if let (None, Some(m)) = (cli.max_memory, graph.pipeline.max_memory) {
+            ibl_core::io::budget::set_max_memory(m);
+        }
+    };
     match cli.cmd {
         Cmd::Kinds { json } => {
             print_kinds(json);
@@ -243,6 +249,7 @@ fn run(cli: Cli) -> Result<i32, Error> {
             quiet,
         } => {
             let graph = crate::load(&file)?;
+            file_budget(&graph);
             let session = exec::Session::open(&graph)?;
             let plan = crate::plan::plan(&graph, force)?;
             // Before any stage runs: nothing of the user's is in the way.

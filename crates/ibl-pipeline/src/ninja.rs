@@ -99,7 +99,7 @@ pub fn emit(graph: &Graph, ninja_file: &Path, bin_dir: &Path) -> Result<String> 
                 Source::Stage(j) => ins.extend(outputs_of[*j].iter().cloned()),
             }
         }
-        let commands = match kind.argv(params, &args, &s.dir, &rel) {
+        let mut commands = match kind.argv(params, &args, &s.dir, &rel) {
             Ok(a) => a,
             Err(e) => {
                 diags.push(Diagnostic::global(
@@ -109,6 +109,12 @@ pub fn emit(graph: &Graph, ninja_file: &Path, bin_dir: &Path) -> Result<String> 
                 continue;
             }
         };
+        // The pipeline's budget goes to every CLI (each takes --max-memory).
+        if let Some(m) = graph.pipeline.max_memory {
+            for argv in &mut commands {
+                argv.extend(["--max-memory".to_string(), m.to_string()]);
+            }
+        }
         // Ninja has no escape for a line break (`$` + newline continues the line): refused.
         let broken = outs
             .iter()
@@ -173,6 +179,23 @@ mod tests {
         assert_eq!(shell_quote("it's"), "'it'\\''s'");
         assert_eq!(shell_quote(""), "''");
         assert_eq!(esc_path(Path::new("a b/c:d$")), "a$ b/c$:d$$");
+    }
+
+    #[test]
+    fn the_pipelines_budget_reaches_every_command() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("p.ron");
+        let src = r#"(max_memory: "64K", stages: [(id: "dfg", kind: "dfg", params: (size: 8))])"#;
+        let graph = crate::graph::build(crate::schema::parse(&file, src.into()).unwrap()).unwrap();
+        assert_eq!(graph.pipeline.max_memory, Some(65536));
+        let text = emit(&graph, &dir.path().join("build.ninja"), Path::new("/b")).unwrap();
+        let cmd = text.lines().find(|l| l.contains("cmd = ")).unwrap();
+        assert!(cmd.ends_with("--max-memory 65536"), "{cmd}");
+        // Without the key, no flag (each CLI takes its default).
+        let src = r#"(stages: [(id: "dfg", kind: "dfg", params: (size: 8))])"#;
+        let graph = crate::graph::build(crate::schema::parse(&file, src.into()).unwrap()).unwrap();
+        let text = emit(&graph, &dir.path().join("build.ninja"), Path::new("/b")).unwrap();
+        assert!(!text.contains("--max-memory"));
     }
 
     #[test]

@@ -9,6 +9,7 @@
 //!         (id: "cube", kind: "equirect-to-cube", reads: ["sky"], params: (size: 64)),
 //!     ],
 //!     outputs: ["cube"],                      // optional: what the pipeline is for
+//!     max_memory: "2G",                       // optional: the memory budget (`--max-memory` wins)
 //!     scene: (probes: [...], materials: [...], params: {"prefilter": (...)}),   // optional
 //! )
 //! ```
@@ -181,6 +182,9 @@ pub struct Pipeline {
     pub targets: Option<Vec<(String, usize)>>,
     /// The scene, if any.
     pub scene: Option<Scene>,
+    /// `max_memory: "2G"`: the memory budget of a run (as `--max-memory`, which wins over it),
+    /// in bytes.
+    pub max_memory: Option<u64>,
 }
 
 impl Pipeline {
@@ -207,6 +211,16 @@ struct RawPipeline<'a> {
     outputs: Option<Vec<String>>,
     #[serde(default, borrow)]
     scene: Option<&'a RawValue>,
+    #[serde(default)]
+    max_memory: Option<Size>,
+}
+
+/// A size as `--max-memory` takes it: `"512M"`, `"8G"`, or a number of bytes.
+#[derive(Deserialize)]
+#[serde(untagged)]
+enum Size {
+    Bytes(u64),
+    Text(String),
 }
 
 #[derive(Deserialize)]
@@ -463,6 +477,25 @@ pub fn parse(file: &Path, src: String) -> Result<Pipeline> {
     let scene = raw
         .scene
         .and_then(|s| parse_scene(file, &src, s, &mut diags));
+    let max_memory = match raw.max_memory {
+        None => None,
+        Some(Size::Bytes(b)) if b > 0 => Some(b),
+        Some(size) => {
+            let text = match size {
+                Size::Bytes(b) => b.to_string(),
+                Size::Text(t) => t,
+            };
+            match ibl_core::io::budget::parse_size(&text) {
+                Ok(b) => Some(b),
+                Err(e) => {
+                    let at = quoted.get(text.as_str()).copied();
+                    let at = at.or_else(|| src.find("max_memory")).unwrap_or(0);
+                    diags.push(Diagnostic::at(file, &src, at, format!("max_memory: {e}")));
+                    None
+                }
+            }
+        }
+    };
     if !diags.is_empty() {
         return Err(Error::Invalid(diags));
     }
@@ -476,6 +509,7 @@ pub fn parse(file: &Path, src: String) -> Result<Pipeline> {
         stages,
         targets,
         scene,
+        max_memory,
     })
 }
 

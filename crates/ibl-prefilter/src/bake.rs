@@ -718,7 +718,7 @@ pub fn run(
     if let Some(lk) = &chain.report.custom_lookup {
         metadata.extend(lk.metadata(&chain.report.level_roughness));
     }
-    let encoded = output::encode_cube(out_dir, &oriented, &enc, params.chain_name(), &metadata)?;
+    let encoded = output::encode_chain(out_dir, &oriented, &enc, params.chain_name(), &metadata)?;
     chain.report.encoding = Some(output::encoding_report(&enc, &encoded.levels));
     chain.warnings.extend(encoded.warnings);
     // Babylon loads the `.env` alone: the chain's own files (EXR faces) would be strays.
@@ -797,7 +797,7 @@ pub fn output_paths(params: &Params, out_dir: &Path) -> Result<Vec<PathBuf>> {
     let mut p = if params.target == Target::Babylon {
         Vec::new()
     } else {
-        output::cube_output_paths(
+        output::chain_output_paths(
             out_dir,
             params.written_levels(),
             enc.layout,

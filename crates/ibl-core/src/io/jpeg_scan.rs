@@ -6,13 +6,21 @@
 //!
 //! The walk follows ITU-T T.81: markers (B.1), frame and scan headers (B.2), Huffman tables
 //! (B.2.4.2, C), the sequential block coding (F.1.2: a DC difference category and its bits,
-//! then run/size AC symbols to EOB) and progressive first scans (G.1.2: DC first, DC
-//! refinement at one bit a block, AC first with end-of-band runs); restart intervals (B.2.4.4)
-//! reset the bit reader. AC refinement scans (G.1.2.3) depend on which coefficients earlier
-//! scans made non-zero, so they are skipped here (the marker walk still requires them
-//! whole). It also refuses, before decoding, a sequential file too short for its header: a
-//! block costs at least 2 bits (a DC code and an EOB code), so a 662-byte file cannot hold the
-//! 4 million blocks of 16384².
+//! then run/size AC symbols to EOB) and every progressive scan (G.1.2: DC first, DC
+//! refinement at one bit a block, AC first with end-of-band runs, AC refinement); restart
+//! intervals (B.2.4.4) reset the bit reader. An AC refinement scan (G.1.2.3) carries one
+//! correction bit for each coefficient earlier scans made non-zero, so the walk keeps, per
+//! block, a 64-bit mask of the coefficients the AC scans so far made non-zero (8 bytes a
+//! block, reserved against the memory budget). It also refuses, before decoding, a file too
+//! short for its header: a sequential block costs at least 2 bits (a DC code and an EOB code),
+//! a progressive one at least 1 (its DC code in the DC first scan), so a 662-byte file cannot
+//! hold the 4 million blocks of 16384².
+//!
+//! Bit order of a refinement block (T.81 G.1.2.3, as libjpeg `jdphuff.c` decode_mcu_AC_refine
+//! reads it): the RS symbol, the new coefficient's sign bit, then a correction bit for each
+//! non-zero coefficient passed on the way to it; a ZRL passes 16 zero coefficients (the
+//! non-zero ones in between do not count), and an EOB run leaves a correction bit for each
+//! non-zero coefficient of the rest of the band in every block it covers.
 
 use crate::error::{Error, Result};
 use std::path::Path;
@@ -172,6 +180,9 @@ pub(crate) fn check(path: &Path, b: &[u8]) -> Result<()> {
     let mut comps: Vec<Component> = Vec::new();
     let (mut width, mut height, mut progressive) = (0usize, 0usize, false);
     let mut restart = 0usize;
+    // Per component, per block: the AC coefficients progressive scans made non-zero so far.
+    let mut nonzero: Vec<Vec<u64>> = Vec::new();
+    let mut reserved = Vec::new();
     let be16 = |o: usize| -> Option<usize> {
         Some(u16::from_be_bytes([*b.get(o)?, *b.get(o + 1)?]) as usize)
     };
@@ -211,17 +222,17 @@ pub(crate) fn check(path: &Path, b: &[u8]) -> Result<()> {
                 if comps.is_empty() || width == 0 || height == 0 {
                     return Ok(());
                 }
-                if !progressive {
-                    // At least 2 bits a block (B.2 / F.1.2: a DC code and an EOB code).
-                    let blocks = frame_blocks(width, height, &comps);
-                    let room = (b.len() as u64).saturating_mul(8);
-                    if blocks.saturating_mul(2) > room {
-                        return Err(bad(format!(
-                            "truncated JPEG: {} bytes cannot hold the {blocks} blocks of a {width}x{height} image",
-                            b.len()
-                        )));
-                    }
+                // At least 2 bits a sequential block (B.2 / F.1.2: a DC code and an EOB code),
+                // 1 a progressive one (G.1.2.1: its DC code in the DC first scan).
+                let blocks = frame_blocks(width, height, &comps);
+                let room = (b.len() as u64).saturating_mul(8);
+                if blocks.saturating_mul(if progressive { 1 } else { 2 }) > room {
+                    return Err(bad(format!(
+                        "truncated JPEG: {} bytes cannot hold the {blocks} blocks of a {width}x{height} image",
+                        b.len()
+                    )));
                 }
+                nonzero = vec![Vec::new(); comps.len()];
             }
             0xC4 => {
                 let mut o = 0usize;
@@ -259,8 +270,21 @@ pub(crate) fn check(path: &Path, b: &[u8]) -> Result<()> {
                     scan.push((k, (s[1] >> 4) as usize & 3, (s[1] & 15) as usize & 3));
                 }
                 at = at + 2 + len;
-                let refine_ac = progressive && ss > 0 && ah > 0;
-                if !refine_ac && !comps.is_empty() {
+                // An AC scan holds one component (G.1.1.1.1); its blocks' masks, made on first use.
+                let ac_band = progressive && ss > 0 && scan.len() == 1;
+                if ac_band && nonzero.get(scan[0].0).is_some_and(Vec::is_empty) {
+                    let k = scan[0].0;
+                    let n = component_blocks(width, height, &comps, k);
+                    reserved.push(super::budget::reserve(
+                        path,
+                        &format!("checking the scans of a {width}x{height} progressive JPEG"),
+                        n.saturating_mul(8),
+                    )?);
+                    nonzero[k] = vec![0u64; n as usize];
+                }
+                // A progressive AC scan of several components is invalid: left to the decoder.
+                let walkable = !comps.is_empty() && (!progressive || ss == 0 || ac_band);
+                if walkable {
                     let walk = Scan {
                         comps: &comps,
                         scan: &scan,
@@ -271,8 +295,14 @@ pub(crate) fn check(path: &Path, b: &[u8]) -> Result<()> {
                         ss,
                         se: se.min(63),
                         dc_refine: progressive && ss == 0 && ah > 0,
+                        ac_refine: progressive && ss > 0 && ah > 0,
                     };
-                    let (done, total, end) = walk.run(b, at, &dc, &ac);
+                    let masks = if ac_band {
+                        nonzero.get_mut(scan[0].0).map(Vec::as_mut_slice)
+                    } else {
+                        None
+                    };
+                    let (done, total, end) = walk.run(b, at, &dc, &ac, masks);
                     if done < total {
                         return Err(bad(format!(
                             "truncated or corrupt JPEG: its scan data ends after {done} of the {total} {} its {width}x{height} header declares",
@@ -298,16 +328,19 @@ pub(crate) fn check(path: &Path, b: &[u8]) -> Result<()> {
 
 /// Blocks of every component of a frame (T.81 A.1.1: component c has ⌈X·Hc/Hmax⌉ columns).
 fn frame_blocks(width: usize, height: usize, comps: &[Component]) -> u64 {
+    (0..comps.len())
+        .map(|k| component_blocks(width, height, comps, k))
+        .sum()
+}
+
+/// Blocks of component `k`, as a scan of it alone visits them (A.2.2).
+fn component_blocks(width: usize, height: usize, comps: &[Component], k: usize) -> u64 {
     let hmax = comps.iter().map(|c| c.h).max().unwrap_or(1);
     let vmax = comps.iter().map(|c| c.v).max().unwrap_or(1);
-    comps
-        .iter()
-        .map(|c| {
-            let bw = (width * c.h).div_ceil(hmax).div_ceil(8) as u64;
-            let bh = (height * c.v).div_ceil(vmax).div_ceil(8) as u64;
-            bw * bh
-        })
-        .sum()
+    let c = comps[k];
+    let bw = (width * c.h).div_ceil(hmax).div_ceil(8) as u64;
+    let bh = (height * c.v).div_ceil(vmax).div_ceil(8) as u64;
+    bw * bh
 }
 
 struct Scan<'a> {
@@ -321,12 +354,21 @@ struct Scan<'a> {
     ss: usize,
     se: usize,
     dc_refine: bool,
+    ac_refine: bool,
 }
 
 impl Scan<'_> {
     /// Walks the scan's MCUs; returns (MCUs whose bits were all in the data, MCUs declared,
     /// where the data ended).
-    fn run(&self, b: &[u8], at: usize, dc: &[Huffman], ac: &[Huffman]) -> (u64, u64, usize) {
+    /// `masks`: the non-zero masks of the blocks of a one-component AC scan, in scan order.
+    fn run(
+        &self,
+        b: &[u8],
+        at: usize,
+        dc: &[Huffman],
+        ac: &[Huffman],
+        mut masks: Option<&mut [u64]>,
+    ) -> (u64, u64, usize) {
         let hmax = self.comps.iter().map(|c| c.h).max().unwrap_or(1);
         let vmax = self.comps.iter().map(|c| c.v).max().unwrap_or(1);
         // Blocks per MCU of each scan component, and the MCU count (A.2.2, A.2.3).
@@ -357,11 +399,24 @@ impl Scan<'_> {
                 eobrun = 0;
             }
             let mut ok = true;
-            'mcu: for (s, &(_, td, ta)) in self.scan.iter().enumerate() {
-                for _ in 0..per_mcu[s] {
-                    if !self.block(&mut bits, &dc[td], &ac[ta], &mut eobrun) {
-                        ok = false;
-                        break 'mcu;
+            if let Some(m) = masks.as_deref_mut() {
+                // One component (per_mcu is 1): block `done` of it.
+                let ta = self.scan[0].2;
+                let mut none = 0u64;
+                let mask = m.get_mut(done as usize).unwrap_or(&mut none);
+                ok = if self.ac_refine {
+                    self.ac_refine_block(&mut bits, &ac[ta], &mut eobrun, mask)
+                } else {
+                    self.block(&mut bits, &dc[0], &ac[ta], &mut eobrun, mask)
+                };
+            } else {
+                let mut none = 0u64;
+                'mcu: for (s, &(_, td, ta)) in self.scan.iter().enumerate() {
+                    for _ in 0..per_mcu[s] {
+                        if !self.block(&mut bits, &dc[td], &ac[ta], &mut eobrun, &mut none) {
+                            ok = false;
+                            break 'mcu;
+                        }
                     }
                 }
             }
@@ -373,8 +428,16 @@ impl Scan<'_> {
         (done, total, bits.at)
     }
 
-    /// One block's bits (F.1.2.1, F.1.2.2; G.1.2.1, G.1.2.2); false on a corrupt code.
-    fn block(&self, bits: &mut Bits, dc: &Huffman, ac: &Huffman, eobrun: &mut u32) -> bool {
+    /// One block's bits (F.1.2.1, F.1.2.2; G.1.2.1, G.1.2.2); false on a corrupt code. An AC
+    /// first scan marks in `nonzero` the coefficients it makes non-zero.
+    fn block(
+        &self,
+        bits: &mut Bits,
+        dc: &Huffman,
+        ac: &Huffman,
+        eobrun: &mut u32,
+        nonzero: &mut u64,
+    ) -> bool {
         if !self.progressive || self.ss == 0 {
             if self.dc_refine {
                 bits.bits(1);
@@ -420,8 +483,77 @@ impl Scan<'_> {
             }
             k += r;
             bits.bits(s);
+            if k <= 63 {
+                *nonzero |= 1 << k;
+            }
             k += 1;
         }
         k <= end + 1
+    }
+
+    /// One block of an AC refinement scan (G.1.2.3; libjpeg `jdphuff.c`
+    /// decode_mcu_AC_refine): new coefficients of magnitude 1 (a sign bit each) placed after
+    /// R zero coefficients, a correction bit for every non-zero coefficient passed on the way
+    /// and, in an end-of-band run, for every non-zero coefficient of the rest of the band.
+    /// False on a corrupt code (a new coefficient not of size 1, or beyond the band).
+    fn ac_refine_block(
+        &self,
+        bits: &mut Bits,
+        ac: &Huffman,
+        eobrun: &mut u32,
+        nonzero: &mut u64,
+    ) -> bool {
+        let (mut k, end) = (self.ss, self.se);
+        let set = |m: u64, k: usize| (m >> k) & 1 == 1;
+        if *eobrun == 0 {
+            while k <= end {
+                let Some(rs) = bits.decode(ac) else {
+                    return false;
+                };
+                let (mut r, s) = ((rs >> 4) as usize, rs & 15);
+                if s != 0 {
+                    if s != 1 {
+                        return false;
+                    }
+                    bits.bits(1);
+                } else if r != 15 {
+                    // EOBr: this block and 2^r - 1 + (r bits) more end here.
+                    *eobrun = 1u32 << r;
+                    if r > 0 {
+                        *eobrun += bits.bits(r as u32);
+                    }
+                    break;
+                }
+                // Pass the non-zero coefficients (a correction bit each) and r zero ones.
+                while k <= end {
+                    if set(*nonzero, k) {
+                        bits.bits(1);
+                    } else {
+                        if r == 0 {
+                            break;
+                        }
+                        r -= 1;
+                    }
+                    k += 1;
+                }
+                if s != 0 {
+                    if k > end {
+                        return false;
+                    }
+                    *nonzero |= 1 << k;
+                }
+                k += 1;
+            }
+        }
+        if *eobrun > 0 {
+            while k <= end {
+                if set(*nonzero, k) {
+                    bits.bits(1);
+                }
+                k += 1;
+            }
+            *eobrun -= 1;
+        }
+        true
     }
 }

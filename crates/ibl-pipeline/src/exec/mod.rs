@@ -27,9 +27,6 @@ use std::path::{Path, PathBuf};
 use std::sync::{mpsc, Mutex};
 use std::time::Instant;
 
-/// Test hook: each stage sleeps this long after baking, before committing (to kill a run mid-stage).
-const DELAY_ENV: &str = "IBL_BAKE_TEST_DELAY_MS";
-
 /// How a stage ended.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "kebab-case")]
@@ -170,10 +167,6 @@ pub fn run(
     let start = Instant::now();
     let jobs = jobs.max(1);
     let n = graph.stages.len();
-    let delay_ms: u64 = std::env::var(DELAY_ENV)
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(0);
     let manifest = Mutex::new(plan.manifest);
     // Save the refreshed input stamps now, so even an interrupted run keeps them.
     {
@@ -232,7 +225,7 @@ pub fn run(
                     // Whatever happens in the stage, the loop below hears of it (it waits for
                     // one report per stage started, and holds a sender itself).
                     let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                        run_stage(session, graph, i, plan_stage, manifest, delay_ms, obs)
+                        run_stage(session, graph, i, plan_stage, manifest, obs)
                     }))
                     .unwrap_or_else(|panic| panicked(session, graph, i, panic_message(&*panic)));
                     let _ = tx.send(Done { index: i, result });
@@ -302,7 +295,6 @@ fn run_stage(
     i: usize,
     planned: &PlannedStage,
     manifest: &Mutex<Manifest>,
-    delay_ms: u64,
     obs: &dyn Observer,
 ) -> StageResult {
     let s = &graph.stages[i];
@@ -337,9 +329,6 @@ fn run_stage(
             return result;
         }
     };
-    if delay_ms > 0 {
-        std::thread::sleep(std::time::Duration::from_millis(delay_ms));
-    }
     let seconds = t0.elapsed().as_secs_f64();
     match commit::commit(session, graph, i, planned, staged, kept, seconds, manifest) {
         Ok(outputs) => result.outputs = outputs,
