@@ -210,7 +210,7 @@ impl Target {
                     sh: None,
                     cube: "skybox_rgb9e5_zstd",
                 },
-                note: "Bevy: EnvironmentMapLight { diffuse_map: asset_server.load(\"diffuse_rgb9e5_zstd.ktx2\"), specular_map: asset_server.load(\"specular_rgb9e5_zstd.ktx2\"), intensity: 900.0, ..default() } (intensity in cd/m^2 per unit of the files, as Bevy's examples use; enable Bevy's `ktx2` and `zstd` features). The cubes are stored with z negated, as Bevy samples them, so the environment shows as the source panorama; the chain's level l is at roughness l/(N-1), as Bevy reads it.",
+                note: "Bevy: EnvironmentMapLight { diffuse_map: asset_server.load(\"diffuse_rgb9e5_zstd.ktx2\"), specular_map: asset_server.load(\"specular_rgb9e5_zstd.ktx2\"), intensity: 900.0, ..default() } (intensity in cd/m^2 per unit of the files, as Bevy's examples use; enable Bevy's `ktx2` and `zstd_rust` features). The cubes are stored with z negated, as Bevy samples them, so the environment shows as the source panorama; the chain's level l is at roughness l/(N-1), as Bevy reads it.",
             },
             // google/filament `shaders/src/surface_light_indirect.fs` (perceptualRoughnessToLod,
             // Irradiance_SphericalHarmonics), `tools/cmgen/src/cmgen.cpp` (KTX1 output with the
