@@ -415,3 +415,30 @@ fn truncated_jpeg_environments_are_refused() {
 fn every_target_and_layout_writes_a_note_naming_only_its_own_files() {
     BIN.assert_every_target_writes_a_true_note(&fixture("hdri/sunset_256.exr"));
 }
+
+/// Filament's KTX1 reader has no pixel type for packed RGB9E5 (google/filament
+/// `libs/ktxreader/src/Ktx1Reader.cpp`, `toPixelDataType`): its skybox is refused in that
+/// format before any work; without the target the same KTX1 is written.
+#[test]
+fn target_filament_refuses_an_rgb9e5_skybox() {
+    let tmp = tempfile::tempdir().unwrap();
+    let input = fixture("hdri/sunset_256.exr");
+    let out = tmp.path().join("sky");
+    let flags = ["--target", "filament", "--format", "rgb9e5", "--size", "8"];
+    let line = BIN.refused_bake(&input, &out, &flags, 2, "Ktx1Reader.cpp");
+    assert!(line.contains("b10g11r11"), "{line}");
+    assert!(!out.exists());
+    let plain = tmp.path().join("plain");
+    bake(
+        &input,
+        &plain,
+        &["--layout", "ktx1", "--format", "rgb9e5", "--size", "8"],
+    );
+    assert_eq!(
+        files_in(&plain)
+            .iter()
+            .filter(|f| f.ends_with(".ktx"))
+            .count(),
+        1
+    );
+}

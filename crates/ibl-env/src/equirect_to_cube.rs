@@ -87,7 +87,9 @@ impl Params {
     /// The output encoding asked for, checked: the flags over the target's container and
     /// format.
     pub fn encoding(&self) -> Result<Encoding> {
-        self.cube_output().resolve(self.target.encoding())
+        self.cube_output()
+            .resolve(self.target.encoding())
+            .and_then(|e| self.target.check_encoding(e))
     }
 
     /// Name (stem) of the cube's container: `cube`, or the target's file name.

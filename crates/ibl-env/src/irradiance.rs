@@ -124,7 +124,9 @@ impl Params {
     /// The irradiance cube's output encoding, checked: the flags over the target's container
     /// and format.
     pub fn encoding(&self) -> Result<Encoding> {
-        self.cube_output().resolve(self.target.encoding())
+        self.cube_output()
+            .resolve(self.target.encoding())
+            .and_then(|e| self.target.check_encoding(e))
     }
 
     /// Name (stem) of the irradiance cube's container: `irradiance`, or the target's.

@@ -387,7 +387,9 @@ impl Params {
 
     /// The chain's output encoding, checked: the flags over the target's container and format.
     pub fn encoding(&self) -> Result<Encoding> {
-        Ok(self.cube_output().resolve(self.target.encoding())?)
+        Ok(self
+            .target
+            .check_encoding(self.cube_output().resolve(self.target.encoding())?)?)
     }
 
     /// Name (stem) of the chain's container: `prefilter`, or the target's file name.

@@ -210,7 +210,7 @@ impl Target {
                     sh: None,
                     cube: "skybox_rgb9e5_zstd",
                 },
-                note: "Bevy: EnvironmentMapLight { diffuse_map: asset_server.load(\"diffuse_rgb9e5_zstd.ktx2\"), specular_map: asset_server.load(\"specular_rgb9e5_zstd.ktx2\"), intensity: 900.0, ..default() } (intensity in cd/m^2 per unit of the files, as Bevy's examples use; enable Bevy's `ktx2` and `zstd` features). The cubes are stored with z negated, as Bevy samples them, so the environment shows as the source panorama; the chain's level l is at roughness l/(N-1), as Bevy reads it.",
+                note: "Bevy: EnvironmentMapLight { diffuse_map: asset_server.load(\"diffuse_rgb9e5_zstd.ktx2\"), specular_map: asset_server.load(\"specular_rgb9e5_zstd.ktx2\"), intensity: 900.0, ..default() } (intensity in cd/m^2 per unit of the files, as Bevy's examples use; enable Bevy's `ktx2` and `zstd_rust` features). The cubes are stored with z negated, as Bevy samples them, so the environment shows as the source panorama; the chain's level l is at roughness l/(N-1), as Bevy reads it.",
             },
             // google/filament `shaders/src/surface_light_indirect.fs` (perceptualRoughnessToLod,
             // Irradiance_SphericalHarmonics), `tools/cmgen/src/cmgen.cpp` (KTX1 output with the
@@ -363,11 +363,71 @@ impl Target {
             ..Default::default()
         }
     }
+
+    /// `encoding` (the flags resolved over [`Target::encoding`]) if the engine's own loader
+    /// takes it; otherwise a one-line reason naming the engine's file that refuses it.
+    ///
+    /// Filament: its KTX1 reader maps glType to a pixel type through `toPixelDataType`
+    /// (google/filament `libs/ktxreader/src/Ktx1Reader.cpp`), which knows UNSIGNED_BYTE,
+    /// UNSIGNED_SHORT, HALF_FLOAT, FLOAT and R11F_G11F_B10F only; the packed RGB9E5 type
+    /// (UNSIGNED_INT_5_9_9_9_REV, 0x8C3E) becomes 0xff, and Filament has no pixel type for it at
+    /// all (`PixelDataType` in `filament/backend/include/backend/DriverEnums.h`), so no header
+    /// makes packed RGB9E5 texels loadable: `setImage` aborts ("The combination of internal
+    /// format … is not supported"). Refused before any work.
+    pub fn check_encoding(
+        self,
+        encoding: ibl_core::output::Encoding,
+    ) -> Result<ibl_core::output::Encoding, ibl_core::Error> {
+        if self == Target::Filament
+            && encoding.layout == Layout::Ktx1
+            && encoding.format == PixelFormat::Rgb9e5
+        {
+            return Err(ibl_core::Error::param(
+                "--target filament cannot take --format rgb9e5 in KTX1: Filament's KTX1 reader (google/filament libs/ktxreader/src/Ktx1Reader.cpp, toPixelDataType) has no pixel type for packed RGB9E5 and aborts on it; use --format b10g11r11 (cmgen's, the default, same 4 bytes a texel) or rgba16f",
+            ));
+        }
+        Ok(encoding)
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn filament_refuses_packed_rgb9e5_in_ktx1_only() {
+        use ibl_core::output::Encoding;
+        let enc = |layout, format| Encoding {
+            layout,
+            format,
+            ..Default::default()
+        };
+        let e = Target::Filament
+            .check_encoding(enc(Layout::Ktx1, PixelFormat::Rgb9e5))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("Ktx1Reader.cpp") && e.contains("rgb9e5"), "{e}");
+        for f in [
+            PixelFormat::B10g11r11,
+            PixelFormat::Rgba16f,
+            PixelFormat::Rgba32f,
+        ] {
+            assert!(Target::Filament
+                .check_encoding(enc(Layout::Ktx1, f))
+                .is_ok());
+        }
+        // Filament's default passes; RGB9E5 stays Bevy's default and anyone else's choice.
+        assert!(Target::Filament
+            .check_encoding(Target::Filament.encoding())
+            .is_ok());
+        for t in ALL_TARGETS {
+            if t != Target::Filament {
+                assert!(t
+                    .check_encoding(enc(Layout::Ktx1, PixelFormat::Rgb9e5))
+                    .is_ok());
+            }
+        }
+    }
     use glam::Vec3;
     use ibl_core::cube::{texel_direction, Cubemap, Face};
     use std::f32::consts::PI;

@@ -228,9 +228,9 @@ fn usage(target: Target, writer: Writer, out: &Outputs) -> String {
         (Target::Gltf, Writer::Prefilter) => format!("{chain} is the viewer's GGX cube: textureLod(u_GGXEnvSampler, R, roughness * float(mipCount - 1)) (KhronosGroup/glTF-Sample-Viewer source/Renderer/shaders/ibl.glsl); load a KTX2 with libktx as the viewer's ResourceLoader does."),
         (Target::Gltf, Writer::Irradiance) => format!("{irr} is the viewer's Lambertian cube (E/pi; multiplied by the diffuse colour)."),
         (Target::Gltf, Writer::Cube) => format!("{cube} is the environment (background) cube; the viewer's GGX and Lambertian cubes come from `prefilter` and `irradiance`."),
-        (Target::Bevy, Writer::Prefilter) => format!("{chain} is EnvironmentMapLight.specular_map (Bevy reads lod = roughness * (mipCount - 1)); enable Bevy's `ktx2` and `zstd` features."),
-        (Target::Bevy, Writer::Irradiance) => format!("{irr} is EnvironmentMapLight.diffuse_map; enable Bevy's `ktx2` and `zstd` features."),
-        (Target::Bevy, Writer::Cube) => format!("{cube} is the Skybox image (bevy::core_pipeline::Skybox); enable Bevy's `ktx2` and `zstd` features."),
+        (Target::Bevy, Writer::Prefilter) => format!("{chain} is EnvironmentMapLight.specular_map (Bevy reads lod = roughness * (mipCount - 1)); enable Bevy's `ktx2` and `zstd_rust` features."),
+        (Target::Bevy, Writer::Irradiance) => format!("{irr} is EnvironmentMapLight.diffuse_map; enable Bevy's `ktx2` and `zstd_rust` features."),
+        (Target::Bevy, Writer::Cube) => format!("{cube} is the Skybox image (bevy::core_pipeline::Skybox); enable Bevy's `ktx2` and `zstd_rust` features."),
         (Target::Filament, Writer::Prefilter) => format!("{chain} is the IndirectLight reflections cube (ktxreader::Ktx1Reader::createTexture); its `sh` metadata holds the 9 pre-scaled irradiance coefficients (Ktx1Bundle::getSphericalHarmonics). Level l is at cmgen's roughness 1 - sqrt(1 - l/(N-1)), which Filament's lod = (N-1) r(2-r) lands on."),
         (Target::Filament, Writer::Irradiance) => format!("{} holds the IndirectLight irradiance: IndirectLight::Builder().irradiance(3, sh).", out.engine_sh.clone().unwrap_or_default()),
         (Target::Filament, Writer::Cube) => format!("{cube} is the Skybox (Skybox::Builder().environment(texture))."),
@@ -279,6 +279,11 @@ fn engine_snippet(target: Target, writer: Writer, out: &Outputs) -> String {
 
 /// Bevy (0.14+): `EnvironmentMapLight` and `Skybox` components on the camera, as Bevy's
 /// examples insert them (bevyengine/bevy `examples/3d/pbr.rs`, `examples/3d/skybox.rs`).
+/// Bevy's KTX2 zstd feature is `zstd_rust` (or `zstd_c`): bevy 0.19.1's and 0.20.1's
+/// Cargo.toml have no `zstd` feature, so `features = ["ktx2", "zstd"]` does not resolve. The
+/// global ambient light is added on top of the environment map whatever the map holds
+/// (`crates/bevy_pbr/src/render/pbr_functions.wgsl`, `ambient::ambient_light`; the resource is
+/// `GlobalAmbientLight` in `crates/bevy_light/src/ambient_light.rs`, brightness 80 by default).
 fn bevy_snippet(writer: Writer, out: &Outputs) -> String {
     let spec = lit(&out.chain, &Writer::Prefilter.command(Target::Bevy));
     let diff = lit(&out.irradiance, &Writer::Irradiance.command(Target::Bevy));
@@ -293,7 +298,7 @@ fn bevy_snippet(writer: Writer, out: &Outputs) -> String {
         Writer::Cube => skybox,
         _ => env,
     };
-    format!("// Cargo.toml: bevy = {{ features = [\"ktx2\", \"zstd\"] }}\ncommands.spawn((\n    Camera3d::default(),\n{body}));")
+    format!("// Cargo.toml: bevy = {{ features = [\"ktx2\", \"zstd_rust\"] }}\n// Bevy also adds its GlobalAmbientLight (80 cd/m^2 by default) on top of the map:\n// app.insert_resource(GlobalAmbientLight {{ brightness: 0.0, ..default() }}) shows the map alone.\ncommands.spawn((\n    Camera3d::default(),\n{body}));")
 }
 
 /// Unity (C#): the chain and cube are imported as Cubemap assets; the SH file is read into a

@@ -476,6 +476,39 @@ fn target_three_has_no_chain_to_bake() {
     assert!(!out.exists());
 }
 
+/// Filament's KTX1 reader has no pixel type for packed RGB9E5 (google/filament
+/// `libs/ktxreader/src/Ktx1Reader.cpp`, `toPixelDataType`): refused up front, nothing written;
+/// the formats it does read (b10g11r11, rgba16f) still bake.
+#[test]
+fn target_filament_refuses_rgb9e5_in_ktx1() {
+    let tmp = tempfile::tempdir().unwrap();
+    let input = fixture("hdri/sunset_256.exr");
+    let out = tmp.path().join("f");
+    let line = BIN.refused_bake(
+        &input,
+        &out,
+        &["--target", "filament", "--format", "rgb9e5", "--size", "16"],
+        2,
+        "Ktx1Reader.cpp",
+    );
+    assert!(
+        line.contains("rgb9e5") && line.contains("b10g11r11"),
+        "{line}"
+    );
+    assert!(!out.exists());
+    for format in ["b10g11r11", "rgba16f"] {
+        let ok = tmp.path().join(format);
+        BIN.bake(
+            &input,
+            &ok,
+            &[
+                "--target", "filament", "--format", format, "--size", "16", "-q",
+            ],
+        );
+        assert!(ok.join("env_ibl.ktx").is_file(), "{format}");
+    }
+}
+
 #[test]
 fn target_babylon_writes_an_env_of_the_full_chain_or_refuses() {
     let tmp = tempfile::tempdir().unwrap();
