@@ -20,9 +20,10 @@ struct Cli {
     /// Input environments (.exr/.hdr equirect or cross, face folders, .ktx2 cubes).
     #[arg(required_unless_present = "emit_shader")]
     inputs: Vec<PathBuf>,
-    /// Write the shipped method (VNDF filtered importance sampling, 16 taps) as
-    /// aniso_fis.glsl, aniso_fis.hlsl and aniso_fis.wgsl into this folder and exit: the same
-    /// constants and steps as the fis-16 method of the evaluator.
+    /// Write the shipped method (VNDF filtered importance sampling, 16 taps, blended into the
+    /// engine's isotropic split sum as the anisotropy vanishes) as aniso_fis.glsl,
+    /// aniso_fis.hlsl and aniso_fis.wgsl into this folder and exit: the same constants and
+    /// steps as the fisb-16 method of the evaluator.
     #[arg(long, value_name = "DIR", conflicts_with = "inputs")]
     emit_shader: Option<PathBuf>,
     /// Prefiltered chain (a folder of m{l}_<face> images or a .ktx2) written by `prefilter`

@@ -333,3 +333,192 @@ fn emits_the_shipped_shader_in_three_languages() {
     assert_eq!(r.status.code(), Some(2));
     assert!(!other.exists());
 }
+
+/// A tool binary built beside `aniso-eval` (`make test` builds every binary first).
+fn tool(name: &str) -> std::path::PathBuf {
+    let p = Path::new(env!("CARGO_BIN_EXE_aniso-eval"))
+        .parent()
+        .unwrap()
+        .join(name);
+    assert!(
+        p.is_file(),
+        "{} is not built: cargo build --release --workspace --bins (make test does)",
+        p.display()
+    );
+    p
+}
+
+/// The per-pixel frames (t, n) of the first case of a report folder.
+fn frames(out: &Path) -> Vec<(Vec<f64>, Vec<f64>)> {
+    let meta = ibl_testkit::read_json(&out.join("case000_sky/case.json"));
+    meta["pixels"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| {
+            let v = |k: &str| -> Vec<f64> {
+                p["frame"][k]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .map(|x| x.as_f64().unwrap())
+                    .collect()
+            };
+            (v("t"), v("n"))
+        })
+        .collect()
+}
+
+#[test]
+fn reads_quat_map_normals_and_tpr_map_tangents_from_the_real_bakes() {
+    let dir = tempfile::tempdir().unwrap();
+    let env = dir.path().join("sky.exr");
+    write_env(&env);
+    // A flat normal map through the real quat-map: every texel the identity quaternion.
+    let flat = dir.path().join("flat.png");
+    let mut img = Image::new(8, 4, 3);
+    for t in img.data.chunks_mut(3) {
+        t.copy_from_slice(&[0.5, 0.5, 1.0]);
+    }
+    write_image(&flat, &img, &WriteOptions::default()).unwrap();
+    let quat = dir.path().join("flat_q.png");
+    let o = std::process::Command::new(tool("quat-map"))
+        .args([
+            flat.to_str().unwrap(),
+            "-o",
+            quat.to_str().unwrap(),
+            "--bits",
+            "16",
+        ])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // A tpr-map of constant:30 from the real tpr-map.
+    let tpr = dir.path().join("c30.exr");
+    let o = std::process::Command::new(tool("tpr-map"))
+        .args([
+            "-o",
+            tpr.to_str().unwrap(),
+            "--size",
+            "32x16",
+            "--preset",
+            "constant:30",
+        ])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // A real normal map (fixture) through quat-map: frames must move, and stay orthonormal.
+    let bumpy = dir.path().join("bumpy_q.png");
+    let o = std::process::Command::new(tool("quat-map"))
+        .arg(ibl_testkit::fixture("normals/0008_128.png"))
+        .args(["-o", bumpy.to_str().unwrap(), "--bits", "16"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let run = |name: &str, extra: &[&str]| -> std::path::PathBuf {
+        let out = dir.path().join(name);
+        let mut args = vec![
+            env.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--sphere-size",
+            "12",
+            "--roughness",
+            "0.5",
+            "--eta",
+            "0.6",
+            "--views",
+            "30",
+            "--elevations",
+            "20",
+            "--truth-samples",
+            "256",
+            "--methods",
+            "iso,fisb-16",
+            "--lookup",
+            "engine",
+        ];
+        args.extend(extra);
+        let o = BIN.run(&args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        out
+    };
+    let plain = frames(&run("plain", &["--tangent", "constant:30"]));
+    let with_maps = frames(&run(
+        "maps",
+        &[
+            "--tpr-map",
+            tpr.to_str().unwrap(),
+            "--quat-map",
+            quat.to_str().unwrap(),
+        ],
+    ));
+    assert_eq!(plain.len(), with_maps.len());
+    assert!(plain.len() > 50);
+    let dist = |a: &[f64], b: &[f64]| {
+        a.iter()
+            .zip(b)
+            .map(|(x, y)| (x - y).powi(2))
+            .sum::<f64>()
+            .sqrt()
+    };
+    for (a, b) in plain.iter().zip(&with_maps) {
+        // 16-bit quantisation of the identity and of (cos 30°, sin 30°): well under 1e-3.
+        assert!(
+            dist(&a.0, &b.0) < 1e-3 && dist(&a.1, &b.1) < 1e-4,
+            "{a:?} {b:?}"
+        );
+    }
+    let bumped = frames(&run("bumpy", &["--quat-map", bumpy.to_str().unwrap()]));
+    let base = frames(&run("base", &[]));
+    let moved = base
+        .iter()
+        .zip(&bumped)
+        .filter(|(a, b)| dist(&a.1, &b.1) > 1e-3)
+        .count();
+    assert!(moved > bumped.len() / 2, "{moved} of {}", bumped.len());
+    for (t, n) in &bumped {
+        let dot: f64 = t.iter().zip(n).map(|(x, y)| x * y).sum();
+        let (lt, ln) = (dist(t, &[0.0; 3]), dist(n, &[0.0; 3]));
+        assert!(dot.abs() < 1e-5 && (lt - 1.0).abs() < 1e-5 && (ln - 1.0).abs() < 1e-5);
+    }
+    // Malformed maps: one-line errors naming the flag and the file, nothing written.
+    let never = dir.path().join("never");
+    let garbage = dir.path().join("garbage.png");
+    std::fs::write(&garbage, b"not a png").unwrap();
+    let zero = dir.path().join("zero.exr");
+    write_image(
+        &zero,
+        &Image::from_data(1, 1, 3, vec![0.5, 0.5, 0.5]).unwrap(),
+        &WriteOptions::default(),
+    )
+    .unwrap();
+    let grey = dir.path().join("grey.exr");
+    write_image(
+        &grey,
+        &Image::from_data(1, 1, 1, vec![0.5]).unwrap(),
+        &WriteOptions::default(),
+    )
+    .unwrap();
+    let e = env.to_str().unwrap();
+    let o = never.to_str().unwrap();
+    for (flag, file, code, needle) in [
+        ("--quat-map", &garbage, 3, "garbage.png"),
+        ("--quat-map", &zero, 2, "not a quaternion"),
+        ("--tpr-map", &grey, 2, "channel"),
+        (
+            "--tpr-map",
+            &dir.path().join("missing.exr"),
+            4,
+            "missing.exr",
+        ),
+    ] {
+        let r = BIN.run(&[e, "--out", o, flag, file.to_str().unwrap()]);
+        let line = assert_one_line_error(&r, code, needle);
+        assert!(
+            line.contains(file.file_name().unwrap().to_str().unwrap()),
+            "{line}"
+        );
+        assert!(!never.exists());
+    }
+}

@@ -9,7 +9,7 @@
 
 use crate::material::Material;
 use crate::methods::{evaluate as eval_method, AsTables, Inputs, Lookup, Method, E01};
-use crate::scene::{camera, plate_pixels, sphere_pixels, Pixel};
+use crate::scene::{camera, plate_pixels, sphere_pixels, Field, Pixel, UvMap};
 use crate::truth::{mc_truth, TruthValue};
 use ibl_core::bordered::BorderedMips;
 use ibl_core::{luminance, CubeMips, Cubemap, Image};
@@ -85,7 +85,17 @@ pub struct Params {
     /// turning the sphere's ring tangent.
     #[arg(long, default_value = "constant:0")]
     pub tangent: String,
-    /// Methods: iso, bent-lg18, bent-filament, bent-khr, major-N[-bBETA][-kK][-cC], fis-N.
+    /// A `tpr-map` output whose RG (the tangent's (x, y)·½ + ½, y up) turns the base tangent
+    /// at the surface's UV, in place of the --tangent preset.
+    #[arg(long, value_name = "FILE")]
+    pub tpr_map: Option<std::path::PathBuf>,
+    /// A `quat-map` output whose RGB (q·½ + ½) rotates each pixel's whole frame at the
+    /// surface's UV: normals perturbed as the thesis's shader perturbs them.
+    #[arg(long, value_name = "FILE")]
+    pub quat_map: Option<std::path::PathBuf>,
+    /// Methods: iso, bent-lg18, bent-filament, bent-khr, major-N[-bBETA][-kK][-cC], fis-N,
+    /// fisb-N (the shipped blend), cv-N; for --as-lobes as-thesis-N, as-weighted-N,
+    /// as-fis-N[-bB], as-strat-N.
     #[arg(
         long,
         value_delimiter = ',',
@@ -151,8 +161,9 @@ impl Params {
             .collect()
     }
 
-    /// Checks the parameters before any input is read; returns the parsed methods and preset.
-    pub fn validate(&self) -> crate::Result<(Vec<Method>, Preset)> {
+    /// Checks the parameters and reads the --tpr-map / --quat-map files, before any
+    /// environment is read; returns the parsed methods and the frame field.
+    pub fn validate(&self) -> crate::Result<(Vec<Method>, Field)> {
         if !(4..=512).contains(&self.sphere_size) {
             return bad(format!(
                 "--sphere-size {} is out of range 4..=512",
@@ -211,8 +222,55 @@ impl Params {
             .map(|m| Method::parse(m.trim()))
             .collect::<Result<Vec<_>, _>>()
             .map_err(|e| crate::Error::Core(ibl_core::Error::param(format!("--methods: {e}"))))?;
-        Ok((methods, preset))
+        let field = Field {
+            preset,
+            tpr: self
+                .tpr_map
+                .as_deref()
+                .map(|p| load_uv_map(p, "--tpr-map", 2))
+                .transpose()?,
+            quat: self
+                .quat_map
+                .as_deref()
+                .map(|p| load_uv_map(p, "--quat-map", 3))
+                .transpose()?,
+        };
+        Ok((methods, field))
     }
+}
+
+/// Reads a map the scene samples at UV: at least `channels` channels, finite texels; a
+/// quaternion map's texels must decode to a non-zero quaternion. One-line errors naming the
+/// flag and the file.
+fn load_uv_map(path: &std::path::Path, flag: &str, channels: usize) -> crate::Result<UvMap> {
+    let err =
+        |m: String| crate::Error::Core(ibl_core::Error::invalid(path, format!("{flag}: {m}")));
+    // Unreadable or missing: the reader's own error (it names the file; I/O keeps its class).
+    let loaded = ibl_material::map::load(path)?;
+    let img = loaded.image;
+    if img.channels < channels || (loaded.grey_alpha && channels > 2) {
+        return Err(err(format!(
+            "{} channel(s), the map needs {channels}",
+            if loaded.grey_alpha { 2 } else { img.channels }
+        )));
+    }
+    if img.width == 0 || img.height == 0 {
+        return Err(err("empty image".into()));
+    }
+    if let Some(i) = img.data.iter().position(|v| !v.is_finite()) {
+        return Err(err(format!("texel {} is not finite", i / img.channels)));
+    }
+    if channels == 3 {
+        for (i, t) in img.data.chunks(img.channels).enumerate() {
+            let q = ibl_material::quaternion::decode_quat(&t[..3]);
+            if q[0] * q[0] + q[1] * q[1] + q[2] * q[2] < 1e-6 {
+                return Err(err(format!(
+                    "texel {i} is not a quaternion (q·½ + ½ decodes to 0): not a quat-map output?"
+                )));
+            }
+        }
+    }
+    Ok(UvMap { image: img })
 }
 
 /// What a method reads, per environment.
@@ -362,7 +420,7 @@ pub fn evaluate(
     env: &Env,
     params: &Params,
     methods: &[Method],
-    preset: &Preset,
+    preset: &Field,
 ) -> (Vec<Case>, Vec<CaseImages>) {
     evaluate_with(env, params, methods, preset, |_| true)
 }
@@ -373,7 +431,7 @@ pub fn evaluate_with(
     env: &Env,
     params: &Params,
     methods: &[Method],
-    preset: &Preset,
+    preset: &Field,
     use_oracle: impl Fn(&Method) -> bool,
 ) -> (Vec<Case>, Vec<CaseImages>) {
     let dfg = Dfg::standard();

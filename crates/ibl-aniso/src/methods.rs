@@ -88,6 +88,13 @@ pub enum Method {
         /// Taps.
         taps: usize,
     },
+    /// M3c: the shipped method (`crate::ship::shade`): the isotropic split sum at r_iso
+    /// mixed into `fis-N` by the fitted weight w(|η|) (w = 0 at η = 0: exactly the floor).
+    /// N pyramid taps + 1 chain tap (none of the N at η = 0).
+    FisBlend {
+        /// FIS taps.
+        taps: usize,
+    },
     /// M3b: the isotropic split sum corrected by VNDF FIS as a control variate: split sum at
     /// r_iso + FIS(α_t, α_b) − FIS(α_iso, α_iso), both FIS sums over the same N rotated points
     /// (2N pyramid taps + 1 chain tap). At η = 0 the two sums are the same numbers and cancel
@@ -109,6 +116,18 @@ pub enum Method {
         /// Taps.
         taps: usize,
     },
+    /// M4c: the weighted taps placed and filtered: the N Hammersley points shifted per pixel
+    /// (Cranley–Patterson, as `fis-N`) through the LUT's inverse CDF — equal-mass strata of
+    /// p_h that differ from pixel to pixel instead of one fixed pattern — and each tap read
+    /// from the box pyramid at the filtered-importance-sampling lod of its pdf
+    /// p_l = A·p_h(n)/(4 v·h) (Křivánek & Colbert 2008 eq. 13, +1 bias, as `fis-N`).
+    AsFis {
+        /// Taps.
+        taps: usize,
+        /// Added to the lod (`as-fis-N`: 1, Křivánek & Colbert's; `as-fis-N-bB`: B); `None`
+        /// reads the raw cube bilinearly (`as-strat-N`: the stratification alone).
+        bias: Option<f32>,
+    },
 }
 
 /// The Ashikhmin–Shirley tables a lobe's runtime reads, baked in memory by `ibl-lut` exactly
@@ -118,6 +137,9 @@ pub struct AsTables {
     pub hv: ibl_core::Image,
     /// The size/bias table (R = s, G = b) over (u, v) = (2/π·atan|v_y/v_x|, √(n·v)).
     pub size_bias: ibl_core::Image,
+    /// p_h at h = n, √((n_u+1)(n_v+1))/2π: the LUT's A channel times it is p_h (a uniform
+    /// of the shader).
+    pub pdf_h_n: f64,
 }
 
 impl AsTables {
@@ -130,6 +152,7 @@ impl AsTables {
         AsTables {
             hv: ibl_lut::hv::hv_table(&a, hv_size, &p),
             size_bias: ibl_lut::as_size_bias::size_bias_table(&set, 64, &p),
+            pdf_h_n: a.pdf_h_at_normal(),
         }
     }
 
@@ -186,15 +209,21 @@ impl Method {
             }
             Method::Fis { taps } => format!("fis-{taps}"),
             Method::Cv { taps } => format!("cv-{taps}"),
+            Method::FisBlend { taps } => format!("fisb-{taps}"),
             Method::AsThesis { taps } => format!("as-thesis-{taps}"),
             Method::AsWeighted { taps } => format!("as-weighted-{taps}"),
+            Method::AsFis { taps, bias } => match bias {
+                None => format!("as-strat-{taps}"),
+                Some(b) if *b == 1.0 => format!("as-fis-{taps}"),
+                Some(b) => format!("as-fis-{taps}-b{b}"),
+            },
         }
     }
 
     /// Parses `iso`, `bent-lg18`, `bent-filament`, `bent-khr`, `major-N[-bBETA][-kK][-cC]`, `fis-N`.
     pub fn parse(s: &str) -> Result<Method, String> {
         let bad = || {
-            format!("unknown method '{s}' (iso, bent-lg18, bent-filament, bent-khr, major-N[-bBETA][-kK][-cC], fis-N, cv-N, as-thesis-N, as-weighted-N)")
+            format!("unknown method '{s}' (iso, bent-lg18, bent-filament, bent-khr, major-N[-bBETA][-kK][-cC], fis-N, fisb-N, cv-N, as-thesis-N, as-weighted-N, as-fis-N)")
         };
         let taps = |t: &str| -> Result<usize, String> {
             let n: usize = t.parse().map_err(|_| bad())?;
@@ -213,11 +242,36 @@ impl Method {
                 if let Some(rest) = s.strip_prefix("fis-") {
                     return Ok(Method::Fis { taps: taps(rest)? });
                 }
+                if let Some(rest) = s.strip_prefix("fisb-") {
+                    return Ok(Method::FisBlend { taps: taps(rest)? });
+                }
                 if let Some(rest) = s.strip_prefix("cv-") {
                     return Ok(Method::Cv { taps: taps(rest)? });
                 }
                 if let Some(rest) = s.strip_prefix("as-thesis-") {
                     return Ok(Method::AsThesis { taps: taps(rest)? });
+                }
+                if let Some(rest) = s.strip_prefix("as-fis-") {
+                    let (n, bias) = match rest.split_once("-b") {
+                        Some((n, b)) => (
+                            n,
+                            b.parse::<f32>()
+                                .ok()
+                                .filter(|b| b.is_finite() && b.abs() <= 8.0)
+                                .ok_or_else(bad)?,
+                        ),
+                        None => (rest, 1.0),
+                    };
+                    return Ok(Method::AsFis {
+                        taps: taps(n)?,
+                        bias: Some(bias),
+                    });
+                }
+                if let Some(rest) = s.strip_prefix("as-strat-") {
+                    return Ok(Method::AsFis {
+                        taps: taps(rest)?,
+                        bias: None,
+                    });
                 }
                 if let Some(rest) = s.strip_prefix("as-weighted-") {
                     return Ok(Method::AsWeighted { taps: taps(rest)? });
@@ -257,8 +311,9 @@ impl Method {
             Method::MajorAxis(p) => (p.taps, 1),
             Method::Fis { taps } => (*taps, 0),
             Method::Cv { taps } => (2 * *taps + 1, 1),
+            Method::FisBlend { taps } => (*taps + 1, 1),
             Method::AsThesis { taps } => (*taps, *taps + 1),
-            Method::AsWeighted { taps } => (*taps, *taps),
+            Method::AsWeighted { taps } | Method::AsFis { taps, .. } => (*taps, *taps),
         }
     }
 
@@ -266,14 +321,17 @@ impl Method {
     pub fn reads_chain(&self) -> bool {
         !matches!(
             self,
-            Method::Fis { .. } | Method::AsThesis { .. } | Method::AsWeighted { .. }
+            Method::Fis { .. }
+                | Method::AsThesis { .. }
+                | Method::AsWeighted { .. }
+                | Method::AsFis { .. }
         )
     }
 
     /// Whether the method renders `mat` (the GGX methods GGX, the thesis route AS).
     pub fn applies_to(&self, mat: &Material) -> bool {
         match self {
-            Method::AsThesis { .. } | Method::AsWeighted { .. } => {
+            Method::AsThesis { .. } | Method::AsWeighted { .. } | Method::AsFis { .. } => {
                 matches!(mat, Material::AshikhminShirley { .. })
             }
             _ => matches!(mat, Material::Ggx { .. }),
@@ -343,6 +401,10 @@ pub fn evaluate(
         let weighted = matches!(method, Method::AsWeighted { .. });
         return as_route(inp.cube, tab, frame, v, *taps, weighted);
     }
+    if let (Method::AsFis { taps, bias }, Some(tab)) = (method, inp.as_tables) {
+        let rot = fis_rotation(seed);
+        return as_fis(inp.pyramid, tab, frame, v, *taps, *bias, rot);
+    }
     let Some((at, ab)) = mat.ggx_alphas() else {
         return ([0.0; 3], [0.0; 3]);
     };
@@ -410,6 +472,12 @@ pub fn evaluate(
             split(acc.map(|c| c * inv), inp.dfg, nv, r_iso)
         }
         Method::Fis { taps } => fis(inp.pyramid, frame, v, at, ab, *taps, seed),
+        Method::FisBlend { taps } => {
+            let l = inp.lookup.radiance(reflect_view(v, n), r_iso, buf);
+            let iso = split(l, inp.dfg, nv, r_iso);
+            let rot = fis_rotation(seed);
+            crate::ship::shade_blend_n(inp.pyramid, frame, v, at, ab, *taps as u32, rot, iso)
+        }
         Method::Cv { taps } => {
             let l = inp.lookup.radiance(reflect_view(v, n), r_iso, buf);
             let base = split(l, inp.dfg, nv, r_iso);
@@ -421,7 +489,9 @@ pub fn evaluate(
             };
             (cv(base.0, an.0, is.0), cv(base.1, an.1, is.1))
         }
-        Method::AsThesis { .. } | Method::AsWeighted { .. } => ([0.0; 3], [0.0; 3]),
+        Method::AsThesis { .. } | Method::AsWeighted { .. } | Method::AsFis { .. } => {
+            ([0.0; 3], [0.0; 3])
+        }
     }
 }
 
@@ -469,6 +539,55 @@ fn as_route(
         let (s, b) = tab.size_bias_at(vl);
         (e0.map(|c| c * inv * (s + b)), e0.map(|c| c * inv * b))
     }
+}
+
+/// `as-fis-N`: Ashikhmin–Shirley by the baked half-vector LUT, stratified per pixel and
+/// filtered. Taps h from the LUT at the rotated Hammersley point (bilinear: the inverse CDF of
+/// p_h, so each of the N cells of the point set holds 1/N of p_h's mass), l = reflect(v, h),
+/// weight F(v·h)(n·l)/max(n·v, n·l) (exact p_h importance sampling), the box pyramid read at
+/// lod ½(log2(1/(N p_l)) − log2 Ω_texel) + 1 with p_l = A·p_h(n)/(4 v·h).
+fn as_fis(
+    pyr: &BorderedMips,
+    tab: &AsTables,
+    frame: &Frame,
+    v: Vec3,
+    taps: usize,
+    bias: Option<f32>,
+    rotation: glam::Vec2,
+) -> E01 {
+    let vl = frame.to_local(v).normalize();
+    let (mut e0, mut e1) = (Vec3::ZERO, Vec3::ZERO);
+    if vl.z <= 0.0 || taps == 0 {
+        return ([0.0; 3], [0.0; 3]);
+    }
+    let n = taps as u32;
+    let log2_sa = pyr.base_log2_texel_solid_angle();
+    let max_lod = pyr.max_lod() as f32;
+    for i in 0..n {
+        let (x1, x2) = hammersley(i, n);
+        let u = glam::Vec2::new(x1, x2) + rotation;
+        let u = u - u.floor();
+        let (h, a) = ibl_lut::hv::lookup(&tab.hv, u.x as f64, u.y as f64);
+        let h = h.as_vec3().normalize();
+        let vh = vl.dot(h);
+        let l = 2.0 * vh * h - vl;
+        if vh <= 0.0 || l.z <= 0.0 {
+            continue;
+        }
+        let pl = (a * tab.pdf_h_n) as f32 / (4.0 * vh);
+        let lod = match bias {
+            None => 0.0,
+            Some(_) if pl <= 0.0 => max_lod,
+            Some(b) => (0.5 * (-(n as f32 * pl).log2() - log2_sa) + b).clamp(0.0, max_lod),
+        };
+        let c = Vec3::from(pyr.sample(frame.to_world(l), lod));
+        let w = l.z / vl.z.max(l.z);
+        let chi = (1.0 - vh.min(1.0)).powi(5);
+        e0 += w * c;
+        e1 += w * chi * c;
+    }
+    let inv = 1.0 / n as f32;
+    ((e0 * inv).into(), (e1 * inv).into())
 }
 
 /// VNDF filtered importance sampling (`fis-N`): the shipped method's emulation
@@ -599,6 +718,25 @@ mod tests {
     }
 
     #[test]
+    fn as_fis_pdf_from_the_lut_is_the_exact_p_h() {
+        // The lod of as-fis-N reads p_h as the LUT's A channel times p_h(n): check it against
+        // ibl-brdf's closed form at the LUT's own taps (bilinear: a few percent at most).
+        for (nu, nv) in [(100.0, 10.0), (20.0, 700.0)] {
+            let tab = AsTables::bake(nu, nv, 128);
+            let a = ibl_brdf::AshikhminShirley::new(nu, nv);
+            let mut worst = 0.0f64;
+            for i in 0..64u32 {
+                let (x1, x2) = hammersley(i, 64);
+                let (h, q) = ibl_lut::hv::lookup(&tab.hv, x1 as f64, x2 as f64);
+                let h = h.normalize();
+                let exact = a.pdf_h(h);
+                worst = worst.max((q * tab.pdf_h_n - exact).abs() / exact.max(1e-9));
+            }
+            assert!(worst < 0.1, "({nu}, {nv}): {worst}");
+        }
+    }
+
+    #[test]
     fn as_routes_agree_with_each_other_and_the_truth_under_a_constant_environment() {
         let cube = Cubemap::constant(8, [1.0; 3]);
         let (lookup, dfg, pyr) = inputs_const();
@@ -643,6 +781,12 @@ mod tests {
             );
             // As written, the thesis's E0 is (s + b): the same expectation as M4b's weight.
             assert!((a.0[0] - b.0[0]).abs() < 0.01, "{a:?} {b:?}");
+            // Stratified, filtered taps: the same estimator (the pyramid of a constant is
+            // constant), so the same expectation.
+            let fis = Method::parse("as-fis-256").unwrap();
+            let c = evaluate(&fis, &inp, &f, v, &mat, 1, &mut buf);
+            assert!((c.0[0] - b.0[0]).abs() < 0.01, "{c:?} {b:?}");
+            assert!((c.1[0] - b.1[0]).abs() < 0.005, "{c:?} {b:?}");
             assert!(
                 (b.0[0] as f64 - t.e0[0]).abs() < 0.02 + 4.0 * t.se0[0],
                 "{b:?} {t:?}"
@@ -668,6 +812,16 @@ mod tests {
         );
         assert_eq!(Method::parse("fis-32").unwrap(), Method::Fis { taps: 32 });
         assert_eq!(Method::parse("cv-8").unwrap(), Method::Cv { taps: 8 });
+        for n in [
+            "as-fis-32",
+            "as-fis-32-b0",
+            "as-fis-16-b-1",
+            "as-strat-32",
+            "fisb-16",
+        ] {
+            assert_eq!(Method::parse(n).unwrap().name(), n);
+        }
+        assert!(Method::parse("as-fis-32-bx").is_err() && Method::parse("as-fis-32-b99").is_err());
         assert_eq!(Method::Cv { taps: 8 }.taps(), (17, 1));
         for bad in ["major-0", "major-x", "fis-", "bent", "major-4-q1"] {
             assert!(Method::parse(bad).is_err(), "{bad}");

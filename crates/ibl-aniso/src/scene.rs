@@ -1,8 +1,11 @@
 //! Scenes: an orthographic sphere seen from an azimuth and an elevation, with a per-pixel
 //! shading frame (t, b, n) whose tangent comes from a `tpr-map` direction preset applied to the
-//! sphere's "lathe" tangent (rings about +Y).
+//! sphere's "lathe" tangent (rings about +Y) or from a `tpr-map` file, and a normal perturbed by
+//! a `quat-map` file (the whole tangent frame rotated by each texel's quaternion, Marcolongo
+//! 2020 §3.4), both read at the surface's UV.
 
 use glam::Vec3;
+use ibl_core::Image;
 use ibl_material::direction::Preset;
 use serde::Serialize;
 
@@ -74,6 +77,107 @@ pub fn pixel_normal(i: usize, j: usize, s: usize, cam: (Vec3, Vec3, Vec3)) -> Op
     Some((cam.0 * x + cam.1 * y + cam.2 * z).normalize())
 }
 
+/// A map read at the surface's UV, as a shader reads a texture: bilinear, u wrapping (the
+/// sphere's seam), v clamped; row 0 is v = 0 (the top), texel centres at (i + ½)/W, as
+/// `tpr-map` writes them.
+#[derive(Clone, Debug)]
+pub struct UvMap {
+    /// The texels (at least 3 channels for a quaternion map, 2 for a tangent map).
+    pub image: Image,
+}
+
+impl UvMap {
+    /// Channels 0..K bilinearly at (u, v).
+    pub fn sample<const K: usize>(&self, u: f64, v: f64) -> [f64; K] {
+        let img = &self.image;
+        let (w, h) = (img.width as f64, img.height as f64);
+        let x = u.rem_euclid(1.0) * w - 0.5;
+        let y = (v.clamp(0.0, 1.0) * h - 0.5).clamp(0.0, h - 1.0);
+        let (x0, y0) = (x.floor(), y.floor());
+        let (fx, fy) = (x - x0, y - y0);
+        let wrap = |i: f64| (i.rem_euclid(w)) as usize;
+        let row = |j: f64| (j.clamp(0.0, h - 1.0)) as usize;
+        let at =
+            |i: usize, j: usize, k: usize| img.data[(j * img.width + i) * img.channels + k] as f64;
+        let (i0, i1, j0, j1) = (wrap(x0), wrap(x0 + 1.0), row(y0), row(y0 + 1.0));
+        std::array::from_fn(|k| {
+            let top = at(i0, j0, k) * (1.0 - fx) + at(i1, j0, k) * fx;
+            let bot = at(i0, j1, k) * (1.0 - fx) + at(i1, j1, k) * fx;
+            top * (1.0 - fy) + bot * fy
+        })
+    }
+}
+
+/// The per-pixel frame field of a scene: the tangent direction from a `tpr-map` preset or a
+/// `tpr-map` file, and optionally normals perturbed by a `quat-map` file.
+#[derive(Clone, Debug)]
+pub struct Field {
+    /// The tangent preset (used when `tpr` is `None`).
+    pub preset: Preset,
+    /// A `tpr-map` output: RG = the tangent's (x, y)·½ + ½ in the (t₀, b₀) plane (y up).
+    pub tpr: Option<UvMap>,
+    /// A `quat-map` output: RGB = q·½ + ½, q = (a, b, c) the rotation of the tangent frame
+    /// onto the texel's frame (identity = (1, ½, ½)).
+    pub quat: Option<UvMap>,
+}
+
+impl From<Preset> for Field {
+    fn from(preset: Preset) -> Field {
+        Field {
+            preset,
+            tpr: None,
+            quat: None,
+        }
+    }
+}
+
+impl Field {
+    /// The frame at UV (u, v) of a surface whose base frame is (t₀, b₀, n) (orthonormal):
+    /// first the quaternion rotates the whole base frame (t₀, b₀, n) → (t₁, b₁, n₁)
+    /// (`ibl_material::quaternion::frame_from_quat`, the b' erratum fixed, q renormalised as
+    /// after bilinear filtering), then the tangent direction d turns t₁ in its tangent plane:
+    /// t = normalize(d_x t₁ + d_y b₁), b = n₁ × t, as the thesis's shader composes the two
+    /// maps (Marcolongo 2020 §3.4–3.5).
+    pub fn frame(&self, u: f64, v: f64, t0: Vec3, b0: Vec3, n: Vec3) -> Frame {
+        let (mut t1, mut b1, mut n1) = (t0, b0, n);
+        if let Some(q) = &self.quat {
+            let e: [f64; 3] = q.sample(u, v);
+            let q = ibl_material::quaternion::decode_quat(&[e[0] as f32, e[1] as f32, e[2] as f32]);
+            let len = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2]).sqrt();
+            if len > 1e-6 && len.is_finite() {
+                let q = q.map(|c| c / len);
+                let [tl, _, nl] = ibl_material::quaternion::frame_from_quat(q);
+                let world = |l: [f64; 3]| {
+                    (t0.as_dvec3() * l[0] + b0.as_dvec3() * l[1] + n.as_dvec3() * l[2]).as_vec3()
+                };
+                // Re-orthonormalise in f32 (the rotation is exact up to rounding).
+                n1 = world(nl).normalize();
+                let t = world(tl);
+                t1 = (t - n1 * n1.dot(t)).normalize();
+                b1 = n1.cross(t1);
+            }
+        }
+        let d: [f64; 2] = match &self.tpr {
+            Some(m) => {
+                let e: [f64; 2] = m.sample(u, v);
+                [2.0 * e[0] - 1.0, 2.0 * e[1] - 1.0]
+            }
+            None => self.preset.field(u, v, [1.0, 1.0], false),
+        };
+        let t = t1 * d[0] as f32 + b1 * d[1] as f32;
+        let t = if t.length_squared() > 1e-12 && t.is_finite() {
+            t.normalize()
+        } else {
+            t1
+        };
+        Frame {
+            t,
+            b: n1.cross(t),
+            n: n1,
+        }
+    }
+}
+
 /// Pixels within this sine of the poles are masked: the ring tangent Y × n is undefined at
 /// the poles (docs/ANISOTROPY.md §6.11).
 pub const POLE_MASK: f32 = 0.1;
@@ -81,7 +185,7 @@ pub const POLE_MASK: f32 = 0.1;
 /// The sphere's frame at normal n: the lathe tangent t₀ = Y × n/|Y × n| (rings about +Y),
 /// b₀ = n × t₀, turned in the tangent plane by the preset's direction at the equirect UV of n
 /// (u = ½ + atan2(n_x, n_z)/2π, v = acos(n_y)/π), as `tpr-map` turns it. `None` near the poles.
-pub fn sphere_frame(n: Vec3, preset: &Preset) -> Option<Frame> {
+pub fn sphere_frame(n: Vec3, field: &Field) -> Option<Frame> {
     let ring = Vec3::Y.cross(n);
     let len = ring.length();
     if len < POLE_MASK {
@@ -91,18 +195,7 @@ pub fn sphere_frame(n: Vec3, preset: &Preset) -> Option<Frame> {
     let b0 = n.cross(t0);
     let u = 0.5 + (n.x as f64).atan2(n.z as f64) / std::f64::consts::TAU;
     let v = (n.y as f64).clamp(-1.0, 1.0).acos() / std::f64::consts::PI;
-    let d = preset.field(u, v, [1.0, 1.0], false);
-    let t = t0 * d[0] as f32 + b0 * d[1] as f32;
-    let t = if t.length_squared() > 1e-12 && t.is_finite() {
-        t.normalize()
-    } else {
-        t0
-    };
-    Some(Frame {
-        t,
-        b: n.cross(t),
-        n,
-    })
+    Some(field.frame(u, v, t0, b0, n))
 }
 
 /// One shaded pixel of a view.
@@ -117,7 +210,7 @@ pub struct Pixel {
 }
 
 /// The shaded pixels of an s×s sphere image under `cam` with tangent field `preset`.
-pub fn sphere_pixels(s: usize, cam: (Vec3, Vec3, Vec3), preset: &Preset) -> Vec<Pixel> {
+pub fn sphere_pixels(s: usize, cam: (Vec3, Vec3, Vec3), field: &Field) -> Vec<Pixel> {
     let mut out = Vec::new();
     for j in 0..s {
         for i in 0..s {
@@ -128,7 +221,7 @@ pub fn sphere_pixels(s: usize, cam: (Vec3, Vec3, Vec3), preset: &Preset) -> Vec<
             if n.dot(cam.2) < 0.02 {
                 continue;
             }
-            if let Some(frame) = sphere_frame(n, preset) {
+            if let Some(frame) = sphere_frame(n, field) {
                 out.push(Pixel {
                     idx: j * s + i,
                     frame,
@@ -146,7 +239,7 @@ pub fn sphere_pixels(s: usize, cam: (Vec3, Vec3, Vec3), preset: &Preset) -> Vec<
 /// al. 2024 Fig. 22). UV = ((x+1)/2, (1−z)/2) on the disc; the base tangent is +X, b₀ = n × t₀
 /// = −Z, turned by `preset` (a `radial` preset gives the pan's concentric grooves). The view
 /// varies per pixel: v = normalize(eye − p).
-pub fn plate_pixels(s: usize, azimuth_deg: f32, elevation_deg: f32, preset: &Preset) -> Vec<Pixel> {
+pub fn plate_pixels(s: usize, azimuth_deg: f32, elevation_deg: f32, field: &Field) -> Vec<Pixel> {
     let (sp, cp) = azimuth_deg.to_radians().sin_cos();
     let (st, ct) = elevation_deg.clamp(5.0, 89.0).to_radians().sin_cos();
     let dir = Vec3::new(sp * ct, st, cp * ct);
@@ -172,20 +265,9 @@ pub fn plate_pixels(s: usize, azimuth_deg: f32, elevation_deg: f32, preset: &Pre
                 continue;
             }
             let (u, v) = (0.5 * (p.x as f64 + 1.0), 0.5 * (1.0 - p.z as f64));
-            let d = preset.field(u, v, [1.0, 1.0], false);
-            let t = t0 * d[0] as f32 + b0 * d[1] as f32;
-            let t = if t.length_squared() > 1e-12 && t.is_finite() {
-                t.normalize()
-            } else {
-                t0
-            };
             out.push(Pixel {
                 idx: j * s + i,
-                frame: Frame {
-                    t,
-                    b: n.cross(t),
-                    n,
-                },
+                frame: field.frame(u, v, t0, b0, n),
                 v: (eye - p).normalize(),
             });
         }
@@ -201,7 +283,7 @@ mod tests {
     fn frames_are_orthonormal_and_right_handed() {
         let preset: Preset = "spiral".parse().unwrap();
         for (az, el) in [(0.0, 0.0), (90.0, 30.0), (200.0, 60.0)] {
-            let px = sphere_pixels(16, camera(az, el), &preset);
+            let px = sphere_pixels(16, camera(az, el), &preset.clone().into());
             assert!(px.len() > 100, "{}", px.len());
             for p in px {
                 let f = p.frame;
@@ -209,11 +291,136 @@ mod tests {
                 assert!(f.t.dot(f.n).abs() < 1e-5 && f.t.cross(f.b).dot(f.n) > 0.999);
             }
         }
-        let plate = plate_pixels(32, 30.0, 40.0, &"radial".parse().unwrap());
+        let radial: Preset = "radial".parse().unwrap();
+        let plate = plate_pixels(32, 30.0, 40.0, &radial.into());
         assert!(plate.len() > 150, "{}", plate.len());
         for p in plate {
             assert!(p.v.dot(p.frame.n) > 0.0 && (p.frame.t.length() - 1.0).abs() < 1e-5);
             assert!(p.frame.t.y.abs() < 1e-6);
         }
+    }
+
+    fn constant_map(w: usize, h: usize, texel: &[f32]) -> UvMap {
+        let data = (0..w * h).flat_map(|_| texel.iter().copied()).collect();
+        UvMap {
+            image: Image::from_data(w, h, texel.len(), data).unwrap(),
+        }
+    }
+
+    fn close(a: Vec3, b: Vec3, tol: f32) -> bool {
+        (a - b).length() <= tol
+    }
+
+    #[test]
+    fn identity_quat_map_changes_nothing_and_a_rotation_rotates_the_frame() {
+        let preset: Preset = "spiral".parse().unwrap();
+        let plain: Field = preset.clone().into();
+        let identity = Field {
+            quat: Some(constant_map(8, 4, &[1.0, 0.5, 0.5])),
+            ..plain.clone()
+        };
+        let cam = camera(30.0, 20.0);
+        let a = sphere_pixels(24, cam, &plain);
+        let b = sphere_pixels(24, cam, &identity);
+        assert_eq!(a.len(), b.len());
+        for (p, q) in a.iter().zip(&b) {
+            assert!(close(p.frame.t, q.frame.t, 1e-6) && close(p.frame.n, q.frame.n, 1e-6));
+            assert!(close(p.frame.b, q.frame.b, 1e-6));
+        }
+        // A known tilt: the quaternion quat-map stores for the tangent-space normal n'
+        // (ibl_material::quaternion::quat_from_normal) turns n onto t₀ n'_x + b₀ n'_y + n n'_z.
+        let nl = [0.35f64, -0.25, 0.9];
+        let len = (nl[0] * nl[0] + nl[1] * nl[1] + nl[2] * nl[2]).sqrt();
+        let nl = nl.map(|c| c / len);
+        let q = ibl_material::quaternion::quat_from_normal(nl);
+        let enc = q.map(|c| (c * 0.5 + 0.5) as f32);
+        let tilted = Field {
+            quat: Some(constant_map(8, 4, &enc)),
+            ..Field::from("constant:0".parse::<Preset>().unwrap())
+        };
+        let base: Field = "constant:0".parse::<Preset>().unwrap().into();
+        let (a, b) = (
+            sphere_pixels(24, cam, &base),
+            sphere_pixels(24, cam, &tilted),
+        );
+        assert_eq!(a.len(), b.len());
+        let mut moved = 0;
+        for (p, q) in a.iter().zip(&b) {
+            let want = p
+                .frame
+                .to_world(Vec3::new(nl[0] as f32, nl[1] as f32, nl[2] as f32));
+            assert!(close(q.frame.n, want, 2e-6), "{} {}", q.frame.n, want);
+            // Orthonormal and right-handed.
+            let f = q.frame;
+            for (x, y) in [(f.t, f.b), (f.b, f.n), (f.n, f.t)] {
+                assert!(x.dot(y).abs() < 2e-6);
+            }
+            for x in [f.t, f.b, f.n] {
+                assert!((x.length() - 1.0).abs() < 2e-6);
+            }
+            assert!(f.t.cross(f.b).dot(f.n) > 0.99999);
+            // The tangent is the base tangent rotated by the same rotation.
+            let [tl, _, _] = ibl_material::quaternion::frame_from_quat(q_of(&enc));
+            let tw = p
+                .frame
+                .to_world(Vec3::new(tl[0] as f32, tl[1] as f32, tl[2] as f32));
+            assert!(close(f.t, tw.normalize(), 2e-5));
+            moved += usize::from(!close(p.frame.n, q.frame.n, 0.1));
+        }
+        assert_eq!(moved, a.len());
+    }
+
+    fn q_of(enc: &[f32; 3]) -> [f64; 3] {
+        let q = ibl_material::quaternion::decode_quat(enc);
+        let l = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2]).sqrt();
+        q.map(|c| c / l)
+    }
+
+    #[test]
+    fn tpr_map_file_tangents_equal_the_preset() {
+        // A tpr-map of constant:30 holds (cos 30°, sin 30°)·½ + ½ in RG everywhere.
+        let (s, c) = 30f64.to_radians().sin_cos();
+        let map = constant_map(
+            16,
+            8,
+            &[(c * 0.5 + 0.5) as f32, (s * 0.5 + 0.5) as f32, 0.3, 1.0],
+        );
+        let preset: Preset = "constant:30".parse().unwrap();
+        let from_file = Field {
+            tpr: Some(map),
+            ..Field::from("constant:0".parse::<Preset>().unwrap())
+        };
+        let from_preset: Field = preset.into();
+        for cam in [camera(0.0, 0.0), camera(120.0, 45.0)] {
+            let a = sphere_pixels(20, cam, &from_preset);
+            let b = sphere_pixels(20, cam, &from_file);
+            assert_eq!(a.len(), b.len());
+            for (p, q) in a.iter().zip(&b) {
+                assert!(
+                    close(p.frame.t, q.frame.t, 1e-5),
+                    "{} {}",
+                    p.frame.t,
+                    q.frame.t
+                );
+            }
+        }
+        let a = plate_pixels(16, 10.0, 50.0, &from_preset);
+        let b = plate_pixels(16, 10.0, 50.0, &from_file);
+        for (p, q) in a.iter().zip(&b) {
+            assert!(close(p.frame.t, q.frame.t, 1e-5));
+        }
+    }
+
+    #[test]
+    fn uv_maps_are_sampled_bilinearly_with_u_wrapping() {
+        // Two columns 0 and 1: at the seam (u = 0) the wrap mixes them half and half.
+        let m = UvMap {
+            image: Image::from_data(2, 1, 1, vec![0.0, 1.0]).unwrap(),
+        };
+        assert!((m.sample::<1>(0.25, 0.5)[0] - 0.0).abs() < 1e-12);
+        assert!((m.sample::<1>(0.75, 0.5)[0] - 1.0).abs() < 1e-12);
+        assert!((m.sample::<1>(0.0, 0.5)[0] - 0.5).abs() < 1e-12);
+        assert!((m.sample::<1>(1.0, 0.0)[0] - 0.5).abs() < 1e-12);
+        assert!((m.sample::<1>(0.5, 1.0)[0] - 0.5).abs() < 1e-12);
     }
 }

@@ -1,20 +1,36 @@
-//! The shipped anisotropic IBL method (issue 23 item 7): VNDF filtered importance sampling at
-//! 16 taps (`fis-16`), the winner of `bench/aniso.md`, as one source of truth — the constants
-//! in [`SHIPPED`], the CPU emulation [`shade`] the evaluator runs, and the GLSL / HLSL / WGSL
+//! The shipped anisotropic IBL method (issue 23 items 6–7): VNDF filtered importance sampling
+//! at 16 taps (`fis-16`, the winner of `bench/aniso.md`) blended into the isotropic split sum
+//! as the anisotropy vanishes (`fisb-16`), as one source of truth — the constants in
+//! [`SHIPPED`], the CPU emulation [`shade`] the evaluator runs, and the GLSL / HLSL / WGSL
 //! snippets [`glsl`], [`hlsl`], [`wgsl`] written from the same constants and the same steps.
 //!
 //! What it reads: the environment cube with its box mip pyramid — `equirect-to-cube`'s cube
 //! with the mips the engine's `generateMipmap` (2×2 box per level, power-of-two faces) builds,
 //! read trilinearly and seamlessly (`ibl_core::bordered::BorderedMips::sample`, the evaluator's
-//! model of a GPU's `textureLod` with `GL_TEXTURE_CUBE_MAP_SEAMLESS`). No split-sum table: the
-//! taps carry the Smith G2/G1 weight and the Schlick tail themselves.
+//! model of a GPU's `textureLod` with `GL_TEXTURE_CUBE_MAP_SEAMLESS`) — and the engine's own
+//! isotropic split-sum result at r_iso = √((α_t+α_b)/2) (its prefiltered chain and DFG table,
+//! which the engine computes for its isotropic materials anyway), passed in.
 //!
-//! Method: Křivánek & Colbert 2008 (GPU Gems 3 ch. 20) filtered importance sampling with
+//! Why the blend (goal G2, "never worse than the isotropic floor at η = 0"): at η = 0 the
+//! anisotropic lobe *is* the isotropic one, and the prefiltered chain integrates it over the
+//! whole lobe where 16 FIS taps only estimate it (2.81× the floor's MSE under a small sun at
+//! r = 0.2). So the method reads the isotropic split sum at η = 0 (w = 0: exactly the floor,
+//! and no FIS tap is taken) and mixes in FIS as |η| grows: specular = iso + (fis − iso)·w,
+//! w = clamp(|η|/η₁, 0, 1)^p, (η₁, p) fitted on training environments and scored on held-out
+//! ones (`examples/fit_blend.rs`, bench/aniso-blend.md).
+//!
+//! FIS: Křivánek & Colbert 2008 (GPU Gems 3 ch. 20) filtered importance sampling with
 //! Heitz 2018's visible-normal sampling of anisotropic GGX: N Hammersley points (shifted by a
 //! per-pixel rotation the caller supplies, Cranley–Patterson), m ~ D_v(m), l = reflect(v, m),
 //! weight G2/G1 = (1+Λ(v))/(1+Λ(v)+Λ(l)), lod = ½(log2 Ω_s − log2 Ω_p) + bias with
 //! Ω_s = 1/(N p_l), p_l = D(m) G1(v) / (4 n·v) (Křivánek & Colbert eq. 13; the +1 bias is
 //! theirs). E0 = mean w·L (F0 = 1), E1 = mean w·(1−v·m)⁵·L, specular = F0·E0 + (1−F0)·E1.
+//! Note on eq. 13: the chapter's pdf is that of the *light* direction (p_l = p_h/(4 v·h)); with
+//! visible normals p_h = D G1(v) (v·m)/(n·v), so p_l = D G1(v)/(4 n·v) — the v·h cancels. Using
+//! D(m)(n·m)/(4 v·h) (their GGX sampler's pdf) with VNDF taps would mis-size every tap.
+//! Reading, not corrected: Ω_p is one texel's *mean* solid angle 4π/(6 size²); on a cube a
+//! face-centre texel is 1.91× that and a corner texel 0.37×, so the lod is ~0.47 levels high at
+//! face centres and ~0.72 low at corners.
 
 use crate::methods::E01;
 use crate::scene::Frame;
@@ -33,6 +49,12 @@ pub struct Shipped {
     pub schlick_power: f32,
     /// Smallest α along either axis: α = 0 (r = 0) would make D(m) infinite.
     pub alpha_min: f32,
+    /// |η| from which the method is pure FIS: below it the isotropic split sum is mixed in
+    /// with weight 1 − w, w = clamp(|η|/blend_eta, 0, 1)^blend_power ([`fis_weight`]).
+    /// Fitted on training environments by `examples/fit_blend.rs` (bench/aniso-blend.md).
+    pub blend_eta: f32,
+    /// Exponent of the blend weight.
+    pub blend_power: f32,
 }
 
 /// The shipped method: `fis-16` of `bench/aniso.md`.
@@ -41,16 +63,20 @@ pub const SHIPPED: Shipped = Shipped {
     lod_bias: 1.0,
     schlick_power: 5.0,
     alpha_min: 1e-3,
+    // bench/aniso-blend.md: the training optimum over η₁ ∈ {0.02 … 1} × p ∈ {0.5, 1, 2}.
+    blend_eta: 0.6,
+    blend_power: 1.0,
 };
 
 /// The steps, in the order every snippet defines them (GLSL/HLSL name, WGSL name): the
 /// emulation's functions of the same role are [`lambda`], [`d_ggx`], [`sample_vndf`],
-/// [`hammersley`], [`shade`].
-pub const STEPS: [(&str, &str); 5] = [
+/// [`hammersley`], [`fis_weight`], [`shade`].
+pub const STEPS: [(&str, &str); 6] = [
     ("anisoFisLambda", "aniso_fis_lambda"),
     ("anisoFisD", "aniso_fis_d"),
     ("anisoFisSampleVndf", "aniso_fis_sample_vndf"),
     ("anisoFisHammersley", "aniso_fis_hammersley"),
+    ("anisoFisWeight", "aniso_fis_weight"),
     ("anisoFisSpecular", "aniso_fis_specular"),
 ];
 
@@ -112,14 +138,73 @@ pub fn hammersley(i: u32, rotation: Vec2) -> Vec2 {
     s - s.floor()
 }
 
-/// The shipped method at one pixel, N = [`SHIPPED`]`.taps`: (E0, E1) of the pyramid `pyr` for
-/// the frame, the view v (world, towards the eye), α_t along t, α_b along b and the per-pixel
+/// The blend weight of FIS against the isotropic split sum for the lobe (α_t, α_b):
+/// w = clamp(|η|/η₁, 0, 1)^p with the Kulla–Conty η = (α_t − α_b)/(α_t + α_b) (0 for α_t =
+/// α_b = 0) and (η₁, p) = [`SHIPPED`]`.blend_eta`, `.blend_power`.
+pub fn fis_weight(at: f32, ab: f32) -> f32 {
+    let s = at + ab;
+    if s.is_nan() || s <= 0.0 {
+        return 0.0;
+    }
+    let eta = ((at - ab) / s).abs();
+    (eta / SHIPPED.blend_eta)
+        .clamp(0.0, 1.0)
+        .powf(SHIPPED.blend_power)
+}
+
+/// The shipped method at one pixel (`fisb-16`): iso + (fis − iso)·w per E0 and E1, w =
+/// [`fis_weight`], fis = [`shade_fis`], `iso` the engine's isotropic split sum at r_iso as
+/// (E0, E1). At w = 0 (η = 0) it returns `iso` untouched and takes no FIS tap.
+pub fn shade(
+    pyr: &BorderedMips,
+    frame: &Frame,
+    v: Vec3,
+    at: f32,
+    ab: f32,
+    rotation: Vec2,
+    iso: E01,
+) -> E01 {
+    shade_blend_n(pyr, frame, v, at, ab, SHIPPED.taps, rotation, iso)
+}
+
+/// [`shade`] with `taps` FIS taps (the evaluator's `fisb-N`).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn shade_blend_n(
+    pyr: &BorderedMips,
+    frame: &Frame,
+    v: Vec3,
+    at: f32,
+    ab: f32,
+    taps: u32,
+    rotation: Vec2,
+    iso: E01,
+) -> E01 {
+    let w = fis_weight(at, ab);
+    if w <= 0.0 {
+        return iso;
+    }
+    let f = shade_n(pyr, frame, v, at, ab, taps, rotation);
+    let mix = |a: [f32; 3], b: [f32; 3]| -> [f32; 3] {
+        std::array::from_fn(|k| a[k] + (b[k] - a[k]) * w)
+    };
+    (mix(iso.0, f.0), mix(iso.1, f.1))
+}
+
+/// Pure VNDF FIS at N = [`SHIPPED`]`.taps` (`fis-16`): (E0, E1) of the pyramid `pyr` for the
+/// frame, the view v (world, towards the eye), α_t along t, α_b along b and the per-pixel
 /// rotation. Returns zeros when v is below the shading normal.
-pub fn shade(pyr: &BorderedMips, frame: &Frame, v: Vec3, at: f32, ab: f32, rotation: Vec2) -> E01 {
+pub fn shade_fis(
+    pyr: &BorderedMips,
+    frame: &Frame,
+    v: Vec3,
+    at: f32,
+    ab: f32,
+    rotation: Vec2,
+) -> E01 {
     shade_n(pyr, frame, v, at, ab, SHIPPED.taps, rotation)
 }
 
-/// [`shade`] with `taps` in place of [`SHIPPED`]`.taps` (the evaluator's `fis-N`).
+/// [`shade_fis`] with `taps` in place of [`SHIPPED`]`.taps` (the evaluator's `fis-N`).
 pub(crate) fn shade_n(
     pyr: &BorderedMips,
     frame: &Frame,
@@ -201,16 +286,21 @@ impl Lang {
 }
 
 const HEADER: &str = "\
-Anisotropic GGX specular IBL: VNDF filtered importance sampling (issue 23, `fis-16` of
-bench/aniso.md). Generated by `aniso-eval --emit-shader` from ibl-aniso's ship.rs, the same
-constants and steps as the evaluator's CPU emulation; do not edit.
+Anisotropic GGX specular IBL: VNDF filtered importance sampling blended into the isotropic
+split sum as the anisotropy vanishes (issue 23, `fisb-16` of bench/aniso.md). Generated by
+`aniso-eval --emit-shader` from ibl-aniso's ship.rs, the same constants and steps as the
+evaluator's CPU emulation; do not edit.
 Reads: the environment cube with its full box mip chain (generateMipmap), seamless trilinear.
 Inputs: n, t, b an orthonormal world frame (t the tangent, alpha_t along it); v the unit
 direction towards the eye; alpha_t = r^2 (1 + eta), alpha_b = r^2 (1 - eta) (Kulla-Conty);
 log2TexelSolidAngle = log2(4 pi / (6 size^2)) of mip 0; maxLod = levels - 1;
-rotation in the unit square per pixel (blue noise, or 0 for a fixed pattern).
-Returns F0 E0 + (1 - F0) E1 (Schlick). The cube is read with the engine's direction
-convention: flip l here if the engine's cube is mirrored.";
+rotation in the unit square per pixel (blue noise, or 0 for a fixed pattern);
+isoSpecular the engine's own isotropic split sum for this pixel at
+r = sqrt((alpha_t + alpha_b) / 2) (prefiltered chain times F0 A + B), returned as is at
+eta = 0 (no tap taken).
+Returns iso + (fis - iso) w, fis = F0 E0 + (1 - F0) E1 (Schlick), w = anisoFisWeight.
+The cube is read with the engine's direction convention: flip l here if the engine's cube
+is mirrored.";
 
 /// The snippet in `lang`.
 pub fn emit(lang: Lang) -> String {
@@ -239,7 +329,9 @@ pub fn emit(lang: Lang) -> String {
             .replace("{POW}", &pow)
             .replace("{AMIN}", &amin)
             .replace("{PI}", &pi)
-            .replace("{INV24}", &inv),
+            .replace("{INV24}", &inv)
+            .replace("{BETA}", &lit(c.blend_eta))
+            .replace("{BPOW}", &lit(c.blend_power)),
     );
     s
 }
@@ -264,6 +356,8 @@ const float ANISO_FIS_SCHLICK_POWER = {POW};
 const float ANISO_FIS_ALPHA_MIN = {AMIN};
 const float ANISO_FIS_PI = {PI};
 const float ANISO_FIS_INV_2_24 = {INV24};
+const float ANISO_FIS_BLEND_ETA = {BETA};
+const float ANISO_FIS_BLEND_POWER = {BPOW};
 
 float anisoFisLambda(vec3 w, float ax, float ay) {
     float a = (ax * ax * w.x * w.x + ay * ay * w.y * w.y) / (w.z * w.z);
@@ -301,12 +395,21 @@ vec2 anisoFisHammersley(uint i, vec2 rotation) {
     return fract(h + rotation);
 }
 
+float anisoFisWeight(float alphaT, float alphaB) {
+    float s = alphaT + alphaB;
+    if (!(s > 0.0)) { return 0.0; }
+    float eta = abs((alphaT - alphaB) / s);
+    return pow(clamp(eta / ANISO_FIS_BLEND_ETA, 0.0, 1.0), ANISO_FIS_BLEND_POWER);
+}
+
 vec3 anisoFisSpecular(samplerCube env, float log2TexelSolidAngle, float maxLod, vec3 n, vec3 t, vec3 b,
-                      vec3 v, float alphaT, float alphaB, vec3 f0, vec2 rotation) {
+                      vec3 v, float alphaT, float alphaB, vec3 f0, vec2 rotation, vec3 isoSpecular) {
+    float wb = anisoFisWeight(alphaT, alphaB);
+    if (wb <= 0.0) { return isoSpecular; }
     float at = max(alphaT, ANISO_FIS_ALPHA_MIN);
     float ab = max(alphaB, ANISO_FIS_ALPHA_MIN);
     vec3 vl = normalize(vec3(dot(v, t), dot(v, b), dot(v, n)));
-    if (vl.z <= 0.0) { return vec3(0.0); }
+    if (vl.z <= 0.0) { return isoSpecular - isoSpecular * wb; }
     float lv = anisoFisLambda(vl, at, ab);
     float g1 = 1.0 / (1.0 + lv);
     vec3 e0 = vec3(0.0);
@@ -328,7 +431,8 @@ vec3 anisoFisSpecular(samplerCube env, float log2TexelSolidAngle, float maxLod, 
     }
     e0 /= float(ANISO_FIS_TAPS);
     e1 /= float(ANISO_FIS_TAPS);
-    return f0 * e0 + (vec3(1.0) - f0) * e1;
+    vec3 fis = f0 * e0 + (vec3(1.0) - f0) * e1;
+    return isoSpecular + (fis - isoSpecular) * wb;
 }
 "#;
 
@@ -339,6 +443,8 @@ static const float ANISO_FIS_SCHLICK_POWER = {POW};
 static const float ANISO_FIS_ALPHA_MIN = {AMIN};
 static const float ANISO_FIS_PI = {PI};
 static const float ANISO_FIS_INV_2_24 = {INV24};
+static const float ANISO_FIS_BLEND_ETA = {BETA};
+static const float ANISO_FIS_BLEND_POWER = {BPOW};
 
 float anisoFisLambda(float3 w, float ax, float ay) {
     float a = (ax * ax * w.x * w.x + ay * ay * w.y * w.y) / (w.z * w.z);
@@ -376,13 +482,22 @@ float2 anisoFisHammersley(uint i, float2 rotation) {
     return frac(h + rotation);
 }
 
+float anisoFisWeight(float alphaT, float alphaB) {
+    float s = alphaT + alphaB;
+    if (!(s > 0.0)) { return 0.0; }
+    float eta = abs((alphaT - alphaB) / s);
+    return pow(saturate(eta / ANISO_FIS_BLEND_ETA), ANISO_FIS_BLEND_POWER);
+}
+
 float3 anisoFisSpecular(TextureCube env, SamplerState samp, float log2TexelSolidAngle, float maxLod,
                         float3 n, float3 t, float3 b, float3 v, float alphaT, float alphaB, float3 f0,
-                        float2 rotation) {
+                        float2 rotation, float3 isoSpecular) {
+    float wb = anisoFisWeight(alphaT, alphaB);
+    if (wb <= 0.0) { return isoSpecular; }
     float at = max(alphaT, ANISO_FIS_ALPHA_MIN);
     float ab = max(alphaB, ANISO_FIS_ALPHA_MIN);
     float3 vl = normalize(float3(dot(v, t), dot(v, b), dot(v, n)));
-    if (vl.z <= 0.0) { return float3(0.0, 0.0, 0.0); }
+    if (vl.z <= 0.0) { return isoSpecular - isoSpecular * wb; }
     float lv = anisoFisLambda(vl, at, ab);
     float g1 = 1.0 / (1.0 + lv);
     float3 e0 = float3(0.0, 0.0, 0.0);
@@ -404,7 +519,8 @@ float3 anisoFisSpecular(TextureCube env, SamplerState samp, float log2TexelSolid
     }
     e0 /= float(ANISO_FIS_TAPS);
     e1 /= float(ANISO_FIS_TAPS);
-    return f0 * e0 + (1.0 - f0) * e1;
+    float3 fis = f0 * e0 + (1.0 - f0) * e1;
+    return isoSpecular + (fis - isoSpecular) * wb;
 }
 "#;
 
@@ -415,6 +531,8 @@ const ANISO_FIS_SCHLICK_POWER: f32 = {POW};
 const ANISO_FIS_ALPHA_MIN: f32 = {AMIN};
 const ANISO_FIS_PI: f32 = {PI};
 const ANISO_FIS_INV_2_24: f32 = {INV24};
+const ANISO_FIS_BLEND_ETA: f32 = {BETA};
+const ANISO_FIS_BLEND_POWER: f32 = {BPOW};
 
 fn aniso_fis_lambda(w: vec3<f32>, ax: f32, ay: f32) -> f32 {
     let a = (ax * ax * w.x * w.x + ay * ay * w.y * w.y) / (w.z * w.z);
@@ -452,13 +570,22 @@ fn aniso_fis_hammersley(i: u32, rotation: vec2<f32>) -> vec2<f32> {
     return fract(h + rotation);
 }
 
+fn aniso_fis_weight(alpha_t: f32, alpha_b: f32) -> f32 {
+    let s = alpha_t + alpha_b;
+    if (!(s > 0.0)) { return 0.0; }
+    let eta = abs((alpha_t - alpha_b) / s);
+    return pow(clamp(eta / ANISO_FIS_BLEND_ETA, 0.0, 1.0), ANISO_FIS_BLEND_POWER);
+}
+
 fn aniso_fis_specular(env: texture_cube<f32>, samp: sampler, log2_texel_solid_angle: f32, max_lod: f32,
                       n: vec3<f32>, t: vec3<f32>, b: vec3<f32>, v: vec3<f32>, alpha_t: f32, alpha_b: f32,
-                      f0: vec3<f32>, rotation: vec2<f32>) -> vec3<f32> {
+                      f0: vec3<f32>, rotation: vec2<f32>, iso_specular: vec3<f32>) -> vec3<f32> {
+    let wb = aniso_fis_weight(alpha_t, alpha_b);
+    if (wb <= 0.0) { return iso_specular; }
     let at = max(alpha_t, ANISO_FIS_ALPHA_MIN);
     let ab = max(alpha_b, ANISO_FIS_ALPHA_MIN);
     let vl = normalize(vec3<f32>(dot(v, t), dot(v, b), dot(v, n)));
-    if (vl.z <= 0.0) { return vec3<f32>(0.0); }
+    if (vl.z <= 0.0) { return iso_specular - iso_specular * wb; }
     let lv = aniso_fis_lambda(vl, at, ab);
     let g1 = 1.0 / (1.0 + lv);
     var e0 = vec3<f32>(0.0);
@@ -480,7 +607,8 @@ fn aniso_fis_specular(env: texture_cube<f32>, samp: sampler, log2_texel_solid_an
     }
     e0 = e0 / f32(ANISO_FIS_TAPS);
     e1 = e1 / f32(ANISO_FIS_TAPS);
-    return f0 * e0 + (vec3<f32>(1.0) - f0) * e1;
+    let fis = f0 * e0 + (vec3<f32>(1.0) - f0) * e1;
+    return iso_specular + (fis - iso_specular) * wb;
 }
 "#;
 
@@ -521,6 +649,8 @@ mod tests {
                 ("ANISO_FIS_ALPHA_MIN", SHIPPED.alpha_min),
                 ("ANISO_FIS_PI", std::f32::consts::PI),
                 ("ANISO_FIS_INV_2_24", INV_2_24),
+                ("ANISO_FIS_BLEND_ETA", SHIPPED.blend_eta),
+                ("ANISO_FIS_BLEND_POWER", SHIPPED.blend_power),
             ] {
                 let got: f32 = constant(&text, name).parse().unwrap();
                 assert_eq!(got.to_bits(), want.to_bits(), "{lang:?} {name}");
@@ -540,7 +670,7 @@ mod tests {
                 at += pos + def.len();
                 assert!(text.matches(name).count() >= 1);
             }
-            for (g, w) in &STEPS[..4] {
+            for (g, w) in &STEPS[..STEPS.len() - 1] {
                 let name = if lang == Lang::Wgsl { w } else { g };
                 assert!(
                     text.matches(&format!("{name}(")).count() >= 2,
@@ -550,7 +680,9 @@ mod tests {
             // Balanced, fully substituted.
             assert_eq!(text.matches('{').count(), text.matches('}').count());
             assert_eq!(text.matches('(').count(), text.matches(')').count());
-            for hole in ["{TAPS}", "{BIAS}", "{POW}", "{AMIN}", "{PI}", "{INV24}"] {
+            for hole in [
+                "{TAPS}", "{BIAS}", "{POW}", "{AMIN}", "{PI}", "{INV24}", "{BETA}", "{BPOW}",
+            ] {
                 assert!(!text.contains(hole), "{lang:?} {hole}");
             }
             // No float literal loses precision: each constant prints back exactly (above).
@@ -622,9 +754,54 @@ mod tests {
             let (at, ab) = mat.ggx_alphas().unwrap();
             for seed in [1u64, 99] {
                 let got = evaluate(&method, &inp, &frame, v, &mat, seed, &mut buf);
-                let want = shade(&pyr, &frame, v, at, ab, crate::methods::fis_rotation(seed));
+                let rot = crate::methods::fis_rotation(seed);
+                let want = shade_fis(&pyr, &frame, v, at, ab, rot);
                 assert_eq!(got, want);
                 assert!(got.0.iter().all(|c| c.is_finite() && *c > 0.0));
+                // The shipped blend: the evaluator's fisb-16 is `shade` over its own iso.
+                let iso = evaluate(&Method::Iso, &inp, &frame, v, &mat, seed, &mut buf);
+                let blend = Method::parse(&format!("fisb-{}", SHIPPED.taps)).unwrap();
+                let got = evaluate(&blend, &inp, &frame, v, &mat, seed, &mut buf);
+                assert_eq!(got, shade(&pyr, &frame, v, at, ab, rot, iso));
+                let w = fis_weight(at, ab);
+                if eta == 0.0 {
+                    // Exactly the isotropic floor, bit for bit (goal G2 by construction).
+                    assert_eq!(w, 0.0);
+                    assert_eq!(got, iso);
+                } else if w >= 1.0 {
+                    for k in 0..3 {
+                        assert!((got.0[k] - want.0[k]).abs() <= 1e-6 * want.0[k].abs().max(1.0));
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn blend_weight_is_the_kulla_conty_eta_rule() {
+        assert_eq!(fis_weight(0.0, 0.0), 0.0);
+        assert_eq!(fis_weight(f32::NAN, 0.1), 0.0);
+        for r in [0.05f32, 0.3, 0.7, 1.0] {
+            let mut last = -1.0;
+            for i in 0..=40 {
+                let eta = -1.0 + i as f32 / 20.0;
+                let (at, ab) = Material::ggx_kc(r, eta).ggx_alphas().unwrap();
+                let w = fis_weight(at, ab);
+                // Symmetric in η (t ↔ b), within [0, 1], 1 from |η| ≥ η₁, monotone in |η|.
+                let (at2, ab2) = Material::ggx_kc(r, -eta).ggx_alphas().unwrap();
+                assert!((w - fis_weight(at2, ab2)).abs() < 1e-6, "{r} {eta}");
+                assert!((0.0..=1.0).contains(&w));
+                if eta.abs() >= SHIPPED.blend_eta + 1e-4 {
+                    assert_eq!(w, 1.0, "{r} {eta}");
+                }
+                let want = (eta.abs() / SHIPPED.blend_eta)
+                    .min(1.0)
+                    .powf(SHIPPED.blend_power);
+                assert!((w - want).abs() < 1e-4, "{r} {eta} {w} {want}");
+                if eta >= 0.0 {
+                    assert!(w >= last - 1e-6);
+                    last = w;
+                }
             }
         }
     }
@@ -641,7 +818,7 @@ mod tests {
         };
         let v = Vec3::new(0.5, 0.2, 0.8).normalize();
         let (at, ab) = Material::ggx_kc(0.5, 0.6).ggx_alphas().unwrap();
-        let e = shade(&pyr, &frame, v, at, ab, Vec2::new(0.3, 0.7));
+        let e = shade_fis(&pyr, &frame, v, at, ab, Vec2::new(0.3, 0.7));
         let albedo = crate::truth::albedo_quadrature(&Ggx::new(at, ab), v, 64);
         assert!((e.0[0] as f64 - albedo).abs() < 0.03, "{e:?} {albedo}");
         assert!(e.1[0] > 0.0 && e.1[0] < e.0[0]);
@@ -652,14 +829,14 @@ mod tests {
                 Vec3::new(0.0, -1.0, 1e-6),
                 Vec3::Z,
             ] {
-                let e = shade(&pyr, &frame, v.normalize(), at, ab, Vec2::new(0.9, 0.1));
+                let e = shade_fis(&pyr, &frame, v.normalize(), at, ab, Vec2::new(0.9, 0.1));
                 assert!(
                     e.0.iter().chain(&e.1).all(|c| c.is_finite() && *c >= 0.0),
                     "{at} {ab} {v} {e:?}"
                 );
             }
         }
-        let below = shade(&pyr, &frame, -Vec3::Z, 0.2, 0.2, Vec2::ZERO);
+        let below = shade_fis(&pyr, &frame, -Vec3::Z, 0.2, 0.2, Vec2::ZERO);
         assert_eq!(below, ([0.0; 3], [0.0; 3]));
         let s = specular(&e, [0.04; 3]);
         assert!((s[0] - (0.04 * e.0[0] + 0.96 * e.1[0])).abs() < 1e-7);
@@ -704,20 +881,20 @@ mod tests {
         let glsl_main = "layout(binding = 0) uniform samplerCube env;\n\
              layout(location = 0) in vec3 n;\nlayout(location = 0) out vec4 color;\n\
              void main() {\n vec3 t = normalize(cross(vec3(0.0, 1.0, 0.0), n));\n\
-             color = vec4(anisoFisSpecular(env, -5.0, 6.0, n, t, cross(n, t), n, 0.3, 0.1, vec3(0.04), vec2(0.5)), 1.0);\n}\n";
+             color = vec4(anisoFisSpecular(env, -5.0, 6.0, n, t, cross(n, t), n, 0.3, 0.1, vec3(0.04), vec2(0.5), vec3(0.1)), 1.0);\n}\n";
         std::fs::write(&glsl_file, format!("#version 450\n{}{glsl_main}", glsl())).unwrap();
         let hlsl_file = dir.join("aniso_fis.hlsl");
         let hlsl_main = "TextureCube env : register(t0);\nSamplerState samp : register(s0);\n\
              float4 main(float3 n : TEXCOORD0) : SV_Target {\n\
              float3 t = normalize(cross(float3(0.0, 1.0, 0.0), n));\n\
-             return float4(anisoFisSpecular(env, samp, -5.0, 6.0, n, t, cross(n, t), n, 0.3, 0.1, float3(0.04, 0.04, 0.04), float2(0.5, 0.5)), 1.0);\n}\n";
+             return float4(anisoFisSpecular(env, samp, -5.0, 6.0, n, t, cross(n, t), n, 0.3, 0.1, float3(0.04, 0.04, 0.04), float2(0.5, 0.5), float3(0.1, 0.1, 0.1)), 1.0);\n}\n";
         std::fs::write(&hlsl_file, hlsl() + hlsl_main).unwrap();
         let wgsl_file = dir.join("aniso_fis.wgsl");
         let wgsl_main = "@group(0) @binding(0) var env: texture_cube<f32>;\n\
              @group(0) @binding(1) var samp: sampler;\n\
              @fragment fn main(@location(0) n: vec3<f32>) -> @location(0) vec4<f32> {\n\
              let t = normalize(cross(vec3<f32>(0.0, 1.0, 0.0), n));\n\
-             let c = aniso_fis_specular(env, samp, -5.0, 6.0, n, t, cross(n, t), n, 0.3, 0.1, vec3<f32>(0.04), vec2<f32>(0.5));\n\
+             let c = aniso_fis_specular(env, samp, -5.0, 6.0, n, t, cross(n, t), n, 0.3, 0.1, vec3<f32>(0.04), vec2<f32>(0.5), vec3<f32>(0.1));\n\
              return vec4<f32>(c, 1.0);\n}\n";
         std::fs::write(&wgsl_file, wgsl() + wgsl_main).unwrap();
         let spv = dir.join("hlsl.spv");
