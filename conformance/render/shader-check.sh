@@ -30,7 +30,7 @@ mkdir -p "$W"
 "$BIN/aniso-eval" --emit-shader "$W/aniso-shader" -q
 "$BIN/equirect-to-cube" "$ENV_MAP" -o "$W/aniso-env" --size 64 --layout ktx2 --half -q
 "$BIN/shader-emulate" inputs custom -o "$W/custom-inputs.json"
-"$BIN/shader-emulate" inputs aniso -o "$W/aniso-inputs.json"
+"$BIN/shader-emulate" inputs aniso --iso-chain "$W/custom/prefilter.ktx2" --iso-sidecar "$W/custom/prefilter.json" -o "$W/aniso-inputs.json"
 "$BIN/shader-emulate" emulate "$W/custom-inputs.json" --chain "$W/custom/prefilter.ktx2" --sidecar "$W/custom/prefilter.json" -o "$W/custom-cpu.json"
 "$BIN/shader-emulate" emulate "$W/aniso-inputs.json" --chain "$W/aniso-env/cube.ktx2" -o "$W/aniso-cpu.json"
 t1=$(date +%s)
