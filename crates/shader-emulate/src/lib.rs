@@ -440,8 +440,7 @@ pub fn emulate_aniso(inputs: &Grid, pyramid: &BorderedMips) -> Grid {
         };
         let rot = Vec2::new(c[16], c[17]);
         let iso = [c[20], c[21], c[22]];
-        let rgb =
-            ship::shade_specular(pyramid, &frame, v3(3), (c[3], c[7]), [c[11]; 3], rot, iso);
+        let rgb = ship::shade_specular(pyramid, &frame, v3(3), (c[3], c[7]), [c[11]; 3], rot, iso);
         let alpha = if ship::fis_weight(c[3], c[7]) <= 0.0 {
             ALPHA_PASS_THROUGH
         } else {
@@ -785,7 +784,10 @@ mod tests {
         let mut off = through.clone();
         off.data[4 * 6] = f32::from_bits(off.data[4 * 6].to_bits() + 1);
         let c = compare(&through, &off, p).unwrap();
-        assert_eq!((c.pass_through.unwrap().count, c.pass_through_identical), (2, 1));
+        assert_eq!(
+            (c.pass_through.unwrap().count, c.pass_through_identical),
+            (2, 1)
+        );
         assert_eq!(c.exact.unwrap().count, 398);
         let c = compare(&flagged, &gpu, p).unwrap();
         assert!(c.corner.unwrap().max.is_infinite() && c.exact.unwrap().max < 0.03);

@@ -115,7 +115,15 @@ fn inputs_emulate_compare_and_the_gate() {
     let mut bad = g.clone();
     bad.data[4 * k] = f32::from_bits(bad.data[4 * k].to_bits() + 1);
     bad.write(&badp).unwrap();
-    let out = BIN.run(&["compare", s(&cpu), s(&badp), "--max-mean", "1", "--max-p99", "1"]);
+    let out = BIN.run(&[
+        "compare",
+        s(&cpu),
+        s(&badp),
+        "--max-mean",
+        "1",
+        "--max-p99",
+        "1",
+    ]);
     assert_eq!(out.status.code(), Some(1), "{}", stdout(&out));
     assert!(stdout(&out).contains("pass-through") && stdout(&out).contains("FAIL"));
 }
