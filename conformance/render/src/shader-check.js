@@ -69,28 +69,18 @@ function boxChain(cube) {
   return out;
 }
 
-// GLSL ES 3.00 (WebGL2) has no bitfieldReverse (ES 3.10 / GLSL 4.00): the emitted aniso
-// snippet calls it, so the page supplies the standard bit reversal under that name (not a
-// reserved identifier in ES 3.00) and leaves the emitted text untouched.
-const BITFIELD_REVERSE = `
-uint bitfieldReverse(uint x) {
-    x = ((x >> 1u) & 0x55555555u) | ((x & 0x55555555u) << 1u);
-    x = ((x >> 2u) & 0x33333333u) | ((x & 0x33333333u) << 2u);
-    x = ((x >> 4u) & 0x0F0F0F0Fu) | ((x & 0x0F0F0F0Fu) << 4u);
-    x = ((x >> 8u) & 0x00FF00FFu) | ((x & 0x00FF00FFu) << 8u);
-    return (x >> 16u) | (x << 16u);
-}
-`;
-
 const CALL = {
   // iblCustomSpecular(samplerCube chain, vec3 R, float roughness) of lookup.glsl.
   custom: { fields: 1, body: `vec4 a = field(0);\n  o = vec4(iblCustomSpecular(u_cube, a.xyz, a.w), 1.0);` },
-  // anisoFisSpecular(env, log2TexelSolidAngle, maxLod, n, t, b, v, alphaT, alphaB, f0, rotation).
+  // anisoFisSpecular(env, log2TexelSolidAngle, maxLod, n, t, b, v, alphaT, alphaB, f0, rotation,
+  // isoSpecular). isoSpecular, the renderer's isotropic split sum (custom chain read at r_iso
+  // times F0 A + B), is computed on the CPU (shader-emulate inputs aniso) and fed to both
+  // sides, so what is tested is the emitted function itself. The emitted file runs verbatim
+  // in GLSL ES 3.00: it carries its own bit reversal (no bitfieldReverse in ES 3.00).
   aniso: {
-    fields: 5,
-    prelude: BITFIELD_REVERSE,
-    body: `vec4 n = field(0), t = field(1), b = field(2), v = field(3), rot = field(4);
-  o = vec4(anisoFisSpecular(u_cube, u_log2TexelSolidAngle, u_maxLod, n.xyz, t.xyz, b.xyz, v.xyz, n.w, t.w, vec3(b.w), rot.xy), 1.0);`,
+    fields: 6,
+    body: `vec4 n = field(0), t = field(1), b = field(2), v = field(3), rot = field(4), iso = field(5);
+  o = vec4(anisoFisSpecular(u_cube, u_log2TexelSolidAngle, u_maxLod, n.xyz, t.xyz, b.xyz, v.xyz, n.w, t.w, vec3(b.w), rot.xy, iso.rgb), 1.0);`,
   },
 };
 

@@ -250,6 +250,29 @@ pub(crate) fn shade_n(
     ((e0 * inv).into(), (e1 * inv).into())
 }
 
+/// The snippets' `anisoFisSpecular` step for step, at the level of the returned radiance:
+/// `iso_specular` (the engine's isotropic split sum F0·E0 + (1−F0)·E1 at r_iso, the snippets'
+/// `isoSpecular`) untouched when w = [`fis_weight`] is 0 (η = 0: bit for bit, no tap), else
+/// iso + (fis − iso)·w with fis = [`specular`] of [`shade_fis`] (zeros below the horizon, as
+/// the snippet's `isoSpecular − isoSpecular·w`). Equal to [`specular`] of [`shade`] up to
+/// rounding (the blend is linear); this is the form the browser check compares with.
+pub fn shade_specular(
+    pyr: &BorderedMips,
+    frame: &Frame,
+    v: Vec3,
+    (at, ab): (f32, f32),
+    f0: [f32; 3],
+    rotation: Vec2,
+    iso_specular: [f32; 3],
+) -> [f32; 3] {
+    let w = fis_weight(at, ab);
+    if w <= 0.0 {
+        return iso_specular;
+    }
+    let fis = specular(&shade_fis(pyr, frame, v, at, ab, rotation), f0);
+    std::array::from_fn(|k| iso_specular[k] + (fis[k] - iso_specular[k]) * w)
+}
+
 /// Specular radiance F0·E0 + (1−F0)·E1 (Schlick), what the snippets' last step returns.
 pub fn specular(e: &E01, f0: [f32; 3]) -> [f32; 3] {
     std::array::from_fn(|k| f0[k] * e.0[k] + (1.0 - f0[k]) * e.1[k])
@@ -268,7 +291,8 @@ fn lit(v: f32) -> String {
 /// The shader languages.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Lang {
-    /// GLSL 4.50 / ES 3.1 (bitfieldReverse).
+    /// GLSL ES 3.00 (WebGL2), GLSL 3.30+ and Vulkan GLSL (its own bit reversal,
+    /// `anisoFisRadicalInverse`: ES 3.00 and 3.30 lack `bitfieldReverse`).
     Glsl,
     /// HLSL SM 5+ (reversebits).
     Hlsl,
@@ -390,8 +414,20 @@ vec3 anisoFisSampleVndf(vec3 v, vec2 u, float ax, float ay) {
     return vec3(0.0, 0.0, 1.0);
 }
 
+// The 32-bit reversal of bits, by shifts and masks: GLSL ES 3.00 (WebGL2) and GLSL 3.30 have
+// no bitfieldReverse (GLSL 4.00 / ES 3.10), so the snippet carries its own and runs as is in
+// WebGL2, GLSL 3.30+ and Vulkan GLSL. Same result as bitfieldReverse for every uint.
+uint anisoFisRadicalInverse(uint bits) {
+    bits = (bits << 16u) | (bits >> 16u);
+    bits = ((bits & 0x55555555u) << 1u) | ((bits & 0xAAAAAAAAu) >> 1u);
+    bits = ((bits & 0x33333333u) << 2u) | ((bits & 0xCCCCCCCCu) >> 2u);
+    bits = ((bits & 0x0F0F0F0Fu) << 4u) | ((bits & 0xF0F0F0F0u) >> 4u);
+    bits = ((bits & 0x00FF00FFu) << 8u) | ((bits & 0xFF00FF00u) >> 8u);
+    return bits;
+}
+
 vec2 anisoFisHammersley(uint i, vec2 rotation) {
-    vec2 h = vec2(float(i) / float(ANISO_FIS_TAPS), float(bitfieldReverse(i) >> 8u) * ANISO_FIS_INV_2_24);
+    vec2 h = vec2(float(i) / float(ANISO_FIS_TAPS), float(anisoFisRadicalInverse(i) >> 8u) * ANISO_FIS_INV_2_24);
     return fract(h + rotation);
 }
 
@@ -778,6 +814,48 @@ mod tests {
     }
 
     #[test]
+    fn shade_specular_is_the_blended_shade_and_passes_iso_through_at_eta_0() {
+        // The snippet's radiance-level blend against the (E0, E1)-level `shade`: equal up to
+        // rounding (linear), and at η = 0 the iso input comes back bit for bit.
+        let cube = Cubemap::from_fn(16, |d| [d.x.max(0.0) * 3.0, d.y.abs(), 0.2 + d.z * d.z]);
+        let pyr = BorderedMips::new(&CubeMips::build(cube, 1));
+        let n = Vec3::new(0.2, -0.3, 0.9).normalize();
+        let t = Vec3::Y.cross(n).normalize();
+        let frame = Frame {
+            t,
+            b: n.cross(t),
+            n,
+        };
+        let mut rng = Pcg32::new(5, 23);
+        for (r, eta) in [(0.3, 0.0), (0.02, 0.0), (1.0, 0.0), (0.6, 0.3), (0.9, -1.0)] {
+            let (at, ab) = Material::ggx_kc(r, eta).ggx_alphas().unwrap();
+            for view in [Vec3::new(0.4, 0.1, 0.7), Vec3::new(0.3, 0.2, -0.5)] {
+                let v = frame.to_world(view.normalize());
+                let iso_e = (
+                    [rng.next_f32(), 2.0 * rng.next_f32(), 0.1],
+                    [0.3 * rng.next_f32(), 0.05, 0.02],
+                );
+                let rot = Vec2::new(rng.next_f32(), rng.next_f32());
+                for f0 in [[1.0f32; 3], [0.04; 3]] {
+                    let iso = specular(&iso_e, f0);
+                    let got = shade_specular(&pyr, &frame, v, (at, ab), f0, rot, iso);
+                    if eta == 0.0 {
+                        assert_eq!(got.map(f32::to_bits), iso.map(f32::to_bits), "{r}");
+                        continue;
+                    }
+                    let want = specular(&shade(&pyr, &frame, v, at, ab, rot, iso_e), f0);
+                    for k in 0..3 {
+                        assert!(
+                            (got[k] - want[k]).abs() <= 1e-6 * want[k].abs().max(1.0),
+                            "{r} {eta} {got:?} {want:?}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
     fn blend_weight_is_the_kulla_conty_eta_rule() {
         assert_eq!(fis_weight(0.0, 0.0), 0.0);
         assert_eq!(fis_weight(f32::NAN, 0.1), 0.0);
@@ -883,6 +961,23 @@ mod tests {
              void main() {\n vec3 t = normalize(cross(vec3(0.0, 1.0, 0.0), n));\n\
              color = vec4(anisoFisSpecular(env, -5.0, 6.0, n, t, cross(n, t), n, 0.3, 0.1, vec3(0.04), vec2(0.5), vec3(0.1)), 1.0);\n}\n";
         std::fs::write(&glsl_file, format!("#version 450\n{}{glsl_main}", glsl())).unwrap();
+        // The same text verbatim under GLSL ES 3.00 (WebGL2) and GLSL 3.30, which have no
+        // bitfieldReverse: the snippet must carry its own bit reversal.
+        assert!(!glsl().contains("bitfieldReverse("));
+        let es_file = dir.join("aniso_fis_es300.frag");
+        let es_main = "uniform samplerCube env;\nin vec3 n;\nout vec4 color;\n\
+             void main() {\n vec3 t = normalize(cross(vec3(0.0, 1.0, 0.0), n));\n\
+             color = vec4(anisoFisSpecular(env, -5.0, 6.0, n, t, cross(n, t), n, 0.3, 0.1, vec3(0.04), vec2(0.5), vec3(0.1)), 1.0);\n}\n";
+        std::fs::write(
+            &es_file,
+            format!(
+                "#version 300 es\nprecision highp float;\nprecision highp int;\n{}{es_main}",
+                glsl()
+            ),
+        )
+        .unwrap();
+        let gl330_file = dir.join("aniso_fis_330.frag");
+        std::fs::write(&gl330_file, format!("#version 330\n{}{es_main}", glsl())).unwrap();
         let hlsl_file = dir.join("aniso_fis.hlsl");
         let hlsl_main = "TextureCube env : register(t0);\nSamplerState samp : register(s0);\n\
              float4 main(float3 n : TEXCOORD0) : SV_Target {\n\
@@ -899,6 +994,8 @@ mod tests {
         std::fs::write(&wgsl_file, wgsl() + wgsl_main).unwrap();
         let spv = dir.join("hlsl.spv");
         assert_compiles("glslangValidator", &[], &glsl_file);
+        assert_compiles("glslangValidator", &[], &es_file);
+        assert_compiles("glslangValidator", &[], &gl330_file);
         assert_compiles(
             "glslangValidator",
             &[

@@ -2,7 +2,7 @@
 //! shaders (the custom lookup of `prefilter --target custom`, the shipped anisotropic VNDF
 //! filtered importance sampling of `aniso-eval --emit-shader`), their CPU emulation — the very
 //! functions the Rust tests hold the shaders to (`ibl_prefilter::custom::CustomLookup::read`,
-//! `ibl_aniso::ship::shade`) — and the GPU-against-CPU comparison.
+//! `ibl_aniso::ship::shade_specular`) — and the GPU-against-CPU comparison.
 //!
 //! The exchange format ([`Grid`], JSON): `count` cases of `fields` RGBA float vectors each,
 //! flat in `data`. The browser page lays case i out at texel (i mod [`ROW`], i div [`ROW`]) of
@@ -11,7 +11,7 @@
 #![warn(missing_docs)]
 
 use glam::{Vec2, Vec3};
-use ibl_aniso::material::Material;
+use ibl_aniso::material::{iso_roughness, Material};
 use ibl_aniso::scene::Frame;
 use ibl_aniso::ship;
 use ibl_core::bordered::BorderedMips;
@@ -19,6 +19,7 @@ use ibl_core::cube::{face_texel_index, Face};
 use ibl_core::sampling::Pcg32;
 use ibl_core::{CubeMips, Cubemap, Rgb};
 use ibl_prefilter::custom::CustomLookup;
+use ibl_shexp::dfg::Dfg;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -60,8 +61,9 @@ fn invalid(path: &Path, msg: impl Into<String>) -> Error {
 pub enum Kind {
     /// `iblCustomSpecular(chain, R, roughness)` of lookup.glsl: one field (R.xyz, roughness).
     Custom,
-    /// `anisoFisSpecular(...)` of aniso_fis.glsl: five fields (n, α_t), (t, α_b), (b, F0),
-    /// (v, 0), (rotation.xy, 0, 0).
+    /// `anisoFisSpecular(...)` of aniso_fis.glsl: six fields (n, α_t), (t, α_b), (b, F0),
+    /// (v, 0), (rotation.xy, 0, 0), (isoSpecular.rgb, 0) — the last the isotropic split sum
+    /// computed on the CPU ([`IsoSplitSum`]) and fed to both sides.
     Aniso,
 }
 
@@ -70,7 +72,7 @@ impl Kind {
     pub fn fields(self) -> usize {
         match self {
             Kind::Custom => 1,
-            Kind::Aniso => 5,
+            Kind::Aniso => 6,
         }
     }
 }
@@ -226,11 +228,40 @@ pub const ANISO_ETA: [f32; 5] = [-1.0, -0.5, 0.0, 0.5, 1.0];
 /// Polar angles (radians) of the views about each normal.
 pub const ANISO_VIEW_POLAR: [f32; 3] = [0.25, 0.8, 1.25];
 
+/// The renderer's isotropic split sum, the `isoSpecular` argument of the shipped snippet:
+/// the prefiltered chain read at r_iso = √((α_t+α_b)/2) in the reflected direction through
+/// the custom lookup (`CustomLookup::read`, what lookup.glsl does), times F0·A + B from the DFG
+/// table at (n·v, r_iso) — the evaluator's `iso` term (`ibl_aniso::methods`, `split`:
+/// E0 = L(A+B), E1 = L·B) in radiance form F0·E0 + (1−F0)·E1.
+pub struct IsoSplitSum<'a> {
+    /// The prefiltered chain, bordered.
+    pub chain: &'a BorderedMips,
+    /// Its lookup (constants from its sidecar).
+    pub lookup: &'a CustomLookup,
+    /// The DFG table (A, B).
+    pub dfg: &'a Dfg,
+}
+
+impl IsoSplitSum<'_> {
+    /// isoSpecular at normal n, view v (towards the eye), lobe (α_t, α_b), F0 (grey).
+    pub fn specular(&self, n: Vec3, v: Vec3, at: f32, ab: f32, f0: f32) -> [f32; 3] {
+        let nv = n.dot(v);
+        if nv <= 0.0 {
+            return [0.0; 3];
+        }
+        let r = iso_roughness(at, ab);
+        let l = self.lookup.read(self.chain, 2.0 * nv * n - v, r);
+        let (a, b) = self.dfg.ab(nv, r);
+        let e = (l.map(|c| c * (a + b)), l.map(|c| c * b));
+        ship::specular(&e, [f0; 3])
+    }
+}
+
 /// The anisotropic method's inputs: `normals` frames (normal of [`directions`], tangent turned
 /// about it) × [`ANISO_VIEW_POLAR`] views × the (r, η) grid (Kulla–Conty α_t, α_b through
 /// `ibl_aniso::material::Material::ggx_kc`, the evaluator's conversion), F0 alternating 1 and
-/// 0.04, a per-case rotation of the Hammersley set.
-pub fn aniso_inputs(normals: usize) -> Grid {
+/// 0.04, a per-case rotation of the Hammersley set, and `iso`'s isotropic split sum.
+pub fn aniso_inputs(normals: usize, iso: &IsoSplitSum) -> Grid {
     let mut data = Vec::new();
     let helpers = directions(normals + 7);
     let mut case = 0u64;
@@ -265,6 +296,8 @@ pub fn aniso_inputs(normals: usize) -> Grid {
                     data.extend([frame.b.x, frame.b.y, frame.b.z, f0]);
                     data.extend([v.x, v.y, v.z, 0.0]);
                     data.extend([rot[0], rot[1], 0.0, 0.0]);
+                    let s = iso.specular(n, v, at, ab, f0);
+                    data.extend([s[0], s[1], s[2], 0.0]);
                     case += 1;
                 }
             }
@@ -281,7 +314,7 @@ pub fn jitter(inputs: &Grid, eps: f32, seed: u64) -> Grid {
     let mut g = inputs.clone();
     let keep: &[usize] = match g.kind {
         Kind::Custom => &[3],
-        Kind::Aniso => &[3, 7, 11, 15, 18, 19],
+        Kind::Aniso => &[3, 7, 11, 15, 18, 19, 23],
     };
     let n = 4 * g.fields;
     let mut rng = Pcg32::new(seed, 99);
@@ -357,6 +390,10 @@ pub fn read_touches_corner(sizes: &[usize], d: Vec3, lod: f32) -> bool {
         || (lod > l0 as f32 && l0 + 1 < sizes.len() && corner_footprint(sizes[l0 + 1], sc, tc))
 }
 
+/// Alpha of an emulated output that reads no texel: the shipped snippet at η = 0, which
+/// returns its `isoSpecular` argument untouched (the comparison wants it bit for bit).
+pub const ALPHA_PASS_THROUGH: f32 = 2.0;
+
 /// Alpha of an emulated output: 1 when every texel the reads use is defined by the GL
 /// specification, 0 when one is a cube-corner texel ([`corner_footprint`]).
 fn corner_alpha(corner: bool) -> f32 {
@@ -388,8 +425,9 @@ pub fn aniso_pyramid(base: ibl_core::Cubemap) -> BorderedMips {
     BorderedMips::new(&CubeMips::build(base, 1))
 }
 
-/// The shipped anisotropic method's CPU emulation (`ibl_aniso::ship::shade`, then
-/// `ship::specular`) at every input case.
+/// The shipped anisotropic method's CPU emulation (`ibl_aniso::ship::shade_specular`, the
+/// snippet's steps, with the case's isoSpecular input) at every input case; alpha
+/// [`ALPHA_PASS_THROUGH`] where the blend weight is 0 (η = 0: iso returned, no tap).
 pub fn emulate_aniso(inputs: &Grid, pyramid: &BorderedMips) -> Grid {
     let mut data = Vec::with_capacity(inputs.count * 4);
     for i in 0..inputs.count {
@@ -400,11 +438,22 @@ pub fn emulate_aniso(inputs: &Grid, pyramid: &BorderedMips) -> Grid {
             t: v3(1),
             b: v3(2),
         };
-        let e = ship::shade(pyramid, &frame, v3(3), c[3], c[7], Vec2::new(c[16], c[17]));
-        let rgb = ship::specular(&e, [c[11]; 3]);
-        let corner =
-            aniso_touches_corner(pyramid, &frame, v3(3), c[3], c[7], Vec2::new(c[16], c[17]));
-        data.extend([rgb[0], rgb[1], rgb[2], corner_alpha(corner)]);
+        let rot = Vec2::new(c[16], c[17]);
+        let iso = [c[20], c[21], c[22]];
+        let rgb = ship::shade_specular(pyramid, &frame, v3(3), (c[3], c[7]), [c[11]; 3], rot, iso);
+        let alpha = if ship::fis_weight(c[3], c[7]) <= 0.0 {
+            ALPHA_PASS_THROUGH
+        } else {
+            corner_alpha(aniso_touches_corner(
+                pyramid,
+                &frame,
+                v3(3),
+                c[3],
+                c[7],
+                rot,
+            ))
+        };
+        data.extend([rgb[0], rgb[1], rgb[2], alpha]);
     }
     Grid::new(Kind::Aniso, Role::Outputs, data)
 }
@@ -546,6 +595,11 @@ pub struct Comparison {
     pub exact: Option<Stats>,
     /// Cases whose reads touch one.
     pub corner: Option<Stats>,
+    /// Cases the emulation returns an input untouched ([`ALPHA_PASS_THROUGH`]: the aniso
+    /// snippet's isoSpecular at η = 0), which the shader must return bit for bit.
+    pub pass_through: Option<Stats>,
+    /// How many of those the shader returned bit-identical (R, G, B).
+    pub pass_through_identical: usize,
 }
 
 fn stats(rel: &[(usize, f64)]) -> Option<Stats> {
@@ -581,7 +635,8 @@ pub fn compare(cpu: &Grid, gpu: &Grid, gpu_path: &Path) -> Result<Comparison> {
         sum += cpu.case(i)[..3].iter().map(|v| v.abs() as f64).sum::<f64>();
     }
     let floor = (1e-3 * sum / (3 * cpu.count) as f64).max(f64::MIN_POSITIVE);
-    let (mut exact, mut corner) = (Vec::new(), Vec::new());
+    let (mut exact, mut corner, mut pass) = (Vec::new(), Vec::new(), Vec::new());
+    let mut identical = 0;
     for i in 0..cpu.count {
         let (c, g) = (cpu.case(i), gpu.case(i));
         let rel = (0..3)
@@ -593,7 +648,10 @@ pub fn compare(cpu: &Grid, gpu: &Grid, gpu_path: &Path) -> Result<Comparison> {
                 }
             })
             .fold(0.0, f64::max);
-        if c[3] == 0.0 {
+        if c[3] == ALPHA_PASS_THROUGH {
+            identical += (0..3).all(|k| c[k].to_bits() == g[k].to_bits()) as usize;
+            pass.push((i, rel));
+        } else if c[3] == 0.0 {
             corner.push((i, rel));
         } else {
             exact.push((i, rel));
@@ -603,12 +661,26 @@ pub fn compare(cpu: &Grid, gpu: &Grid, gpu_path: &Path) -> Result<Comparison> {
         floor,
         exact: stats(&exact),
         corner: stats(&corner),
+        pass_through: stats(&pass),
+        pass_through_identical: identical,
     })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `f(iso)` with the isotropic split sum over a constant environment (L = 1 everywhere).
+    fn with_unit_iso<T>(f: impl FnOnce(&IsoSplitSum) -> T) -> T {
+        let mips = CubeMips::build(Cubemap::constant(8, [1.0; 3]), 4);
+        let chain = BorderedMips::new(&mips);
+        let lookup = CustomLookup::new(0.01, mips.levels.len(), 8);
+        f(&IsoSplitSum {
+            chain: &chain,
+            lookup: &lookup,
+            dfg: Dfg::standard(),
+        })
+    }
 
     fn tmp(name: &str) -> std::path::PathBuf {
         let d = std::env::temp_dir().join(format!("shader-emulate-{}", std::process::id()));
@@ -625,7 +697,7 @@ mod tests {
         odd.data[1] = 1.0 + f32::EPSILON;
         odd.data[2] = -3.4e38;
         odd.data[5] = 1e-45; // subnormal
-        for g in [odd, aniso_inputs(2)] {
+        for g in [odd, with_unit_iso(|iso| aniso_inputs(2, iso))] {
             let p = tmp(&format!("{:?}.json", g.kind));
             g.write(&p).unwrap();
             let back = Grid::read(&p).unwrap();
@@ -705,6 +777,18 @@ mod tests {
         // Cases the emulation flags (alpha 0) are reported apart.
         let mut flagged = cpu.clone();
         flagged.data[4 * 3 + 3] = 0.0;
+        // A pass-through case (alpha 2) counts as identical only bit for bit.
+        let mut through = cpu.clone();
+        through.data[4 * 5 + 3] = ALPHA_PASS_THROUGH;
+        through.data[4 * 6 + 3] = ALPHA_PASS_THROUGH;
+        let mut off = through.clone();
+        off.data[4 * 6] = f32::from_bits(off.data[4 * 6].to_bits() + 1);
+        let c = compare(&through, &off, p).unwrap();
+        assert_eq!(
+            (c.pass_through.unwrap().count, c.pass_through_identical),
+            (2, 1)
+        );
+        assert_eq!(c.exact.unwrap().count, 398);
         let c = compare(&flagged, &gpu, p).unwrap();
         assert!(c.corner.unwrap().max.is_infinite() && c.exact.unwrap().max < 0.03);
         gpu.data.truncate(8);
@@ -734,21 +818,39 @@ mod tests {
             .chunks(4)
             .zip(out.data.chunks(4))
             .all(|(a, b)| (a[0] - b[0]).abs() < 1e-5 && a[3] == b[3]));
-        let inp = aniso_inputs(3);
+        let inp = with_unit_iso(|iso| aniso_inputs(3, iso));
         let out = emulate_aniso(&inp, &aniso_pyramid(cube));
+        let mut passed = 0;
         for i in 0..inp.count {
             let c = out.case(i);
+            let x = inp.case(i);
+            // η = 0 (α_t = α_b): the isoSpecular input back bit for bit, flagged; the iso
+            // input itself is the split sum of L = 1: F0·A + B, in (0, 1].
+            if x[3] == x[7] {
+                passed += 1;
+                assert_eq!(c[3], ALPHA_PASS_THROUGH);
+                assert_eq!(&c[..3], &x[20..23]);
+            } else {
+                assert_ne!(c[3], ALPHA_PASS_THROUGH);
+            }
+            assert!(x[20] > 0.0 && x[20] <= 1.0 + 1e-6, "{x:?}");
+            let (a, b) = Dfg::standard().ab(
+                Vec3::new(x[0], x[1], x[2]).dot(Vec3::new(x[12], x[13], x[14])),
+                iso_roughness(x[3], x[7]),
+            );
+            assert!((x[20] - (x[11] * a + b)).abs() < 1e-5, "{x:?}");
             assert!(
                 c[..3].iter().all(|v| v.is_finite() && *v > 0.0 && *v < 2.1),
                 "{c:?}"
             );
             // Frames are orthonormal and the views above the surface.
-            let x = inp.case(i);
             let n = Vec3::new(x[0], x[1], x[2]);
             let t = Vec3::new(x[4], x[5], x[6]);
             let v = Vec3::new(x[12], x[13], x[14]);
             assert!(n.dot(t).abs() < 1e-5 && v.dot(n) > 0.3);
         }
+        // Every η = 0 case, and r = 0.02 at any η (Kulla–Conty's α floor makes α_t = α_b).
+        assert_eq!(passed, inp.count / ANISO_ETA.len() + inp.count / 35 * 4);
     }
 
     /// The diagnostic GPU model and ibl-core's sampler read the same values wherever no

@@ -4,7 +4,7 @@
 use clap::{Parser, Subcommand};
 use shader_emulate::{
     aniso_inputs, aniso_pyramid, compare, custom_inputs, custom_lookup_from_sidecar, emulate_aniso,
-    emulate_custom, Grid, Kind, Result,
+    emulate_custom, Grid, IsoSplitSum, Kind, Result,
 };
 use std::path::PathBuf;
 
@@ -32,6 +32,13 @@ enum Cmd {
         /// Aniso: normals (each with 3 views and 35 (r, η) materials).
         #[arg(long, default_value_t = 24)]
         normals: usize,
+        /// aniso: the prefiltered chain (`prefilter --target custom`'s prefilter.ktx2) whose
+        /// isotropic split sum is each case's isoSpecular input.
+        #[arg(long)]
+        iso_chain: Option<PathBuf>,
+        /// aniso: that chain's prefilter.json (its custom lookup constants).
+        #[arg(long)]
+        iso_sidecar: Option<PathBuf>,
         /// Output JSON.
         #[arg(short, long)]
         output: PathBuf,
@@ -97,11 +104,31 @@ fn run(cli: Cli) -> Result<bool> {
             dirs,
             roughness,
             normals,
+            iso_chain,
+            iso_sidecar,
             output,
         } => {
             let g = match kind {
                 Kind::Custom => custom_inputs(dirs, roughness),
-                Kind::Aniso => aniso_inputs(normals),
+                Kind::Aniso => {
+                    let (Some(chain), Some(sc)) = (iso_chain, iso_sidecar) else {
+                        return Err(shader_emulate::Error::Invalid {
+                            path: output.display().to_string(),
+                            msg: "aniso inputs need --iso-chain prefilter.ktx2 and --iso-sidecar prefilter.json (the isotropic split sum)".into(),
+                        });
+                    };
+                    let mips = ibl_core::envmap::read_cube_chain(&chain)?;
+                    let lookup = custom_lookup_from_sidecar(&sc, &mips)?;
+                    let chain = ibl_core::bordered::BorderedMips::new(&mips);
+                    aniso_inputs(
+                        normals,
+                        &IsoSplitSum {
+                            chain: &chain,
+                            lookup: &lookup,
+                            dfg: ibl_shexp::dfg::Dfg::standard(),
+                        },
+                    )
+                }
             };
             g.write(&output)?;
             Ok(true)
@@ -188,6 +215,21 @@ fn run(cli: Cli) -> Result<bool> {
                     &c.case(s.worst)[..3],
                     &g.case(s.worst)[..3],
                     inp.as_ref().map_or(String::new(), |i| format!(" inputs {:?}", i.case(s.worst))),
+                );
+            }
+            if let Some(s) = &cmp.pass_through {
+                // The emitted function returns its isoSpecular argument untouched at η = 0.
+                let ok = cmp.pass_through_identical == s.count;
+                pass &= ok;
+                println!(
+                    "{label} pass-through (eta = 0, isoSpecular returned): {} cases, {} bit-identical, relative difference max {:.2e} ({}); worst case {}: cpu {:?} gpu {:?}",
+                    s.count,
+                    cmp.pass_through_identical,
+                    s.max,
+                    if ok { "ok" } else { "FAIL" },
+                    s.worst,
+                    &c.case(s.worst)[..3],
+                    &g.case(s.worst)[..3],
                 );
             }
             if let Some(p) = json {

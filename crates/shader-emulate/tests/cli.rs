@@ -42,7 +42,33 @@ fn inputs_emulate_compare_and_the_gate() {
     // Aniso: a single cube (px.exr …), box-mipped by the tool.
     write_faces(&d.join("env"), "", &sky(8));
     let (inp, cpu) = (d.join("in.json"), d.join("cpu.json"));
-    BIN.run_ok(&["inputs", "aniso", "--normals", "2", "-o", s(&inp)]);
+    // The isotropic split sum's chain (isoSpecular input) and its sidecar.
+    let chain = d.join("chain");
+    let mips = ibl_core::CubeMips::build(sky(8), 2);
+    for (l, c) in mips.levels.iter().enumerate() {
+        write_faces(&chain, &format!("m{l}_"), c);
+    }
+    let lk = ibl_prefilter::custom::CustomLookup::new(0.01, mips.levels.len(), 8);
+    let sidecar = d.join("prefilter.json");
+    std::fs::write(
+        &sidecar,
+        serde_json::json!({ "custom_lookup": lk }).to_string(),
+    )
+    .unwrap();
+    let out = BIN.run(&["inputs", "aniso", "--normals", "2", "-o", s(&inp)]);
+    assert_one_line_error(&out, 2, "--iso-chain");
+    BIN.run_ok(&[
+        "inputs",
+        "aniso",
+        "--normals",
+        "2",
+        "--iso-chain",
+        s(&chain),
+        "--iso-sidecar",
+        s(&sidecar),
+        "-o",
+        s(&inp),
+    ]);
     BIN.run_ok(&[
         "emulate",
         s(&inp),
@@ -82,6 +108,24 @@ fn inputs_emulate_compare_and_the_gate() {
     ]);
     assert_eq!(out.status.code(), Some(1), "{}", stdout(&out));
     assert!(stdout(&out).contains("FAIL"));
+    // η = 0 returns isoSpecular: one ulp off in one such case fails the gate, whatever the
+    // mean/p99 gates say.
+    assert!(stdout(&ok).contains("bit-identical"), "{}", stdout(&ok));
+    let k = (0..g.count).find(|&i| g.case(i)[3] == 2.0).unwrap();
+    let mut bad = g.clone();
+    bad.data[4 * k] = f32::from_bits(bad.data[4 * k].to_bits() + 1);
+    bad.write(&badp).unwrap();
+    let out = BIN.run(&[
+        "compare",
+        s(&cpu),
+        s(&badp),
+        "--max-mean",
+        "1",
+        "--max-p99",
+        "1",
+    ]);
+    assert_eq!(out.status.code(), Some(1), "{}", stdout(&out));
+    assert!(stdout(&out).contains("pass-through") && stdout(&out).contains("FAIL"));
 }
 
 #[test]
