@@ -16,10 +16,12 @@
 //! Ω_s = 1/(N p_l), p_l = D(m) G1(v) / (4 n·v) (Křivánek & Colbert eq. 13; the +1 bias is
 //! theirs). E0 = mean w·L (F0 = 1), E1 = mean w·(1−v·m)⁵·L, specular = F0·E0 + (1−F0)·E1.
 
-use crate::methods::E01;
 use crate::scene::Frame;
 use glam::{Vec2, Vec3};
 use ibl_core::bordered::BorderedMips;
+
+/// (E0, E1) of one pixel.
+pub type E01 = ([f32; 3], [f32; 3]);
 use std::fmt::Write;
 
 /// The shipped method's constants: the emulation and the three snippets read these only.
