@@ -544,7 +544,11 @@ mod tests {
             for (s, p) in searched.iter().zip(&plain) {
                 assert!(s <= p, "{w}x{h}: {s} > {p}");
             }
-            assert_eq!(encode_searched(&img), encode_searched(&img), "deterministic");
+            assert_eq!(
+                encode_searched(&img),
+                encode_searched(&img),
+                "deterministic"
+            );
         }
         // A constant colour is one palette entry away: well under a half-float step.
         let mut img = Image::new(2, 2, 3);
