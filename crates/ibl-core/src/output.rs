@@ -2,8 +2,8 @@
 //! the flags every cube-writing bake shares (one struct, flattened into each bake's `Params`,
 //! so `--format bc6h` on the command line is `format: bc6h` in a pipeline), the check of their
 //! combination before any work, and the encoding itself. A new container is one module under
-//! `io/` implementing [`io::container::Codec`], registered here by its [`Layout`] variant and
-//! its arm in [`Layout::codec`].
+//! `io/` implementing [`io::container::Codec`], registered by its [`Layout`] variant
+//! (`io::layout`) and its arm in [`Layout::codec`] (`io::container`).
 
 use crate::cube::{CubeMips, Face};
 use crate::error::{Error, Result};

@@ -13,6 +13,9 @@
 //! (error feedback) and re-encoded, each candidate decoded and scored, the best kept. The
 //! candidates include the plain exhaustive encoding, so the result is never worse than it.
 
+// Index loops over texels, channels and modes read closer to the block format's tables.
+#![allow(clippy::needless_range_loop)]
+
 use super::format::Bc6hQuality;
 use crate::image::Image;
 
