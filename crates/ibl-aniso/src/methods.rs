@@ -353,8 +353,9 @@ pub struct Inputs<'a> {
     pub as_tables: Option<&'a AsTables>,
 }
 
-/// (E0, E1) of one pixel.
-pub type E01 = ([f32; 3], [f32; 3]);
+/// (E0, E1) of one pixel (defined in [`crate::ship`], whose shading returns it, so `ship`
+/// needs nothing of `methods`).
+pub use crate::ship::E01;
 
 fn split(l: Rgb, dfg: &Dfg, nv: f32, r: f32) -> E01 {
     let (a, b) = dfg.ab(nv, r);

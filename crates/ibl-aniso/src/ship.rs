@@ -32,10 +32,12 @@
 //! face-centre texel is 1.91× that and a corner texel 0.37×, so the lod is ~0.47 levels high at
 //! face centres and ~0.72 low at corners.
 
-use crate::methods::E01;
 use crate::scene::Frame;
 use glam::{Vec2, Vec3};
 use ibl_core::bordered::BorderedMips;
+
+/// (E0, E1) of one pixel.
+pub type E01 = ([f32; 3], [f32; 3]);
 use std::fmt::Write;
 
 /// The shipped method's constants: the emulation and the three snippets read these only.

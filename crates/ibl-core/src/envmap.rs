@@ -587,7 +587,7 @@ pub fn classify_layout(path: &Path, img: Image) -> Result<Environment> {
     Ok(Environment::Cube(Cubemap::from_faces(faces)?))
 }
 
-pub use crate::output::Layout;
+pub use crate::io::layout::Layout;
 
 /// Reads `path` as a KTX2, KTX1 or DDS cube (found by its magic bytes, or by its extension
 /// when it is too short to have any); `None` if it is not a container file. A container

@@ -2,8 +2,8 @@
 //! the flags every cube-writing bake shares (one struct, flattened into each bake's `Params`,
 //! so `--format bc6h` on the command line is `format: bc6h` in a pipeline), the check of their
 //! combination before any work, and the encoding itself. A new container is one module under
-//! `io/` implementing [`io::container::Codec`], registered here by its [`Layout`] variant and
-//! its arm in [`Layout::codec`].
+//! `io/` implementing [`io::container::Codec`], registered by its [`Layout`] variant
+//! (`io::layout`) and its arm in [`Layout::codec`] (`io::container`).
 
 use crate::cube::{CubeMips, Face};
 use crate::error::{Error, Result};
@@ -13,63 +13,9 @@ use crate::io::texture::{self, LevelEncoding};
 use crate::io::{self, FloatDepth, WriteOptions};
 use std::path::{Path, PathBuf};
 
-/// Output container for cubemaps.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    PartialEq,
-    Eq,
-    Default,
-    serde::Serialize,
-    serde::Deserialize,
-    clap::ValueEnum,
-)]
-#[serde(rename_all = "kebab-case")]
-pub enum Layout {
-    /// One EXR per face (`px.exr` … or `m{l}_px.exr` … for chains).
-    #[default]
-    Faces,
-    /// One KTX2 file with all faces and levels.
-    Ktx2,
-    /// One DDS file (DX10 header, cubemap flags) with all faces and levels.
-    Dds,
-    /// One KTX 1.1 file with all faces and levels (what Filament's cmgen writes).
-    Ktx1,
-}
-
-impl Layout {
-    /// Every layout, in declaration order (clap's list of `--layout` values).
-    pub fn all() -> &'static [Layout] {
-        <Layout as clap::ValueEnum>::value_variants()
-    }
-
-    /// The codec of a single-file container, `None` for face files: the one place a container
-    /// is registered.
-    pub fn codec(self) -> Option<&'static dyn io::container::Codec> {
-        match self {
-            Layout::Faces => None,
-            Layout::Ktx2 => Some(&io::ktx2::Ktx2),
-            Layout::Dds => Some(&io::dds::Dds),
-            Layout::Ktx1 => Some(&io::ktx1::Ktx1),
-        }
-    }
-
-    /// File extension of a single-file container, `None` for face files.
-    pub fn extension(self) -> Option<&'static str> {
-        self.codec().map(|c| c.extension())
-    }
-
-    /// `dir/<name>.<ext>` for a single-file container, `None` for face files.
-    pub fn container_path(self, dir: &Path, name: &str) -> Option<PathBuf> {
-        self.extension().map(|e| dir.join(format!("{name}.{e}")))
-    }
-
-    /// The name flags and RON keys use.
-    pub fn name(self) -> &'static str {
-        self.codec().map_or("faces", |c| c.name())
-    }
-}
+/// Output container for cubemaps (defined in `io::layout`, below the container modules that
+/// implement it; its methods are in `io::container`, which registers each codec).
+pub use crate::io::layout::Layout;
 
 /// The output flags of every bake that writes a cube or a chain, as [`cube_output_params!`]
 /// adds them to its `Params`.

@@ -290,7 +290,7 @@ impl Manifest {
                 let p = output.join(&old.dir).join(&o.rel);
                 // Only a file that still holds the bytes recorded, reached without a symlink
                 // out of the output folder: anything else is not ours to remove.
-                let ours = crate::owned::matches_stamp(&p, &o.stamp, false)
+                let ours = matches_stamp(&p, &o.stamp, false)
                     && ibl_core::ownership::check_inside(&p, output).is_ok();
                 if ours && !new_files.contains(&p) {
                     let _ = std::fs::remove_file(&p);
@@ -518,6 +518,21 @@ impl CacheDir {
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct CacheEntry {
     pub files: Vec<OutputRecord>,
+}
+
+/// Whether the file at `path` still holds the bytes `stamp` records: size and modification
+/// time first (cheap), the hash when they moved (or when `rehash`). A symlink never matches.
+pub(crate) fn matches_stamp(path: &Path, stamp: &FileStamp, rehash: bool) -> bool {
+    let Ok(md) = std::fs::symlink_metadata(path) else {
+        return false;
+    };
+    if !md.is_file() || md.len() != stamp.size {
+        return false;
+    }
+    if !rehash && mtime_ns(&md) == stamp.mtime_ns {
+        return true;
+    }
+    hash_file(path).is_ok_and(|(h, _)| h == stamp.hash)
 }
 
 /// Modification time in nanoseconds since the epoch (0 when unknown).

@@ -5,27 +5,16 @@
 //! means it); the stale-output removal of a re-run and `bake clean` leave anything else in
 //! place and say so.
 
-use crate::cache::{FileStamp, Manifest, OutputRecord};
+use crate::cache::{Manifest, OutputRecord};
 use crate::error::{Error, Result};
 use crate::graph::Graph;
 use crate::plan::Plan;
 use ibl_core::ownership;
 use std::path::{Path, PathBuf};
 
-/// Whether the file at `path` still holds the bytes `stamp` records: size and modification
-/// time first (cheap), the hash when they moved (or when `rehash`). A symlink never matches.
-pub(crate) fn matches_stamp(path: &Path, stamp: &FileStamp, rehash: bool) -> bool {
-    let Ok(md) = std::fs::symlink_metadata(path) else {
-        return false;
-    };
-    if !md.is_file() || md.len() != stamp.size {
-        return false;
-    }
-    if !rehash && crate::cache::mtime_ns(&md) == stamp.mtime_ns {
-        return true;
-    }
-    crate::cache::hash_file(path).is_ok_and(|(h, _)| h == stamp.hash)
-}
+/// Whether a file still holds the bytes its stamp records (in [`crate::cache`], beside the
+/// stamp, so the cache needs nothing of this module).
+pub(crate) use crate::cache::matches_stamp;
 
 /// Whether `path`, an output of the stage with id `id` in folder `dir`, is the runner's to
 /// replace or remove: the manifest records it with these bytes, or a CLI run of the same bake
@@ -162,6 +151,7 @@ pub fn verify(output: &Path) -> Result<(usize, Vec<Damaged>)> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::cache::FileStamp;
 
     #[test]
     fn a_stamp_matches_only_the_same_bytes_in_a_regular_file() {

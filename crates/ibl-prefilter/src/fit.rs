@@ -46,7 +46,7 @@
 //! [r_1, r_2] only: between the mirror and level 1 no single value per texel can follow a small
 //! source (the exact blend is off by 100–250% there).
 
-use crate::bake::ErrorStats;
+use crate::stats::ErrorStats;
 use ibl_core::cube::Cubemap;
 use ibl_core::luminance;
 use ibl_target::LodMapping;

@@ -24,6 +24,7 @@ pub mod kernel;
 pub mod runtime;
 pub mod samples;
 pub mod spatial;
+pub mod stats;
 pub mod tree;
 
 pub use bake::{run, Method, Params, Quality};

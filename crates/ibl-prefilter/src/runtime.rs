@@ -5,8 +5,8 @@
 
 pub use crate::custom::CustomLookup;
 
-use crate::bake::ErrorStats;
 use crate::kernel::SourceTexels;
+use crate::stats::ErrorStats;
 use crate::tree::{tree_convolve, CellTree, TreeBuffers, TreeParams};
 use glam::Vec3;
 use ibl_core::bordered::BorderedMips;

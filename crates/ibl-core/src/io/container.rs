@@ -4,38 +4,50 @@
 //! key/value metadata.
 //!
 //! A new container is one module under `io/` implementing [`Codec`], registered by a
-//! `Layout` variant and its arm in `Layout::codec` (`crate::output`): the flag value, the RON
+//! `Layout` variant (`io::layout`) and its arm in `Layout::codec` (here): the flag value, the RON
 //! key, file names, stale-file removal, sniffing and reading follow.
 
-use super::ktx2::Metadata;
 use super::texture::Payload;
 use crate::error::Result;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// A single-file GPU texture container: the layouts that are one file (`Layout::Faces` is not).
-pub use crate::output::Layout as Container;
-
-/// What a single-file container is: implemented once, in the container's module.
-pub trait Codec: Sync {
-    /// The name flags and RON keys use (`--layout ktx1`).
-    fn name(&self) -> &'static str;
-    /// The file extension, without the dot (`ktx2`).
-    fn extension(&self) -> &'static str;
-    /// The bytes every file of this container starts with.
-    fn magic(&self) -> &'static [u8];
-    /// Frames a chain with its key/value `metadata` (where the container has any) and, where
-    /// the container supercompresses, `zstd` (validated against the layout beforehand).
-    fn encode(
-        &self,
-        p: &Payload,
-        zstd: Option<i32>,
-        metadata: &[(String, Vec<u8>)],
-    ) -> Result<Vec<u8>>;
-    /// Parses a file into its payload and key/value metadata.
-    fn decode(&self, path: &Path, bytes: &[u8]) -> Result<(Payload, Metadata)>;
-}
+pub use super::layout::Layout as Container;
+use super::layout::Layout;
+pub use super::layout::{Codec, Metadata};
 
 impl Container {
+    /// Every layout, in declaration order (clap's list of `--layout` values).
+    pub fn all() -> &'static [Layout] {
+        <Layout as clap::ValueEnum>::value_variants()
+    }
+
+    /// The codec of a single-file container, `None` for face files: the one place a container
+    /// is registered.
+    pub fn codec(self) -> Option<&'static dyn Codec> {
+        match self {
+            Layout::Faces => None,
+            Layout::Ktx2 => Some(&super::ktx2::Ktx2),
+            Layout::Dds => Some(&super::dds::Dds),
+            Layout::Ktx1 => Some(&super::ktx1::Ktx1),
+        }
+    }
+
+    /// File extension of a single-file container, `None` for face files.
+    pub fn extension(self) -> Option<&'static str> {
+        self.codec().map(|c| c.extension())
+    }
+
+    /// `dir/<name>.<ext>` for a single-file container, `None` for face files.
+    pub fn container_path(self, dir: &Path, name: &str) -> Option<PathBuf> {
+        self.extension().map(|e| dir.join(format!("{name}.{e}")))
+    }
+
+    /// The name flags and RON keys use.
+    pub fn name(self) -> &'static str {
+        self.codec().map_or("faces", |c| c.name())
+    }
+
     /// The container `bytes` start like, if any.
     pub(crate) fn sniff(bytes: &[u8]) -> Option<Container> {
         Self::containers()

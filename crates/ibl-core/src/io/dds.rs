@@ -193,10 +193,10 @@ pub fn decode(path: &Path, b: &[u8]) -> Result<Payload> {
     Ok(p)
 }
 
-/// DDS as a [`super::container::Codec`] (it has no key/value metadata: none is written or read).
+/// DDS as a [`super::layout::Codec`] (it has no key/value metadata: none is written or read).
 pub struct Dds;
 
-impl super::container::Codec for Dds {
+impl super::layout::Codec for Dds {
     fn name(&self) -> &'static str {
         "dds"
     }
@@ -214,7 +214,7 @@ impl super::container::Codec for Dds {
     ) -> Result<Vec<u8>> {
         Ok(encode(p))
     }
-    fn decode(&self, path: &Path, bytes: &[u8]) -> Result<(Payload, super::ktx2::Metadata)> {
+    fn decode(&self, path: &Path, bytes: &[u8]) -> Result<(Payload, super::layout::Metadata)> {
         Ok((decode(path, bytes)?, Vec::new()))
     }
 }

@@ -82,7 +82,7 @@ fn header_gl_type(f: PixelFormat) -> u32 {
 }
 
 /// Parses a KTX 1.1 file (either endianness) into its payload and key/value metadata.
-pub fn decode(path: &Path, b: &[u8]) -> Result<(Payload, super::ktx2::Metadata)> {
+pub fn decode(path: &Path, b: &[u8]) -> Result<(Payload, super::layout::Metadata)> {
     let bad = |why: String| Error::invalid(path, format!("not a valid KTX file: {why}"));
     if b.len() < HEADER_LEN || b[..12] != IDENTIFIER {
         return Err(bad("bad identifier or truncated header".into()));
@@ -156,10 +156,10 @@ fn swap_elements(d: &[u8], size: u32) -> Vec<u8> {
     out
 }
 
-/// KTX 1.1 as a [`super::container::Codec`].
+/// KTX 1.1 as a [`super::layout::Codec`].
 pub struct Ktx1;
 
-impl super::container::Codec for Ktx1 {
+impl super::layout::Codec for Ktx1 {
     fn name(&self) -> &'static str {
         "ktx1"
     }
@@ -177,7 +177,7 @@ impl super::container::Codec for Ktx1 {
     ) -> Result<Vec<u8>> {
         Ok(encode(p, metadata))
     }
-    fn decode(&self, path: &Path, bytes: &[u8]) -> Result<(Payload, super::ktx2::Metadata)> {
+    fn decode(&self, path: &Path, bytes: &[u8]) -> Result<(Payload, super::layout::Metadata)> {
         decode(path, bytes)
     }
 }

@@ -109,8 +109,9 @@ fn dfd(format: PixelFormat) -> Vec<u8> {
     d
 }
 
-/// Key/value metadata of KTX1 and KTX2 files: (key, value bytes) pairs.
-pub type Metadata = Vec<(String, Vec<u8>)>;
+/// Key/value metadata of KTX1 and KTX2 files (defined in `io::layout`; named here too, where
+/// it was first).
+pub use super::layout::Metadata;
 
 /// Key/value data: entries sorted by key (as the KTX2 spec requires), each padded to 4 bytes.
 fn kvd(entries: &[(String, Vec<u8>)]) -> Vec<u8> {
@@ -422,10 +423,10 @@ pub fn decode_cube(path: &Path, b: &[u8]) -> Result<CubeMips> {
     texture::decode_cube(path, &payload)
 }
 
-/// KTX2 as a [`super::container::Codec`].
+/// KTX2 as a [`super::layout::Codec`].
 pub struct Ktx2;
 
-impl super::container::Codec for Ktx2 {
+impl super::layout::Codec for Ktx2 {
     fn name(&self) -> &'static str {
         "ktx2"
     }

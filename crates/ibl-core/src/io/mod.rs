@@ -12,6 +12,7 @@ pub mod format;
 mod jpeg_scan;
 pub mod ktx1;
 pub mod ktx2;
+pub mod layout;
 mod ldr;
 pub mod packed;
 mod rgbe;

@@ -138,6 +138,10 @@ pub struct LevelEncoding {
     pub mean_rel: f64,
     /// The largest such error.
     pub max_rel: f64,
+    /// How the BC6H blocks were searched when not by the `--bc6h-quality` profile: levels of
+    /// at most 8² texels a face are searched exhaustively (see `io::bc6h::encode_searched`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub bc6h_search: Option<&'static str>,
     /// Channel values outside [0, the format's largest value], clamped when encoded.
     pub clamped: usize,
     /// Bytes of the level (all faces), before supercompression.
@@ -193,6 +197,8 @@ pub fn encode_chain(
             size: cube.size,
             mean_rel,
             max_rel,
+            bc6h_search: (format == PixelFormat::Bc6h && cube.size <= super::bc6h::SEARCH_MAX)
+                .then_some(super::bc6h::SEARCH_NAME),
             clamped: faces.iter().map(|f| f.1).sum(),
             bytes: faces.iter().map(|f| f.0.len()).sum(),
             seconds: faces.iter().map(|f| f.2).sum(),
