@@ -417,10 +417,42 @@ pub fn emulate_custom(inputs: &Grid, chain: &BorderedMips, lk: &CustomLookup) ->
     Grid::new(Kind::Custom, Role::Outputs, data)
 }
 
-/// The box pyramid the shipped anisotropic snippet reads: `base` and its 2×2 box mips down to
-/// 1×1 (what `generateMipmap` builds; the evaluator's pyramid, `ibl_aniso::eval`).
+/// The pyramid the shipped anisotropic snippet reads on the GPU: `base` and its plain 2×2 box
+/// mips down to 1×1, what `generateMipmap` builds (each texel the unweighted mean of four).
+/// Not `CubeMips::build` (the evaluator's pyramid, `ibl_aniso::eval`), whose reduction weights
+/// the four by their solid angles: on the 4×4…1×1 levels the rough taps read, the two differ
+/// by several percent where the environment has contrast (notes/corner.md).
 pub fn aniso_pyramid(base: ibl_core::Cubemap) -> BorderedMips {
-    BorderedMips::new(&CubeMips::build(base, 1))
+    let mut levels = vec![base];
+    while levels.last().unwrap().size > 1 {
+        let prev = levels.last().unwrap();
+        let (n, m) = (prev.size, (prev.size / 2).max(1));
+        let mut next = Cubemap::new(m);
+        for (f, face) in next.faces.iter_mut().enumerate() {
+            let src = &prev.faces[f];
+            for j in 0..m {
+                for i in 0..m {
+                    // Odd sizes (never from a KTX2 power of two): the last row/column folded in.
+                    let (i1, j1) = (
+                        if i == m - 1 { n } else { 2 * i + 2 },
+                        if j == m - 1 { n } else { 2 * j + 2 },
+                    );
+                    let mut acc = [0.0f32; 3];
+                    let mut w = 0.0f32;
+                    for y in 2 * j..j1 {
+                        for x in 2 * i..i1 {
+                            let t = src.texel(x, y);
+                            (0..3).for_each(|k| acc[k] += t[k]);
+                            w += 1.0;
+                        }
+                    }
+                    face.texel_mut(i, j).copy_from_slice(&acc.map(|a| a / w));
+                }
+            }
+        }
+        levels.push(next);
+    }
+    BorderedMips::new(&CubeMips { levels })
 }
 
 /// The shipped anisotropic method's CPU emulation (`ibl_aniso::ship::shade`, then
@@ -795,6 +827,39 @@ mod tests {
             let v = Vec3::new(x[12], x[13], x[14]);
             assert!(n.dot(t).abs() < 1e-5 && v.dot(n) > 0.3);
         }
+    }
+
+    /// The aniso emulation's pyramid is generateMipmap's: every coarse texel the unweighted
+    /// mean of the four below it (so a level's plain mean is kept), which the solid-angle
+    /// weighted `CubeMips::build` is not.
+    #[test]
+    fn aniso_pyramid_is_the_plain_box_chain() {
+        let cube = Cubemap::from_fn(8, |d| {
+            [d.x.max(0.0) * 5.0, 1.0 + d.y, (3.0 * d.z).cos() + 1.5]
+        });
+        let b = aniso_pyramid(cube.clone());
+        assert_eq!(b.sizes(), vec![8, 4, 2, 1]);
+        let weighted = BorderedMips::new(&CubeMips::build(cube.clone(), 1));
+        let mut moved = 0.0f32;
+        for face in Face::ALL {
+            for (i, j) in [(0usize, 0usize), (1, 2), (3, 3)] {
+                let d = ibl_core::cube::texel_direction(face, i, j, 4);
+                let got = b.bilinear(d, 1);
+                for k in 0..3 {
+                    let want = [(0, 0), (1, 0), (0, 1), (1, 1)]
+                        .iter()
+                        .map(|&(x, y)| cube.texel(face, 2 * i + x, 2 * j + y)[k])
+                        .sum::<f32>()
+                        / 4.0;
+                    assert!(
+                        (got[k] - want).abs() < 1e-5,
+                        "{face:?} ({i}, {j}): {got:?} vs {want}"
+                    );
+                    moved = moved.max((weighted.bilinear(d, 1)[k] - want).abs());
+                }
+            }
+        }
+        assert!(moved > 1e-3, "the weighted chain is another chain: {moved}");
     }
 
     /// The GPU model written apart and ibl-core's sampler read the same values everywhere,
