@@ -38,26 +38,31 @@ mkdir -p "$W"
 "$BIN/shader-emulate" emulate "$W/aniso-inputs.json" --chain "$W/aniso-env/cube.ktx2" -o "$W/aniso-cpu.json"
 t1=$(date +%s)
 
-# Gates, measured November 2026 on Chromium's SwiftShader (notes/shaders-browser.md): per case
-# the largest relative difference over R, G, B, split by the emulation's flag (alpha 0) for the
-# cases whose reads touch a cube-corner texel, which the GL specification leaves to the
-# implementation (ibl-core's emulation re-projects one texel; SwiftShader averages the three,
-# as the specification recommends; reported, gated loosely).
+# Gates, measured November 2026 on Chromium's SwiftShader (notes/shaders-browser.md,
+# notes/corner.md): per case the largest relative difference over R, G, B, split by the
+# emulation's flag (alpha 0.5) for the cases whose reads touch a cube-corner texel, which the GL
+# specification leaves to the implementation and recommends to be the mean of the three texels
+# meeting there: ibl-core's emulation takes that mean, as SwiftShader does, so those cases are
+# gated like the rest. Reads in a direction exactly at a cube corner (|x| = |y| = |z|, alpha 0,
+# the face choice a tie SwiftShader breaks otherwise) are reported only.
 # custom: both sides read the same float16 texels and SwiftShader filters in float: measured
-#   mean 1.7e-8, p99 1.9e-7, max 3.3e-6 off the corners (f32 rounding), so the gate is 1e-6 / 1e-5.
-# aniso (fisb-16, measured again after the isoSpecular argument: 823 FIS cases off the corners
-#   mean 3.5e-3, p99 3.2e-2, max 0.10; 905 corner cases mean 6.3e-2, p99 0.17; 792 pass-through
-#   cases all bit-identical). Before the blend (fis-16, 2520 cases with taps):
-# aniso: measured mean 3.8e-3, p99 4.0e-2 off the corners, corner cases mean 7.9e-2, p99 0.20;
-#   gates at about 1.5x. Not the mips (uploading the emulation's float32 box chain instead of
-#   generateMipmap, `shader-check.mjs ... box32`, gives the same numbers) but the GPU's
-#   sin/cos: SwiftShader's are off by up to 1.9e-4 absolute on [0, 2 pi] (GLSL ES allows
-#   2^-11), which moves the 16 taps by ~1e-4 rad (1/200 of a texel, amplified by the
-#   environment's contrast); and 4 of the 2520 cases hold a tap at the rim of Heitz's VNDF
-#   disk (u.x within 1e-3 of 1), where pz = sqrt(1 - p1^2 - p2^2) is ill-conditioned and
-#   float rounding decides whether the tap is above the horizon (up to 84% in that pixel).
-custom_gates=(--max-mean 1e-6 --max-p99 1e-5)
-aniso_gates=(--max-mean 6e-3 --max-p99 6e-2 --corner-max-mean 0.12 --corner-max-p99 0.3)
+#   mean 1.7e-8, p99 1.9e-7, max 3.3e-6 off the corners (f32 rounding), so the gate is 1e-6 / 1e-5;
+#   the 279 corner cases mean 8.0e-6, p99 3.8e-5, max 3.9e-5 (was 0.37% mean, 2.4% max when the
+#   emulation re-projected one texel), gate 2e-5 / 1e-4.
+# aniso (fisb-16: the isotropic split sum fed as isoSpecular; the 792 cases of weight 0, eta = 0
+#   and alpha under 1e-3, must come back bit-identical, checked by compare): the emulation reads generateMipmap's chain, a plain 2x2 box (shader_emulate::aniso_pyramid;
+#   it read the solid-angle-weighted chain of CubeMips::build before, which was most of the old
+#   3.8e-3 mean and all of the corner group's 8e-2, notes/corner.md). Measured mean 1.2e-3, p99
+#   6.7e-3 off the corners, mean 9.4e-4, p99 1.0e-2 on reads touching a corner texel; gates at
+#   about 1.5-2x, the same for both. What remains was traced (notes/shaders-browser.md) to the
+#   GPU's sin/cos and the VNDF rim; not re-measured here. SwiftShader's sin/cos are off
+#   by up to 1.9e-4 absolute on [0, 2 pi] (GLSL ES allows 2^-11), which moves the 16 taps by
+#   ~1e-4 rad (1/200 of a texel, amplified by the environment's contrast); and 4 of the 2520
+#   cases hold a tap at the rim of Heitz's VNDF disk (u.x within 1e-3 of 1), where
+#   pz = sqrt(1 - p1^2 - p2^2) is ill-conditioned and float rounding decides whether the tap
+#   is above the horizon (up to 84% in that pixel, under the p99).
+custom_gates=(--max-mean 1e-6 --max-p99 1e-5 --corner-max-mean 2e-5 --corner-max-p99 1e-4)
+aniso_gates=(--max-mean 2e-3 --max-p99 1.5e-2 --corner-max-mean 2e-3 --corner-max-p99 1.5e-2)
 
 fail=0
 check() { # kind glsl cube label gates...
@@ -67,9 +72,9 @@ check() { # kind glsl cube label gates...
 		"$BIN/shader-emulate" compare "$W/$kind-cpu.json" "$W/$label-gpu.json" --label "$label" --inputs "$W/$kind-inputs.json" "$@"
 }
 check custom "$W/custom/lookup.glsl" "$W/custom/prefilter.ktx2" custom "${custom_gates[@]}" --json "$W/custom-stats.json" || fail=1
-# Diagnosis, not a gate: the same GPU outputs against a GPU model whose corner texel is the
-# average of the three (crates/shader-emulate, gl_corner_read): the corner cases agree with it
-# except at the exact cube corners (|x| = |y| = |z|, the face choice a tie).
+# Diagnosis, not a gate: the same GPU outputs against a GPU model written apart from ibl-core
+# whose corner texel is the average of the three (crates/shader-emulate, gl_corner_read): it
+# agrees with the emulation (unit test) and so with the GPU but at the exact cube corners.
 "$BIN/shader-emulate" emulate "$W/custom-inputs.json" --chain "$W/custom/prefilter.ktx2" --sidecar "$W/custom/prefilter.json" --gl-corners -o "$W/custom-glmodel.json"
 "$BIN/shader-emulate" compare "$W/custom-glmodel.json" "$W/custom-gpu.json" --label "custom (GPU model, corner = mean of 3)" || true
 check aniso "$W/aniso-shader/aniso_fis.glsl" "$W/aniso-env/cube.ktx2" aniso "${aniso_gates[@]}" --json "$W/aniso-stats.json" || fail=1

@@ -17,7 +17,8 @@ struct BorderedLevel {
 
 impl BorderedLevel {
     /// Copies the cube and fills each border texel from the face its direction lands on
-    /// (`Cubemap::texel_wrapped`, the re-projection `Cubemap::sample_bilinear` uses).
+    /// (`Cubemap::texel_wrapped`, the re-projection `Cubemap::sample_bilinear` uses; a corner
+    /// border texel is the mean of the three texels meeting at that cube corner, as on GPUs).
     fn new(cube: &Cubemap) -> Self {
         let n = cube.size;
         let s = n + 2;

@@ -84,8 +84,8 @@ impl Face {
 }
 
 /// The texel of an n×n cube that integer coordinates (i, j) of `face`, possibly one texel
-/// outside it, read: the texel itself, or the neighbouring face's texel that the tap's
-/// direction lands on (the re-projection that makes bilinear reads seamless).
+/// outside it across one edge, read: the texel itself, or the neighbouring face's texel that
+/// the tap's direction lands on (the re-projection that makes bilinear reads seamless).
 #[inline]
 fn wrapped_index(n: usize, face: Face, i: isize, j: isize) -> (Face, usize, usize) {
     let m = n as isize;
@@ -101,27 +101,72 @@ fn wrapped_index(n: usize, face: Face, i: isize, j: isize) -> (Face, usize, usiz
     (f2, i2, j2)
 }
 
-/// The four texels a seamless bilinear read of an n×n cube in direction `d` blends, with their
+/// The texels whose mean a seamless read takes at integer coordinates (i, j) of `face`, at most
+/// one texel outside it: one texel ([`wrapped_index`]), or, past two edges at once (the
+/// cube-corner texel, which no face holds), the three texels meeting at that cube corner — the
+/// face's own corner texel and the two neighbours' across each edge. Returns them and their
+/// count (1 or 3).
+///
+/// The rule is the GPU's: OpenGL 4.6 core §8.13.1 "Seamless Cube Map Filtering" (4.2: §3.10.10):
+/// "If a texture sample location would lie in the texture border in both u and v (in one of the
+/// corners of the cube), there is no unique neighboring face from which to extract one texel.
+/// The recommended method to generate this texel is to average the values of the three
+/// available samples"; SwiftShader does (measured in conformance/render/shader-check.sh, the
+/// GPU agreeing to f32 rounding), and so does Mesa's llvmpipe (mesa/mesa,
+/// src/gallium/auxiliary/gallivm/lp_bld_sample_soa.c: "New corner texel color is all colors
+/// added / 3"). Vulkan's "Cube Map Edge Handling" (textures chapter, #textures-cubemapedge)
+/// leaves the corner texel's value to the implementation; D3D10+ hardware and Metal share the
+/// same sampler units. Re-projecting a single texel there instead (this crate before) was off
+/// by up to 2.4% in reads of 4×4–8×8 levels and 7.9% mean in the anisotropic FIS's corner taps
+/// (notes/corner.md).
+#[inline]
+fn ghost_indices(n: usize, face: Face, i: isize, j: isize) -> ([(Face, usize, usize); 3], usize) {
+    let m = n as isize;
+    let out = |x: isize| x < 0 || x >= m;
+    let one = wrapped_index(n, face, i, j);
+    if !(out(i) && out(j)) {
+        return ([one; 3], 1);
+    }
+    let (ci, cj) = (i.clamp(0, m - 1), j.clamp(0, m - 1));
+    (
+        [
+            (face, ci as usize, cj as usize),
+            wrapped_index(n, face, i, cj),
+            wrapped_index(n, face, ci, j),
+        ],
+        3,
+    )
+}
+
+/// The texels a seamless bilinear read of an n×n cube in direction `d` blends, with their
 /// weights, as (face·n² + j·n + i, weight): [`Cubemap::sample_bilinear`] is their weighted sum
-/// (to round-off). The read is linear in the texels; this is its row, for fitting texels to
-/// what a read of them should give.
-pub fn bilinear_taps(n: usize, d: Vec3) -> [(usize, f32); 4] {
+/// (to round-off). Four taps, one of which may be the cube-corner texel, the mean of three
+/// texels ([`ghost_indices`]) and so three entries of a third of its weight; unused entries
+/// have weight 0 (and index 0). The read is linear in the texels; this is its row, for
+/// fitting texels to what a read of them should give.
+pub fn bilinear_taps(n: usize, d: Vec3) -> [(usize, f32); 6] {
     let (face, sc, tc) = Face::from_direction(d);
     let x = (sc + 1.0) * 0.5 * n as f32 - 0.5;
     let y = (tc + 1.0) * 0.5 * n as f32 - 0.5;
     let (x0, y0) = (x.floor(), y.floor());
     let (fx, fy) = (x - x0, y - y0);
     let (x0, y0) = (x0 as isize, y0 as isize);
-    let tap = |i: isize, j: isize, w: f32| {
-        let (f, i, j) = wrapped_index(n, face, i, j);
-        (f as usize * n * n + j * n + i, w)
-    };
-    [
-        tap(x0, y0, (1.0 - fx) * (1.0 - fy)),
-        tap(x0 + 1, y0, fx * (1.0 - fy)),
-        tap(x0, y0 + 1, (1.0 - fx) * fy),
-        tap(x0 + 1, y0 + 1, fx * fy),
-    ]
+    let mut taps = [(0usize, 0.0f32); 6];
+    let mut k = 0;
+    for (i, j, w) in [
+        (x0, y0, (1.0 - fx) * (1.0 - fy)),
+        (x0 + 1, y0, fx * (1.0 - fy)),
+        (x0, y0 + 1, (1.0 - fx) * fy),
+        (x0 + 1, y0 + 1, fx * fy),
+    ] {
+        let (texels, count) = ghost_indices(n, face, i, j);
+        for &(f, i, j) in &texels[..count] {
+            // A 2×2 footprint holds at most one cube-corner texel (4 + 2 entries).
+            taps[k] = (f as usize * n * n + j * n + i, w / count as f32);
+            k += 1;
+        }
+    }
+    taps
 }
 
 /// Face coordinate of the centre of texel `i` on an `n`-texel edge: 2(i+0.5)/n − 1.
@@ -266,11 +311,17 @@ impl Cubemap {
 
     /// Texel at integer coordinates that may lie one texel outside the face: such taps are
     /// re-projected onto the neighbouring face through their direction, which makes bilinear
-    /// filtering seamless across edges and corners.
+    /// filtering seamless across edges; past two edges at once (the cube-corner texel) the
+    /// mean of the three texels meeting at that corner, as GPUs do ([`ghost_indices`]).
     #[inline]
     pub(crate) fn texel_wrapped(&self, face: Face, i: isize, j: isize) -> Rgb {
-        let (f2, i2, j2) = wrapped_index(self.size, face, i, j);
-        self.texel(f2, i2, j2)
+        let (texels, count) = ghost_indices(self.size, face, i, j);
+        if count == 1 {
+            let (f, i, j) = texels[0];
+            return self.texel(f, i, j);
+        }
+        let [a, b, c] = texels.map(|(f, i, j)| self.texel(f, i, j));
+        std::array::from_fn(|k| (a[k] + b[k] + c[k]) / 3.0)
     }
 
     /// Seamless bilinear sample in direction `d` (need not be normalised).
@@ -569,6 +620,172 @@ mod tests {
                             assert!(k < 6 * n * n);
                             w * cube.faces[k / (n * n)].data[3 * (k % (n * n)) + c]
                         })
+                        .sum();
+                    assert!((got - want).abs() < 1e-5, "n {n}, {d}: {got} vs {want}");
+                }
+            }
+        }
+    }
+
+    /// A cube of distinct random values per texel and channel.
+    fn random_cube(n: usize, seed: u64) -> Cubemap {
+        let mut rng = crate::sampling::Pcg32::new(seed, 5);
+        let mut cube = Cubemap::new(n);
+        for face in cube.faces.iter_mut() {
+            face.data
+                .iter_mut()
+                .for_each(|v| *v = rng.next_f64() as f32 * 4.0);
+        }
+        cube
+    }
+
+    #[test]
+    fn corner_ghost_texel_is_the_mean_of_the_three_texels_at_the_cube_corner() {
+        // Independent of the re-projection: the three texels meeting at a cube corner are the
+        // three whose centres lie nearest that corner's direction (one per face), found by
+        // brute force over all texels; every face's four corner ghosts must read their mean
+        // (OpenGL 4.6 §8.13.1's recommended rule), for every size including 1×1.
+        for n in [1usize, 2, 3, 4, 7] {
+            let cube = random_cube(n, n as u64);
+            for face in Face::ALL {
+                for (gi, gj) in [
+                    (-1, -1),
+                    (n as isize, -1),
+                    (-1, n as isize),
+                    (n as isize, n as isize),
+                ] {
+                    let c = |x: isize| (2.0 * (x as f32 + 0.5)) / n as f32 - 1.0;
+                    let g = face.direction(c(gi), c(gj));
+                    let corner = Vec3::new(g.x.signum(), g.y.signum(), g.z.signum()).normalize();
+                    let mut all: Vec<(f32, Rgb)> = Vec::new();
+                    for f in Face::ALL {
+                        for j in 0..n {
+                            for i in 0..n {
+                                let d = texel_direction(f, i, j, n);
+                                all.push((-d.dot(corner), cube.texel(f, i, j)));
+                            }
+                        }
+                    }
+                    all.sort_by(|a, b| a.0.total_cmp(&b.0));
+                    let got = cube.texel_wrapped(face, gi, gj);
+                    for k in 0..3 {
+                        let want = (all[0].1[k] + all[1].1[k] + all[2].1[k]) / 3.0;
+                        assert!(
+                            (got[k] - want).abs() < 1e-6,
+                            "n {n} {face:?} ({gi}, {gj}): {got:?} vs mean {want}"
+                        );
+                    }
+                    // The fourth nearest is farther: the three are the corner's, not a tie.
+                    if n > 1 {
+                        assert!(all[3].0 > all[2].0 + 1e-4, "n {n}");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_read_near_a_cube_corner_blends_the_mean_of_three() {
+        // Only the three texels at the +X+Y+Z corner are lit (values 3, 6, 12 on a 4×4 cube):
+        // a read on +X inside its corner texel's quarter towards that corner blends the face's
+        // texel (3), the two neighbours' (6, 12) and the corner ghost (their mean, 7) by the
+        // bilinear weights; a single re-projected texel (3, 6 or 12, the old rule) differs.
+        let n = 4;
+        let mut cube = Cubemap::new(n);
+        let corner = Vec3::ONE.normalize();
+        let mut lit = Vec::new();
+        for f in Face::ALL {
+            let (mut best, mut at) = (-2.0, (0, 0));
+            for j in 0..n {
+                for i in 0..n {
+                    let d = texel_direction(f, i, j, n).dot(corner);
+                    if d > best {
+                        (best, at) = (d, (i, j));
+                    }
+                }
+            }
+            if best > 0.5 {
+                lit.push((f, at));
+            }
+        }
+        assert_eq!(lit.len(), 3);
+        let value = |f: Face| match f {
+            Face::Px => 3.0,
+            Face::Py => 6.0,
+            _ => 12.0,
+        };
+        for &(f, (i, j)) in &lit {
+            cube.faces[f as usize].texel_mut(i, j).fill(value(f));
+        }
+        // +X: (sc, tc) → (1, −tc, −sc); its +Y+Z corner is at sc = −1, tc = −1, texel (0, 0).
+        // Face coordinates a quarter and a third of a texel past the corner texel's centre.
+        let (qx, qy) = (0.25f32, 1.0 / 3.0);
+        let sc = -1.0 + (0.5 - qx) * 2.0 / n as f32;
+        let tc = -1.0 + (0.5 - qy) * 2.0 / n as f32;
+        let d = Face::Px.direction(sc, tc);
+        // Texel-space weights: the ghost column/row is x = −1 / y = −1, fraction qx / qy of it.
+        let (wx, wy) = (qx, qy);
+        let (pz, py) = (12.0, 6.0); // the neighbours across the −sc (+Z) and −tc (+Y) edges
+        let want = (1.0 - wx) * (1.0 - wy) * 3.0
+            + wx * (1.0 - wy) * pz
+            + (1.0 - wx) * wy * py
+            + wx * wy * (3.0 + 6.0 + 12.0) / 3.0;
+        let got = cube.sample_bilinear(d)[0];
+        assert!((got - want).abs() < 1e-5, "{got} vs {want}");
+        let bordered = crate::bordered::BorderedMips::new(&CubeMips {
+            levels: vec![cube.clone()],
+        });
+        assert!((bordered.bilinear(d, 0)[0] - want).abs() < 1e-5);
+    }
+
+    #[test]
+    fn constant_cube_reads_constant_everywhere_and_tap_weights_sum_to_one() {
+        // Property: for random directions (and every cube corner, edge and face centre
+        // direction), on sizes 1…8, the read of a constant cube is that constant (corners
+        // included: three equal texels average to their value, which GL requires of any
+        // corner rule), the taps' weights are ≥ 0 and sum to 1, and the taps' row reproduces
+        // the read of a random cube.
+        let mut rng = crate::sampling::Pcg32::new(11, 3);
+        let c = [0.7f32, 123.25, 3.0e-3];
+        let mut dirs: Vec<Vec3> = Vec::new();
+        for x in [-1.0f32, 0.0, 1.0] {
+            for y in [-1.0f32, 0.0, 1.0] {
+                for z in [-1.0f32, 0.0, 1.0] {
+                    if (x, y, z) != (0.0, 0.0, 0.0) {
+                        dirs.push(Vec3::new(x, y, z));
+                        // Just off the corner/edge, on each side of the face choice.
+                        dirs.push(Vec3::new(x * 1.001, y, z * 0.999));
+                    }
+                }
+            }
+        }
+        for _ in 0..3000 {
+            let d = Vec3::new(
+                rng.next_f64() as f32 - 0.5,
+                rng.next_f64() as f32 - 0.5,
+                rng.next_f64() as f32 - 0.5,
+            );
+            if d.length() > 1e-3 {
+                dirs.push(d);
+            }
+        }
+        for n in 1..=8usize {
+            let cube = Cubemap::constant(n, c);
+            let random = random_cube(n, 100 + n as u64);
+            for &d in &dirs {
+                let got = cube.sample_bilinear(d);
+                for k in 0..3 {
+                    assert!((got[k] - c[k]).abs() <= 2e-6 * c[k], "n {n} {d}: {got:?}");
+                }
+                let taps = bilinear_taps(n, d);
+                assert!(taps.iter().all(|t| t.1 >= 0.0 && t.0 < 6 * n * n));
+                let w: f32 = taps.iter().map(|t| t.1).sum();
+                assert!((w - 1.0).abs() < 1e-5, "n {n} {d}: weights sum to {w}");
+                let want = random.sample_bilinear(d);
+                for (k, want) in want.iter().enumerate() {
+                    let got: f32 = taps
+                        .iter()
+                        .map(|&(p, w)| w * random.faces[p / (n * n)].data[3 * (p % (n * n)) + k])
                         .sum();
                     assert!((got - want).abs() < 1e-5, "n {n}, {d}: {got} vs {want}");
                 }

@@ -4,7 +4,8 @@
 //!
 //! A level stored as footprint means (or centre values) is exact where it is stored, but an
 //! engine never reads it there: it reads a bilinear blend of four texels, seamless across faces
-//! (texels past an edge re-projected from the neighbour, `ibl_core::cube::bilinear_taps`). On a
+//! (texels past an edge re-projected from the neighbour, a cube-corner texel the mean of the
+//! three meeting there, as GPUs do: `ibl_core::cube::bilinear_taps`). On a
 //! 4×4 face the radiance at r = 1 curves too much over a texel for that blend: measured 2.5–5.4%
 //! mean error on four real environments (bench/runtime.md, `% at r = 1`), the largest error of
 //! the whole lookup above r = 0.8. The read is linear in the texels v, so the texels that make it
@@ -293,7 +294,9 @@ pub fn keep_read_power(level: &mut Cubemap, power: [f64; 3], w: &[f64]) {
     }
 }
 
-type Sample = ([(usize, f32); 4], [f32; 3], f64);
+/// A fit sample: its read's taps (`bilinear_taps`: four, a cube-corner one as three texels of a third
+/// of its weight, the GPU's corner rule), the exact value, its solid angle.
+type Sample = ([(usize, f32); 6], [f32; 3], f64);
 
 /// Solid-angle-weighted mean |read − exact| / exact of luminance at the samples (exact values
 /// below 10⁻⁶ of the mean left out, as the runtime report does).
