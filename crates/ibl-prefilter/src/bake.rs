@@ -278,7 +278,7 @@ impl CpuStages {
 /// The exact kernel the runtime report compares the lookup with: the cell tree at the knobs
 /// the default preset had when the report's figures were published (measured 0.02% from the
 /// brute force), fixed so the report measures the same thing whatever the bake's own preset.
-pub(crate) const RUNTIME_REFERENCE: TreeParams = TreeParams {
+pub const RUNTIME_REFERENCE: TreeParams = TreeParams {
     theta: 0.7,
     kappa: 4.0,
     horizon: 0.12,
@@ -993,10 +993,12 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
     level_seconds.truncate(n_written);
     level_work.truncate(n_written);
     let mut levels: Vec<Cubemap> = stages.iter().map(Stage::stored).collect();
-    // The custom lookup promises a sun's power at every roughness: that is the power of the
-    // read, which on a small level differs from the texels' (crate::spatial::keep_read_power;
-    // 0.28% on the 4² last level before). Each small level's read is given the source's power.
-    if params.target == Target::Custom {
+    // A sun's power at every roughness is the power of the read, which on a small level
+    // differs from the texels' (crate::spatial::keep_read_power; 0.28% on the 4² last level
+    // before). Each small level's read is given the source's power, for every engine target
+    // (each reads its levels through a seamless bilinear tap); the brute-force --reference
+    // of a stock target stays the exact kernel's texels by definition.
+    if params.target == Target::Custom || !params.reference {
         let power = spatial::texel_power(&source);
         for level in &mut levels {
             if level.size <= spatial::READ_POWER_MAX_SIZE {
