@@ -28,7 +28,7 @@ pub(crate) fn roughness_grid(steps: usize) -> Vec<f32> {
 
 /// `n` low-discrepancy unit directions (a spherical Fibonacci lattice, turned by an
 /// irrational angle so no point falls on a texel centre or a face edge of any level).
-pub(crate) fn probe_directions(n: usize) -> Vec<Vec3> {
+pub fn probe_directions(n: usize) -> Vec<Vec3> {
     let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
     let (s, c) = (0.7390851332f64.sin(), 0.7390851332f64.cos());
     (0..n)

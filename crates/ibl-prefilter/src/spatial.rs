@@ -213,7 +213,7 @@ fn solve_pinned(
     v.iter().all(|v| v.is_finite()).then_some(v)
 }
 
-/// Levels of at most this many texels an edge have their read's power kept (the custom target,
+/// Levels of at most this many texels an edge have their read's power kept (every target,
 /// [`keep_read_power`]). The read's power differs from the texels' by O(1/n²): on random
 /// texels +0.11% at 4², +0.012% at 8², −0.002% at 16² (`read_weights_give_the_power_of_the_read`),
 /// and a 10⁵ one-texel sun through a 4² last level lost 0.28% at r = 1 (bench/runtime.md); past
