@@ -17,7 +17,7 @@ use std::path::PathBuf;
 #[derive(Parser)]
 #[command(version, about)]
 struct Cli {
-    /// Input environments (.exr/.hdr equirect or cross, face folders, .ktx2 cubes).
+    /// Input environments (.exr/.hdr equirect or cross, face folders, .ktx2/.ktx/.dds cubes).
     #[arg(required_unless_present = "emit_shader")]
     inputs: Vec<PathBuf>,
     /// Write the shipped method (VNDF filtered importance sampling, 16 taps, blended into the
@@ -26,7 +26,7 @@ struct Cli {
     /// steps as the fisb-16 method of the evaluator.
     #[arg(long, value_name = "DIR", conflicts_with = "inputs")]
     emit_shader: Option<PathBuf>,
-    /// Prefiltered chain (a folder of m{l}_<face> images or a .ktx2) written by `prefilter`
+    /// Prefiltered chain (a folder of m{l}_<face> images or a .ktx2/.ktx/.dds) written by `prefilter`
     /// for --target (one environment only); default: bake one at --chain-size.
     #[arg(long)]
     prefiltered: Option<PathBuf>,

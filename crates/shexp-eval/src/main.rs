@@ -13,14 +13,14 @@ use std::path::PathBuf;
 #[derive(Parser)]
 #[command(version, about)]
 struct Cli {
-    /// Input environments (.exr/.hdr equirect or cross, face folders, .ktx2 cubes).
+    /// Input environments (.exr/.hdr equirect or cross, face folders, .ktx2/.ktx/.dds cubes).
     #[arg(required = true)]
     inputs: Vec<PathBuf>,
     /// Coefficients written by shexp-fit (one environment only); default: fit with the
     /// paper's settings (or --fit-params).
     #[arg(long)]
     coeffs: Option<PathBuf>,
-    /// Prefiltered chain (a folder of m{l}_<face> images or a .ktx2) written by `prefilter`
+    /// Prefiltered chain (a folder of m{l}_<face> images or a .ktx2/.ktx/.dds) written by `prefilter`
     /// (one environment only); default: bake one at --ss-size.
     #[arg(long)]
     prefiltered: Option<PathBuf>,
