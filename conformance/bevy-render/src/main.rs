@@ -68,7 +68,10 @@ fn main() -> AppExit {
         None => 900.0,
         Some(Ok(v)) if v > 0.0 && f32::is_finite(v) => v,
         Some(_) => {
-            eprintln!("bevy-render: INTENSITY {} is not a positive number", args[3]);
+            eprintln!(
+                "bevy-render: INTENSITY {} is not a positive number",
+                args[3]
+            );
             return AppExit::from_code(2);
         }
     };
