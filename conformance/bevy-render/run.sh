@@ -54,7 +54,8 @@ for name in $FIXTURES orientation; do
 	"$BIN/irradiance" "$env" -o "$d/diff" --target bevy -q
 	"$exe" "$d/spec/specular_rgb9e5_zstd.ktx2" "$d/diff/diffuse_rgb9e5_zstd.ktx2" "$d/bevy-ours.pfm" 2>"$d/bevy.log" || {
 		echo "conformance/bevy-render: Bevy failed on $name:" >&2
-		grep -v '^\s*$' "$d/bevy.log" | tail -5 >&2
+		# The program's own one-line reason (Bevy's errors come with backtraces), else the log's end.
+		grep '^bevy-render:' "$d/bevy.log" >&2 || grep -v '^\s*$' "$d/bevy.log" | tail -5 >&2
 		fail=1
 		continue
 	}
