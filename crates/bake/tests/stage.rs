@@ -298,3 +298,46 @@ fn bad_entries_inputs_and_results_fail_with_one_line_and_write_nothing() {
     );
     assert!(!d.join("out/p/cube/extra.bin").exists());
 }
+
+/// The pipeline's `max_memory` travels with each plan entry: `bake stage` on another machine
+/// runs under the same budget (refusing the 512×256 panorama the equirect stage reads, in one
+/// line naming the budget, exit 3), unless its own `--max-memory` names one.
+#[test]
+fn a_pipelines_budget_travels_with_its_entries() {
+    let dir = tempfile::tempdir().unwrap();
+    let pipeline = workspace(dir.path(), "budget");
+    let text = std::fs::read_to_string(&pipeline).unwrap().replacen(
+        "Pipeline(\n",
+        "Pipeline(\n    max_memory: \"64K\",\n",
+        1,
+    );
+    std::fs::write(&pipeline, text).unwrap();
+    let stages = plan(dir.path(), &pipeline);
+    let entry = stages
+        .iter()
+        .find(|s| s["id"] == "cube")
+        .and_then(|s| s.get("entry"))
+        .cloned()
+        .unwrap_or_else(|| panic!("no entry for 'cube' in {stages:?}"));
+    assert_eq!(entry["max_memory"], 65536, "{entry}");
+
+    let scratch = dir.path().join("scratch");
+    let (inputs, e) = (scratch.join("in"), scratch.join("cube.json"));
+    materialise(&entry, &inputs);
+    std::fs::write(&e, serde_json::to_vec(&entry).unwrap()).unwrap();
+    let stage = |extra: &[&str], out: &str| {
+        let mut args = vec!["stage", "--entry", e.to_str().unwrap()];
+        args.extend(["--inputs", inputs.to_str().unwrap()]);
+        args.extend(["--out", out]);
+        args.extend(extra);
+        bake(&scratch, &args)
+    };
+    let refused = stage(&[], "res-a");
+    assert_eq!(refused.status.code(), Some(3), "{}", stderr(&refused));
+    let msg = stderr(&refused);
+    assert_eq!(msg.trim_end().lines().count(), 1, "{msg}");
+    assert!(msg.contains("memory budget"), "{msg}");
+    assert!(!scratch.join("res-a").join("stage.json").exists());
+    // The flag names the budget: the stage runs.
+    ok(stage(&["--max-memory", "2G"], "res-b"));
+}

@@ -288,6 +288,9 @@ fn run(cli: Cli) -> Result<i32, Error> {
                     format!("not a stage entry: {e}"),
                 ))
             })?;
+            if let (None, Some(m)) = (cli.max_memory, e.max_memory) {
+                ibl_core::io::budget::set_max_memory(m);
+            }
             match remote::run_entry(&e, &inputs, &out) {
                 Ok(report) => {
                     if json {

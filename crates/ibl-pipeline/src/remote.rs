@@ -44,6 +44,10 @@ pub struct StageEntry {
     pub dir: String,
     /// What it reads, in order.
     pub reads: Vec<ReadEntry>,
+    /// The pipeline's memory budget (`max_memory`), which `bake stage` applies unless its own
+    /// `--max-memory` names one: the budget of a run is the same wherever its stages run.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_memory: Option<u64>,
 }
 
 /// One source a stage reads, as files to materialise in its numbered input folder.
@@ -192,6 +196,7 @@ pub fn entries(graph: &Graph, plan: &Plan) -> Result<Vec<Option<StageEntry>>> {
             tool: cache::tool(),
             dir: rel_dir(&s.dir)?,
             reads,
+            max_memory: graph.pipeline.max_memory,
         }));
     }
     Ok(out)
@@ -695,6 +700,7 @@ mod tests {
                     tool: cache::tool(),
                     dir: "s".into(),
                     reads: vec![],
+                    max_memory: None,
                 };
                 let back = entry_params(kind, &entry)
                     .unwrap_or_else(|e| panic!("{}: {}", kind.name(), e.message));
