@@ -78,6 +78,13 @@ pub fn resolve(p: &Path) -> PathBuf {
 /// a `..` is taken *after* the symlinks before it (`out/link/..` is the parent of where `link`
 /// points, not `out`), which is what `open(2)` does with a path that is not normalized.
 fn resolve_walked(p: &Path) -> PathBuf {
+    // `Path::parent` of a bare file name is the empty path, which is the working folder
+    // (`std::path::absolute` refuses the empty path).
+    let p = if p.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        p
+    };
     let abs = std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
     let comps: Vec<Component> = abs.components().collect();
     for n in (1..=comps.len()).rev() {
@@ -347,6 +354,15 @@ mod tests {
         check_output_folder(&dir.path().join("out"), "-o", true).unwrap();
         check_output_folder(Path::new("/tmp"), "-o", false).unwrap();
         assert!(check_output_folder(Path::new("/etc"), "-o", false).is_err());
+    }
+
+    #[test]
+    fn a_bare_file_names_folder_is_the_working_folder() {
+        // `Path::new("n.png").parent()` is the empty path: `-o n.png` writes into the working
+        // folder, which must not read as a link leading to "." (quat-map's e2e caught it).
+        let cwd = std::fs::canonicalize(std::env::current_dir().unwrap()).unwrap();
+        assert_eq!(resolve_walked(Path::new("")), cwd);
+        assert_eq!(resolve_walked(Path::new(".")), cwd);
     }
 
     #[test]
