@@ -38,8 +38,8 @@ mkdir -p "$W"
 "$BIN/shader-emulate" emulate "$W/aniso-inputs.json" --chain "$W/aniso-env/cube.ktx2" -o "$W/aniso-cpu.json"
 t1=$(date +%s)
 
-# Gates, measured November 2026 on Chromium's SwiftShader (notes/shaders-browser.md,
-# notes/corner.md): per case the largest relative difference over R, G, B, split by the
+# Gates, measured November 2026 on Chromium's SwiftShader (docs/notes/shaders-browser.md,
+# docs/notes/corner.md): per case the largest relative difference over R, G, B, split by the
 # emulation's flag (alpha 0.5) for the cases whose reads touch a cube-corner texel, which the GL
 # specification leaves to the implementation and recommends to be the mean of the three texels
 # meeting there: ibl-core's emulation takes that mean, as SwiftShader does, so those cases are
@@ -52,9 +52,9 @@ t1=$(date +%s)
 # aniso (fisb-16: the isotropic split sum fed as isoSpecular; the 792 cases of weight 0, eta = 0
 #   and alpha under 1e-3, must come back bit-identical, checked by compare): the emulation reads generateMipmap's chain, a plain 2x2 box (shader_emulate::aniso_pyramid;
 #   it read the solid-angle-weighted chain of CubeMips::build before, which was most of the old
-#   3.8e-3 mean and all of the corner group's 8e-2, notes/corner.md). Measured mean 1.2e-3, p99
+#   3.8e-3 mean and all of the corner group's 8e-2, docs/notes/corner.md). Measured mean 1.2e-3, p99
 #   6.7e-3 off the corners, mean 9.4e-4, p99 1.0e-2 on reads touching a corner texel; gates at
-#   about 1.5-2x, the same for both. What remains was traced (notes/shaders-browser.md) to the
+#   about 1.5-2x, the same for both. What remains was traced (docs/notes/shaders-browser.md) to the
 #   GPU's sin/cos and the VNDF rim; not re-measured here. SwiftShader's sin/cos are off
 #   by up to 1.9e-4 absolute on [0, 2 pi] (GLSL ES allows 2^-11), which moves the 16 taps by
 #   ~1e-4 rad (1/200 of a texel, amplified by the environment's contrast); and 4 of the 2520

@@ -118,7 +118,7 @@ fn wrapped_index(n: usize, face: Face, i: isize, j: isize) -> (Face, usize, usiz
 /// leaves the corner texel's value to the implementation; D3D10+ hardware and Metal share the
 /// same sampler units. Re-projecting a single texel there instead (this crate before) was off
 /// by up to 2.4% in reads of 4×4–8×8 levels and 7.9% mean in the anisotropic FIS's corner taps
-/// (notes/corner.md).
+/// (docs/notes/corner.md).
 #[inline]
 fn ghost_indices(n: usize, face: Face, i: isize, j: isize) -> ([(Face, usize, usize); 3], usize) {
     let m = n as isize;

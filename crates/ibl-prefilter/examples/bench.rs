@@ -116,7 +116,7 @@ fn main() {
         }
         return;
     }
-    // `-- --two-tap`: the two-tap custom lookup experiment (notes/custom-2tap.md, printed).
+    // `-- --two-tap`: the two-tap custom lookup experiment (docs/notes/custom-2tap.md, printed).
     if std::env::args().any(|a| a == "--two-tap") {
         two_tap(&root);
         return;

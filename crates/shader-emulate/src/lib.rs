@@ -458,7 +458,7 @@ pub fn emulate_custom(inputs: &Grid, chain: &BorderedMips, lk: &CustomLookup) ->
 /// mips down to 1×1, what `generateMipmap` builds (each texel the unweighted mean of four).
 /// Not `CubeMips::build` (the evaluator's pyramid, `ibl_aniso::eval`), whose reduction weights
 /// the four by their solid angles: on the 4×4…1×1 levels the rough taps read, the two differ
-/// by several percent where the environment has contrast (notes/corner.md).
+/// by several percent where the environment has contrast (docs/notes/corner.md).
 pub fn aniso_pyramid(base: ibl_core::Cubemap) -> BorderedMips {
     let mut levels = vec![base];
     while levels.last().unwrap().size > 1 {
