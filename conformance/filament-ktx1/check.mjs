@@ -4,29 +4,9 @@
 //! taking the file, the refusal can go).
 //!
 //! usage: node check.mjs ok:FILE ... abort:FILE ...   (paths relative to the repository root)
-import http from "node:http";
-import fs from "node:fs";
-import path from "node:path";
-import { createRequire } from "node:module";
+import { serveAndLaunch } from "../render/serve.mjs";
 
-const root = path.resolve(path.dirname(new URL(import.meta.url).pathname), "../..");
-const require = createRequire(path.join(root, "conformance/render/package.json"));
-const { chromium } = require("playwright-core");
-const types = { ".html": "text/html", ".js": "text/javascript", ".wasm": "application/wasm" };
-const server = http.createServer((req, res) => {
-  const p = path.resolve(root, "." + decodeURIComponent(new URL(req.url, "http://127.0.0.1").pathname));
-  if (!p.startsWith(root + path.sep) || !fs.existsSync(p) || !fs.statSync(p).isFile()) {
-    res.writeHead(404);
-    return res.end();
-  }
-  res.writeHead(200, { "content-type": types[path.extname(p)] || "application/octet-stream" });
-  fs.createReadStream(p).pipe(res);
-});
-await new Promise((ok) => server.listen(0, "127.0.0.1", ok));
-const browser = await chromium.launch({
-  executablePath: process.env.CHROMIUM || "/usr/bin/chromium",
-  args: ["--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--disable-background-networking"],
-});
+const { base, browser, close } = await serveAndLaunch();
 let passed = 0, failed = 0;
 try {
   for (const arg of process.argv.slice(2)) {
@@ -34,7 +14,7 @@ try {
     const page = await browser.newPage();
     const log = [];
     page.on("console", (m) => log.push(m.text()));
-    const url = `http://127.0.0.1:${server.address().port}/conformance/filament-ktx1/page.html?f=${encodeURIComponent("/" + file)}`;
+    const url = `${base}/conformance/filament-ktx1/page.html?f=${encodeURIComponent("/" + file)}`;
     await page.goto(url);
     let got;
     try {
@@ -49,8 +29,7 @@ try {
     await page.close();
   }
 } finally {
-  await browser.close();
-  server.close();
+  await close();
 }
 console.log(`${passed} passed, ${failed} failed`);
 process.exit(failed ? 1 : 0);

@@ -5,40 +5,18 @@
 //! usage: node render.mjs JOBS.json   — JOBS: [{ "page": "three", "params": {...}, "out": "dir/stem" }]
 //! (or "outs": [stems] for a page that renders several routes and hands back one image each)
 //! Paths in params are URLs relative to the served root (the repository).
-import http from "node:http";
 import fs from "node:fs";
 import path from "node:path";
-import { chromium } from "playwright-core";
+import { root, serveAndLaunch } from "./serve.mjs";
 import { writePfm, writePng } from "./lib.mjs";
 
-const root = path.resolve(path.dirname(new URL(import.meta.url).pathname), "../..");
 const jobsFile = process.argv[2];
 if (!jobsFile) {
   console.error("usage: node render.mjs JOBS.json");
   process.exit(2);
 }
 const jobs = JSON.parse(fs.readFileSync(jobsFile, "utf8"));
-const types = { ".html": "text/html", ".js": "text/javascript", ".mjs": "text/javascript", ".wasm": "application/wasm", ".json": "application/json", ".png": "image/png" };
-
-const server = http.createServer((req, res) => {
-  const u = new URL(req.url, "http://127.0.0.1");
-  const p = path.resolve(root, "." + decodeURIComponent(u.pathname));
-  if (!p.startsWith(root + path.sep) || !fs.existsSync(p) || !fs.statSync(p).isFile()) {
-    res.writeHead(404);
-    res.end();
-    return;
-  }
-  res.writeHead(200, { "content-type": types[path.extname(p)] || "application/octet-stream" });
-  fs.createReadStream(p).pipe(res);
-});
-await new Promise((ok) => server.listen(0, "127.0.0.1", ok));
-const base = `http://127.0.0.1:${server.address().port}`;
-
-const browser = await chromium.launch({
-  executablePath: process.env.CHROMIUM || "/usr/bin/chromium",
-  args: ["--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--disable-background-networking",
-    "--disable-component-update", "--disable-sync", "--no-first-run", "--disable-quic"],
-});
+const { base, browser, close } = await serveAndLaunch();
 let failed = 0;
 try {
   for (const job of jobs) {
@@ -77,7 +55,6 @@ try {
     await page.close();
   }
 } finally {
-  await browser.close();
-  server.close();
+  await close();
 }
 process.exit(failed ? 1 : 0);

@@ -5,12 +5,10 @@
 //!
 //! usage: node shader-check.mjs KIND GLSL CUBE.ktx2 INPUTS.json OUT.json [generate|box32]
 //! (paths inside the repository; the last argument as the page's "mips")
-import http from "node:http";
 import fs from "node:fs";
 import path from "node:path";
-import { chromium } from "playwright-core";
+import { root, serveAndLaunch } from "./serve.mjs";
 
-const root = path.resolve(path.dirname(new URL(import.meta.url).pathname), "../..");
 const [kind, glsl, cube, inputs, out, mips] = process.argv.slice(2);
 if (!out) {
   console.error("usage: node shader-check.mjs KIND GLSL CUBE.ktx2 INPUTS.json OUT.json");
@@ -21,25 +19,7 @@ const url = (p) => {
   if (!abs.startsWith(root + path.sep)) throw new Error(`${p}: outside the served repository ${root}`);
   return "/" + path.relative(root, abs).split(path.sep).map(encodeURIComponent).join("/");
 };
-const types = { ".html": "text/html", ".js": "text/javascript", ".json": "application/json" };
-const server = http.createServer((req, res) => {
-  const u = new URL(req.url, "http://127.0.0.1");
-  const p = path.resolve(root, "." + decodeURIComponent(u.pathname));
-  if (!p.startsWith(root + path.sep) || !fs.existsSync(p) || !fs.statSync(p).isFile()) {
-    res.writeHead(404);
-    res.end();
-    return;
-  }
-  res.writeHead(200, { "content-type": types[path.extname(p)] || "application/octet-stream" });
-  fs.createReadStream(p).pipe(res);
-});
-await new Promise((ok) => server.listen(0, "127.0.0.1", ok));
-const base = `http://127.0.0.1:${server.address().port}`;
-const browser = await chromium.launch({
-  executablePath: process.env.CHROMIUM || "/usr/bin/chromium",
-  args: ["--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--disable-background-networking",
-    "--disable-component-update", "--disable-sync", "--no-first-run", "--disable-quic"],
-});
+const { base, browser, close } = await serveAndLaunch();
 let code = 0;
 try {
   const t0 = Date.now();
@@ -64,7 +44,6 @@ try {
   console.error(`shader-check ${kind} ${glsl}: ${String(e.message || e).split("\n")[0]}`);
   code = 1;
 } finally {
-  await browser.close();
-  server.close();
+  await close();
 }
 process.exit(code);
