@@ -31,9 +31,16 @@ pub struct Params {
     #[arg(long, default_value_t = 32)]
     pub size: usize,
     /// Build the cube by brute-force cosine convolution of the source (the reference)
-    /// instead of from the SH coefficients.
+    /// instead of from the SH coefficients, for any target. Targets whose engine samples the
+    /// cube (gltf, bevy, custom: `Target::reads_diffuse_cube`) get it without this flag,
+    /// since a 3-band SH cannot hold a sun and the engine shows every texel.
     #[arg(long)]
     pub exact: bool,
+    /// Build the cube from the SH coefficients even for a target whose engine samples the
+    /// cube (smooth, ringing-free only with `--window`; cheaper); refused with `--exact`.
+    /// Targets whose engine reads SH already get the cube that matches their coefficients.
+    #[arg(long)]
+    pub from_sh: bool,
     /// Width of the equirect the source is box-reduced to (solid-angle exact) before the
     /// `--exact` convolution; 0 keeps the source's own texels. The cosine lobe is so smooth
     /// that halving a 1024-wide source changes the result by about 0.04% (see the tests).
@@ -106,6 +113,11 @@ impl Params {
             )));
         }
         ibl_core::params::check_rotate(self.rotate)?;
+        if self.exact && self.from_sh {
+            return Err(Error::param(
+                "--exact and --from-sh ask for opposite cubes: give at most one",
+            ));
+        }
         if self.bands < 3 && self.target_sh_file().is_some() {
             return Err(Error::param(format!(
                 "--target {} takes 9 SH coefficients: --bands must be at least 3",
@@ -114,6 +126,13 @@ impl Params {
         }
         self.encoding()?;
         Ok(())
+    }
+
+    /// Whether the cube is the exact cosine convolution: `--exact`, or by default when the
+    /// target's engine samples the cube (it shows the cube itself, not our SH), unless
+    /// `--from-sh`.
+    pub fn exact_cube(&self) -> bool {
+        self.exact || (!self.from_sh && self.target.reads_diffuse_cube())
     }
 
     /// The engine's own SH file, if the target takes one.
@@ -556,7 +575,7 @@ pub fn run(
         irradiance: to_f32(&irr, "irradiance")?,
         windowed: params.window,
     };
-    let (cube, negative_clamped) = if params.exact {
+    let (cube, negative_clamped) = if params.exact_cube() {
         (
             convolve_cosine_exact(
                 &input.env,
@@ -653,6 +672,48 @@ mod tests {
             .join("../../fixtures/hdri")
             .join(name);
         ibl_core::envmap::load_environment(&p, false).unwrap().env
+    }
+
+    #[test]
+    fn the_cube_is_exact_by_default_exactly_for_targets_whose_engine_samples_it() {
+        for (target, exact) in [
+            (Target::Gltf, true),
+            (Target::Bevy, true),
+            (Target::Custom, true),
+            (Target::Three, false),
+            (Target::Filament, false),
+            (Target::Babylon, false),
+            (Target::Unity, false),
+        ] {
+            let p = Params {
+                target,
+                ..Params::default()
+            };
+            assert_eq!(p.exact_cube(), exact, "{target:?}");
+            let forced = Params {
+                exact: true,
+                ..p.clone()
+            };
+            assert!(forced.exact_cube() && forced.validate().is_ok());
+            let sh = Params {
+                from_sh: true,
+                ..p.clone()
+            };
+            assert!(!sh.exact_cube() && sh.validate().is_ok());
+            let both = Params {
+                exact: true,
+                from_sh: true,
+                ..p
+            };
+            let e = both.validate().unwrap_err().to_string();
+            assert!(
+                e.contains("--exact and --from-sh") && !e.contains('\n'),
+                "{e}"
+            );
+        }
+        // The RON keys are the flags.
+        let p: Params = ron::from_str("(from_sh: true)").unwrap();
+        assert!(p.from_sh && !p.exact_cube());
     }
 
     #[test]

@@ -138,7 +138,7 @@ fn exact_cube_matches_brute_force_and_sh_cube_matches_its_coefficients() {
     let src = fixture("hdri/sunset_256.exr");
     let exact_dir = dir.path().join("exact");
     let sh_dir = dir.path().join("sh");
-    for (out, extra) in [(&exact_dir, &["--exact"][..]), (&sh_dir, &[])] {
+    for (out, extra) in [(&exact_dir, &["--exact"][..]), (&sh_dir, &["--from-sh"])] {
         bake(&src, out, &[&["--size", "8"], extra].concat());
     }
     let img = load_clamped(&src);
@@ -235,6 +235,7 @@ fn bad_parameters_and_inputs_fail_cleanly() {
         (vec!["--bands", "0"], 2, "--bands 0"),
         (vec!["--bands", "40"], 2, "--bands 40"),
         (vec!["--sh-file", "sh.txt"], 2, "sh.txt"),
+        (vec!["--exact", "--from-sh"], 2, "--exact and --from-sh"),
     ] {
         BIN.refused_bake(&src, &out, &args, code, expect);
         assert!(!out.exists());
@@ -259,7 +260,7 @@ fn outputs_are_byte_identical_for_one_and_two_threads() {
         for exact in [false, true] {
             let sub = out.join(if exact { "exact" } else { "sh" });
             let flags = ["--size", "8", "--threads", threads];
-            let extra: &[&str] = if exact { &["--exact"] } else { &[] };
+            let extra: &[&str] = if exact { &["--exact"] } else { &["--from-sh"] };
             bake(&src, &sub, &[&flags[..], extra].concat());
         }
         let mut files: Vec<(String, Vec<u8>)> = Vec::new();
@@ -278,14 +279,64 @@ fn outputs_are_byte_identical_for_one_and_two_threads() {
 
 /// `--target`: the cube turned as the engine samples it and the engine's own SH file, whose
 /// values, evaluated the engine's way, reproduce our irradiance (the gltf cube).
+/// Every `.exr` face of a `--layout faces` output folder, in Face order.
+fn faces(dir: &Path) -> Vec<Vec<f32>> {
+    Face::ALL
+        .iter()
+        .map(|f| load_clamped(&dir.join(format!("{}.exr", f.name()))).data)
+        .collect()
+}
+
+#[test]
+fn cube_reading_targets_get_the_exact_cube_by_default_sh_readers_the_sh_cube() {
+    // Issue 22: engines that sample the diffuse cube (gltf, bevy) show every texel of it, and
+    // a 3-band SH misses a sun by several percent; SH-reading engines never see the cube.
+    let tmp = tempfile::tempdir().unwrap();
+    let src = fixture("hdri/city_512.exr");
+    let run = |name: &str, flags: &[&str]| {
+        let out = tmp.path().join(name);
+        let base = ["--size", "8", "--layout", "faces"];
+        bake(&src, &out, &[&base[..], flags].concat());
+        faces(&out)
+    };
+    let exact = run("exact", &["--exact"]);
+    let sh = run("sh", &["--from-sh"]);
+    assert_ne!(exact, sh, "the fixture must tell the two cubes apart");
+    assert_eq!(
+        run("gltf", &[]),
+        exact,
+        "gltf's default cube is the exact one"
+    );
+    // custom stores half floats: compare it with its own --exact.
+    assert_eq!(
+        run("custom", &["--target", "custom"]),
+        run("custom-exact", &["--target", "custom", "--exact"])
+    );
+    assert_eq!(run("gltf-sh", &["--target", "gltf", "--from-sh"]), sh);
+    // An SH reader: its default is the SH cube, --exact still forces the exact one.
+    let unity = run("unity", &["--target", "unity"]);
+    let unity_exact = run("unity-exact", &["--target", "unity", "--exact"]);
+    assert_ne!(unity, unity_exact, "unity's default cube is the SH one");
+    assert_eq!(run("unity-sh", &["--target", "unity", "--from-sh"]), unity);
+}
+
 #[test]
 fn targets_write_the_engines_sh_forms_and_orientation() {
     let tmp = tempfile::tempdir().unwrap();
     let input = fixture("hdri/sunset_256.exr");
     let bake = |t: &str| {
         let out = tmp.path().join(t);
-        // Faces here (each target's own container is checked by `make conformance`).
-        let flags = ["--size", "8", "--target", t, "--layout", "faces"];
+        // Faces here (each target's own container is checked by `make conformance`). The
+        // SH cube for every target (gltf's default is exact): the SH forms are checked against it.
+        let flags = [
+            "--size",
+            "8",
+            "--target",
+            t,
+            "--layout",
+            "faces",
+            "--from-sh",
+        ];
         bake(&input, &out, &flags);
         out
     };

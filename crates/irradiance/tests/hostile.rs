@@ -382,7 +382,7 @@ fn finite_input_gives_finite_output_or_a_clear_error() {
     );
     for exact in [false, true] {
         let out = d.path().join(format!("o{exact}"));
-        let flags: &[&str] = if exact { &["--exact"] } else { &[] };
+        let flags: &[&str] = if exact { &["--exact"] } else { &["--from-sh"] };
         let r = run(&p, &out, flags);
         assert_eq!(r.code, 0, "{}", r.stderr);
         let sh: serde_json::Value =
