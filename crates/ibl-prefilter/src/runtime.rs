@@ -7,7 +7,7 @@ pub use crate::custom::CustomLookup;
 
 use crate::kernel::SourceTexels;
 use crate::stats::ErrorStats;
-use crate::tree::{tree_convolve, CellTree, TreeBuffers, TreeParams};
+use crate::tree::{tree_convolve, tree_convolve_many, CellTree, TreeBuffers, TreeParams};
 use glam::Vec3;
 use ibl_core::bordered::BorderedMips;
 use ibl_core::cube::{CubeMips, Cubemap};
@@ -84,6 +84,41 @@ impl Reference<'_> {
         }
     }
 
+    /// [`Self::radiance`] at every roughness of `roughness` (the tree shares its cuts
+    /// between roughness values of one leaf level: `crate::tree::tree_convolve_many`).
+    pub fn radiance_many(&self, d: Vec3, roughness: &[f32], buffers: &mut TreeBuffers) -> Vec<Rgb> {
+        match self {
+            Reference::Tree {
+                tree,
+                params,
+                source,
+            } => {
+                let mut out = vec![[0.0f32; 3]; roughness.len()];
+                let (idx, rs): (Vec<usize>, Vec<f32>) = roughness
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, &r)| r > 0.0)
+                    .map(|(k, &r)| (k, r))
+                    .unzip();
+                let mut vals = vec![[0.0f32; 3]; rs.len()];
+                tree_convolve_many(tree, d, &rs, params, buffers, &mut vals);
+                for (k, v) in idx.into_iter().zip(vals) {
+                    out[k] = v;
+                }
+                for (o, &r) in out.iter_mut().zip(roughness) {
+                    if r <= 0.0 {
+                        *o = source.sample_bilinear(d);
+                    }
+                }
+                out
+            }
+            Reference::Brute { .. } => roughness
+                .iter()
+                .map(|&r| self.radiance(d, r, buffers))
+                .collect(),
+        }
+    }
+
     /// Name written into the report.
     pub fn name(&self) -> &'static str {
         match self {
@@ -140,15 +175,26 @@ pub fn abs_rel_stats(
     reference: &Reference,
 ) -> Vec<AbsRel> {
     use rayon::prelude::*;
-    roughness
+    // The reference per direction at every roughness at once (one cut per group of roughness
+    // values sharing a leaf level, not one per roughness: the report cost 9% of the bake),
+    // then the statistics per roughness. Parallel over directions, collected in order: the
+    // same bits for any thread count.
+    let refs: Vec<Vec<Rgb>> = dirs
         .par_iter()
-        .map_init(TreeBuffers::default, |buf, &r| {
+        .map_init(TreeBuffers::default, |buf, &d| {
+            reference.radiance_many(d, roughness, buf)
+        })
+        .collect();
+    roughness
+        .iter()
+        .enumerate()
+        .map(|(k, &r)| {
             let pairs: Vec<(f64, f64)> = dirs
                 .iter()
-                .map(|&d| {
+                .zip(&refs)
+                .map(|(&d, y)| {
                     let x = lookup(chain, mapping, d, r);
-                    let y = reference.radiance(d, r, buf);
-                    (luminance(x) as f64, luminance(y) as f64)
+                    (luminance(x) as f64, luminance(y[k]) as f64)
                 })
                 .collect();
             let mean_ref = pairs.iter().map(|p| p.1).sum::<f64>() / pairs.len().max(1) as f64;
