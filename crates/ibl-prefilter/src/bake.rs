@@ -21,6 +21,7 @@ use ibl_core::progress::Progress;
 use ibl_core::{luminance, CubeMips};
 use ibl_target::{LodMapping, Target};
 use serde::Serialize;
+use std::borrow::Cow;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -649,12 +650,16 @@ pub(crate) const REPORT_NAME: &str = "prefilter.json";
 /// Bakes the chain and encodes the outputs for `out_dir` (nothing is written).
 pub fn run(
     params: &Params,
-    input: &LoadedEnvironment,
+    input: LoadedEnvironment,
     out_dir: &Path,
     progress: &dyn Progress,
 ) -> Result<Baked> {
     let enc = params.encoding()?;
-    let mut chain = bake_chain(params, &input.env, progress)?;
+    params.validate()?;
+    let resampled = Resampled::new(params, &input.env, progress);
+    // The input's image is not read again: freed before the tree and the levels.
+    drop(input);
+    let mut chain = bake_resampled(params, resampled, progress)?;
     let te = Instant::now();
     let ce = process_cpu_seconds();
     // The engine's orientation: an exact texel permutation of every level.
@@ -778,26 +783,65 @@ enum Engine {
 /// Bakes the chain in memory.
 pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -> Result<Chain> {
     params.validate()?;
-    let t0 = Instant::now();
-    let mut cpu = CpuStages::start();
+    bake_resampled(params, Resampled::new(params, env, progress), progress)
+}
+
+/// The source cube the levels are filtered from, resampled from the input (the first stage
+/// of [`bake_chain`], apart so that [`run`] can drop the input's image before the rest: a
+/// 4k equirect is 100 MB, more than everything the bake builds from it at 256²).
+struct Resampled {
+    cube: Cubemap,
+    natural: usize,
+    seconds: f64,
+    cpu: CpuStages,
+}
+
+impl Resampled {
+    fn new(params: &Params, env: &Environment, progress: &dyn Progress) -> Self {
+        let t0 = Instant::now();
+        let mut cpu = CpuStages::start();
+        let natural = env.natural_face_size();
+        let src_size = source_face_size(natural, params.size);
+        let cube = env.to_cube(src_size, Filter::Area, params.rotate, progress);
+        let seconds = t0.elapsed().as_secs_f64();
+        cpu.stage("resample".into());
+        Resampled {
+            cube,
+            natural,
+            seconds,
+            cpu,
+        }
+    }
+}
+
+/// [`bake_chain`] from its resampled source.
+fn bake_resampled(params: &Params, resampled: Resampled, progress: &dyn Progress) -> Result<Chain> {
+    let Resampled {
+        cube: source,
+        natural,
+        seconds: resample_seconds,
+        mut cpu,
+    } = resampled;
     let size = params.size;
     let n_chain = params.chain_levels();
     let n_baked = params.baked_levels();
-    let natural = env.natural_face_size();
-    let src_size = source_face_size(natural, size);
+    let src_size = source.size;
     let mut warnings = Vec::new();
     if natural < size {
         warnings.push(format!("the input holds about {natural}² texels per cube face, less than --size {size}: level 0 is upsampled"));
     }
-    let source = env.to_cube(src_size, Filter::Area, params.rotate, progress);
-    let resample_seconds = t0.elapsed().as_secs_f64();
-    cpu.stage("resample".into());
     let t1 = Instant::now();
-    // Level 0 is the mirror: the source box-reduced to --size (src_size = size·2^k).
-    let mut level0 = source.clone();
-    while level0.size > size {
-        level0 = level0.downsample();
-    }
+    // Level 0 is the mirror: the source box-reduced to --size (src_size = size·2^k); the
+    // source itself, not a copy, when they are the same size.
+    let level0 = if source.size > size {
+        let mut l0 = source.downsample();
+        while l0.size > size {
+            l0 = l0.downsample();
+        }
+        Cow::Owned(l0)
+    } else {
+        Cow::Borrowed(&source)
+    };
     // The brute-force texel table: the tree method sums over its own finest cells instead
     // (the same texels), so the bake holds the source once.
     let tree_method = !params.reference && params.method == Method::Tree;
@@ -824,8 +868,8 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
     let mut estimate_cpu = 0.0;
 
     let mut stages = vec![Stage {
-        exact: level0.clone(),
-        values: level0,
+        exact: level0,
+        values: None,
         correction: None,
         fitting: None,
     }];
@@ -911,8 +955,8 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
             beyond_max_roughness: l >= n_baked,
         });
         stages.push(Stage {
-            values: exact.clone(),
-            exact,
+            values: None,
+            exact: Cow::Owned(exact),
             correction: None,
             fitting,
         });
@@ -939,7 +983,13 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
     reports.truncate(n_written);
     level_seconds.truncate(n_written);
     level_work.truncate(n_written);
-    let mut levels: Vec<Cubemap> = stages.iter().map(Stage::stored).collect();
+    for (report, st) in reports.iter_mut().zip(&stages) {
+        if let Some((plan, _)) = &st.fitting {
+            report.fit = Some(fit::LevelFit::new(plan, st.values(), &st.exact));
+        }
+    }
+    let mut levels: Vec<Cubemap> = stages.into_iter().map(Stage::into_stored).collect();
+    release_freed_memory();
     // A sun's power at every roughness is the power of the read, which on a small level
     // differs from the texels' (crate::spatial::keep_read_power; 0.28% on the 4² last level
     // before). Each small level's read is given the source's power, for every engine target
@@ -955,11 +1005,6 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
                 let w = spatial::read_weights(level.size);
                 spatial::keep_read_power(level, power, &w);
             }
-        }
-    }
-    for (report, st) in reports.iter_mut().zip(&stages) {
-        if let Some((plan, _)) = &st.fitting {
-            report.fit = Some(fit::LevelFit::new(plan, &st.values, &st.exact));
         }
     }
     let note = (n_baked < n_chain).then(|| {
@@ -1148,7 +1193,7 @@ fn fit_to_lookup(
                 coarser,
                 fit::Power::Kept,
             );
-            stages[l].values = values;
+            stages[l].values = Some(values);
             release_freed_memory();
         }
     }
@@ -1156,28 +1201,30 @@ fn fit_to_lookup(
 }
 
 /// One level on its way through the lookup fit.
-struct Stage {
-    /// The kernel at the level's roughness (footprint means where they apply).
-    exact: Cubemap,
-    /// What the per-texel lookup fit stores (crate::fit), `exact` where it does not apply.
-    values: Cubemap,
+struct Stage<'a> {
+    /// The kernel at the level's roughness (footprint means where they apply); level 0 may
+    /// be the source itself.
+    exact: Cow<'a, Cubemap>,
+    /// What the per-texel lookup fit stores (crate::fit); none where it does not apply (the
+    /// level stores `exact`: one copy, not two, of level 0, the largest).
+    values: Option<Cubemap>,
     /// The level fitted to its bilinear read (crate::spatial), on small levels.
     correction: Option<Cubemap>,
     /// The per-texel fit's plan and the kernel at its nodes, kept for the later sweeps.
     fitting: Option<(fit::Plan, Vec<Cubemap>)>,
 }
 
-impl Stage {
+impl Stage<'_> {
     /// What the level stores: the per-texel fit's values plus the read correction (the
     /// read-fitted exact level minus the exact level), never negative and never black where
     /// the exact level is not: a texel channel the sum takes to 0 or below keeps the per-texel
     /// fit's value, else the exact one. Both keep the exact level's power; where a texel was
     /// replaced, its channel is rescaled to it.
-    fn stored(&self) -> Cubemap {
-        let mut out = self.values.clone();
+    fn stored(&self) -> Cow<'_, Cubemap> {
         let Some(read) = &self.correction else {
-            return out;
+            return Cow::Borrowed(self.values());
         };
+        let mut out = self.values().clone();
         let mut clamped = false;
         for ((o, f), e) in out.faces.iter_mut().zip(&read.faces).zip(&self.exact.faces) {
             for ((v, f), e) in o.data.iter_mut().zip(&f.data).zip(&e.data) {
@@ -1203,7 +1250,20 @@ impl Stage {
                 }
             }
         }
-        out
+        Cow::Owned(out)
+    }
+
+    /// What the per-texel fit stores, the exact level where it does not apply.
+    fn values(&self) -> &Cubemap {
+        self.values.as_ref().unwrap_or(&self.exact)
+    }
+
+    /// [`Self::stored`], consuming the stage (no copy of a level left as it is).
+    fn into_stored(self) -> Cubemap {
+        if self.correction.is_some() {
+            return self.stored().into_owned();
+        }
+        self.values.unwrap_or_else(|| self.exact.into_owned())
     }
 }
 

@@ -51,7 +51,11 @@ impl Bake for Prefilter {
         let env = ibl_bake::environment(Self::NAME, inputs, p.sanitize)?;
         let read_seconds = tr.elapsed().as_secs_f64();
         let read_cpu = pf::process_cpu_seconds() - cr;
-        let baked = pf::run(p, &env, out, progress)?;
+        // The input's warnings first (run consumes the input to free its image early),
+        // then the chain's own (an upsampled source, a kernel wider than a level's support);
+        // the report's note is information, not a warning.
+        let mut warnings = env.warnings();
+        let baked = pf::run(p, env, out, progress)?;
         let chain = &baked.chain;
         let mut stages_cpu = serde_json::Map::new();
         stages_cpu.insert("read".into(), read_cpu.into());
@@ -64,9 +68,6 @@ impl Bake for Prefilter {
             peaks.insert(k.clone(), (*v).into());
         }
         peaks.insert("encode".into(), pf::peak_rss_mib().into());
-        // The input's warnings, then the chain's own (an upsampled source, a kernel wider
-        // than a level's support); the report's note is information, not a warning.
-        let mut warnings = env.warnings();
         warnings.extend(chain.warnings.iter().cloned());
         Ok(Baked {
             details: serde_json::json!({
