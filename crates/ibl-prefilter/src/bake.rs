@@ -663,7 +663,13 @@ pub fn run(
     let te = Instant::now();
     let ce = process_cpu_seconds();
     // The engine's orientation: an exact texel permutation of every level.
-    let oriented = params.target.spec().orientation.apply_mips(&chain.mips);
+    // (No copy of the chain where the files hold our frame, as gltf's do.)
+    let orientation = params.target.spec().orientation;
+    let oriented = if orientation.is_identity() {
+        Cow::Borrowed(&chain.mips)
+    } else {
+        Cow::Owned(orientation.apply_mips(&chain.mips))
+    };
     let spec = params.target.spec();
     let mut metadata = target_metadata(params.target, &chain.mips);
     metadata.extend(spec.orientation.metadata(params.target.name()));
@@ -704,7 +710,6 @@ pub fn run(
         // The .env carries the chain and the irradiance polynomial of the same environment.
         let path = out_dir.join(BABYLON_ENV_NAME);
         let irradiance = ibl_target::babylon::irradiance_sh(&chain.mips.levels[0]);
-        let orientation = params.target.spec().orientation;
         let bytes = ibl_target::babylon::encode_env(&path, &oriented, &irradiance, orientation)?;
         files.push((path, bytes));
         outputs.env = Some(BABYLON_ENV_NAME.to_string());

@@ -37,7 +37,7 @@ impl Orientation {
     };
 
     /// Whether A is the identity.
-    pub(crate) fn is_identity(&self) -> bool {
+    pub fn is_identity(&self) -> bool {
         *self == Self::IDENTITY
     }
 
