@@ -18,6 +18,9 @@ mkdir -p bench
 	cargo run --release -q -p "$crate" --example "bench-$crate" -- $quick
 done
 [ -z "$gather" ] && echo "== containers" && cargo run --release -q -p ibl-env --example bench-containers -- $quick
+# Whole-process speed and memory of the default bake against a build of the base commit
+# (issue 25): bench/speed.md. Not in the quick run (it builds a second tree).
+[ -z "$gather" ] && [ -z "$quick" ] && echo "== speed" && scripts/speed-bench.sh
 {
 	echo "# Benchmark report"
 	echo
