@@ -487,6 +487,9 @@ struct CutSpec {
 struct CellBlock {
     /// [mx, my, mz, mq, mc0..mc5, gx, gy, gz, gq, gc0..gc5, er, eg, eb, om]
     cols: [Vec<f32>; COLS],
+    /// The cells as rows while the cut is built (one push a cell instead of 24), turned
+    /// into `cols` by [`CellBlock::pad`].
+    rows: Vec<[f32; COLS]>,
 }
 
 const COLS: usize = 24;
@@ -507,18 +510,22 @@ impl CellBlock {
             row[o + 4..o + 10].copy_from_slice(&cov);
         }
         row[20..24].copy_from_slice(&[e[0], e[1], e[2], lv.omega(c)]);
-        for (col, v) in self.cols.iter_mut().zip(row) {
-            col.push(v);
-        }
+        self.rows.push(row);
     }
 
-    /// Pads to a whole number of lanes with empty cells (zero energy and solid angle).
+    /// Pads to a whole number of lanes with empty cells (zero energy and solid angle), and
+    /// turns the rows into columns.
     fn pad(&mut self) {
-        while !self.cols[0].len().is_multiple_of(LANES) {
-            for (k, col) in self.cols.iter_mut().enumerate() {
-                // A unit mean (+z) keeps the arithmetic finite; the weights multiply zeros.
-                col.push(if k == 2 || k == 12 { 1.0 } else { 0.0 });
-            }
+        while !self.rows.len().is_multiple_of(LANES) {
+            // A unit mean (+z) keeps the arithmetic finite; the weights multiply zeros.
+            let mut empty = [0.0f32; COLS];
+            empty[2] = 1.0;
+            empty[12] = 1.0;
+            self.rows.push(empty);
+        }
+        for (k, col) in self.cols.iter_mut().enumerate() {
+            col.clear();
+            col.extend(self.rows.iter().map(|r| r[k]));
         }
     }
 }
@@ -731,6 +738,8 @@ impl CutList {
             .iter_mut()
             .chain(self.horizon.cols.iter_mut())
             .for_each(Vec::clear);
+        self.smooth.rows.clear();
+        self.horizon.rows.clear();
     }
 
     fn push(&mut self, lv: &CellLevel, c: usize, straddles: bool) {
