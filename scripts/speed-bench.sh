@@ -118,14 +118,14 @@ t = time.process_time(); [np.copyto(y, x) for _ in range(4)]; bw = 4 * 2 * x.nby
 
 lines.append("\n### Where the time and the bytes go\n")
 lines.append(f"Per stage, CPU seconds of the process (`prefilter --json`: `stages_cpu`; write = the process's CPU minus "
-             f"the stages) and the peak RSS at the end of the stage (`stages_peak_mib`). Procedural sources (sky, 1e5 sun, "
+             f"the stages) and the peak RSS at the end of the stage (`stages_peak_mib`); reserved = what the bake reserves against the memory budget before it starts (`working_set_estimate_mib`, besides the process and the input's image). Procedural sources (sky, 1e5 sun, "
              f"ground detail; `scripts/procedural-hdr.py`). Floor of a stage = its bytes moved once at the measured memory "
              f"bandwidth ({bw:.1f} GB/s, one core, numpy copy): the cube it writes (read, resample) or the float chain (encode).\n")
 cases = [(1024, 256), (1024, 512), (4096, 256), (4096, 512)]
 if full:
     cases += [(4096, 1024), (8192, 256), (8192, 512), (8192, 1024)]
-lines.append("| source | faces | levels | CPU s | peak MiB | read | resample | source tree | levels | fit | runtime | encode | write | floor read / resample / encode (ms) |")
-lines.append("|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|")
+lines.append("| source | faces | levels | CPU s | peak MiB | reserved MiB | read | resample | source tree | levels | fit | runtime | encode | write | floor read / resample / encode (ms) |")
+lines.append("|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|")
 chart = []
 for w, size in cases:
     inp = os.path.join(work, f"proc_{w}.hdr")
@@ -139,7 +139,7 @@ for w, size in cases:
     fl_read = w * w // 2 * 12 / bw / 1e6
     fl_res = 6 * src * src * 12 / bw / 1e6
     fl_enc = 6 * size * size * 16 * 4 / 3 / bw / 1e6
-    lines.append(f"| {w}×{w//2} | {size}² | {nl} | {c:.2f} | {m:.0f} | {st['read']:.3f} | {st['resample']:.3f} | {st['source']:.3f} | "
+    lines.append(f"| {w}×{w//2} | {size}² | {nl} | {c:.2f} | {m:.0f} | {d.get('working_set_estimate_mib', 0):.0f} | {st['read']:.3f} | {st['resample']:.3f} | {st['source']:.3f} | "
                  f"{lv:.3f} | {st['fit']:.3f} | {st['runtime']:.3f} | {st['encode']:.3f} | {max(0.0, c - known):.3f} | "
                  f"{fl_read:.1f} / {fl_res:.1f} / {fl_enc:.1f} |")
     print(lines[-1], flush=True)

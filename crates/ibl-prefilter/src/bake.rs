@@ -472,6 +472,23 @@ impl Params {
     }
 }
 
+/// Bytes per source-cube texel the bake holds at once: the source cube (12), its cell tree
+/// (the texels' directions and energies, 24; the coarser cells with their moments, about 37)
+/// and slack; measured at 256² and 512² (bench/speed.md: `stages_peak_mib` of the source
+/// stage).
+const SOURCE_TEXEL_BYTES: u64 = 80;
+/// Bytes per level-0 texel: the levels as computed and as stored, the fit's working set, the
+/// runtime report's bordered copy and the encoded files.
+const CHAIN_TEXEL_BYTES: u64 = 160;
+
+/// The memory the bake of `size`² faces from a `src`² source cube holds at its peak, besides
+/// the process itself and the input's image (freed after the resample): what `run` reserves
+/// against the memory budget before it starts.
+pub fn working_set_bytes(size: usize, src: usize) -> u64 {
+    let (size, src) = (size as u64, src as u64);
+    6 * src * src * SOURCE_TEXEL_BYTES + 6 * size * size * CHAIN_TEXEL_BYTES
+}
+
 /// Face size of the source the levels are filtered from: the output size times the largest
 /// power of two (at most [`MAX_SOURCE_FACTOR`]) that the input's own resolution supports, so
 /// detail finer than level 0 still reaches the rough levels and level 0 is an exact box
@@ -656,6 +673,19 @@ pub fn run(
 ) -> Result<Baked> {
     let enc = params.encoding()?;
     params.validate()?;
+    // What the bake will hold, against the run's memory budget before any of it is
+    // allocated: refused in a line rather than swapped (the input is already read, under
+    // its own reservation).
+    let natural = input.env.natural_face_size();
+    let src = source_face_size(natural, params.size);
+    let _working_set = ibl_core::io::budget::reserve(
+        &input.path,
+        &format!(
+            "baking {}² faces from a {src}² source cube (its cell tree, the levels and their fit)",
+            params.size
+        ),
+        working_set_bytes(params.size, src),
+    )?;
     let resampled = Resampled::new(params, &input.env, progress);
     // The input's image is not read again: freed before the tree and the levels.
     drop(input);

@@ -97,6 +97,9 @@ impl Bake for Prefilter {
                 "stages_cpu": stages_cpu,
                 // Peak resident MiB of the process at the end of each stage.
                 "stages_peak_mib": peaks,
+                // What run() reserved against the memory budget for the bake's working set.
+                "working_set_estimate_mib":
+                    pf::working_set_bytes(p.size, chain.report.source_size) as f64 / (1u64 << 20) as f64,
                 "encoding": ibl_bake::encoding_details(&baked.encoding),
             }),
             info: chain.report.note.iter().cloned().collect(),

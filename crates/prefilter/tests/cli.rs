@@ -272,6 +272,30 @@ fn bad_inputs_fail_with_one_line_and_write_nothing() {
 }
 
 #[test]
+fn a_bake_over_the_memory_budget_is_refused_before_it_starts() {
+    // sunset_256 (256×128) → 512² faces: a 512² source cube and its tree, about 0.4 GB by
+    // the estimate, refused under 64 MiB with exit 3 and nothing written; the same bake at
+    // 32² fits and runs.
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    let i = fixture("hdri/sunset_256.exr");
+    let line = assert_fails_cleanly(
+        &i,
+        &out,
+        &["--size", "512", "--max-memory", "64M"],
+        3,
+        "sunset_256.exr",
+    );
+    assert!(
+        line.contains("512² faces") && line.contains("needs") && line.contains("--max-memory"),
+        "{line}"
+    );
+    let want = ibl_prefilter::bake::working_set_bytes(512, 512);
+    assert!(want > 64 << 20, "{want}");
+    BIN.bake(&i, &out, &["--size", "32", "--max-memory", "64M", "-q"]);
+}
+
+#[test]
 fn every_container_and_format_reads_back_within_the_reported_error() {
     let tmp = tempfile::tempdir().unwrap();
     let input = fixture("hdri/interior_256.exr");
