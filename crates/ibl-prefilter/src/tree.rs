@@ -677,7 +677,7 @@ fn accumulate<const HORIZON: bool>(
                 lanes[3][k] += wg8[k] * om8[k];
             }
             let i = (q + 1) * L;
-            if i % 64 == 0 || i == len {
+            if i.is_multiple_of(64) || i == len {
                 for c in 0..4 {
                     acc[c] += lanes[c].iter().map(|v| *v as f64).sum::<f64>();
                     lanes[c] = [0.0; L];
