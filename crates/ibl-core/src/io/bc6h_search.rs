@@ -435,9 +435,21 @@ fn pull_in(cand: &mut Cand) {
 
 /// Coordinate descent from `cand` (error `err`) on the twelve (or six) quantized endpoint
 /// values and the six (three) shifts of both ends of a region's channel: steps from an
-/// eighth of the widest span down to 1, each move repeated while the error falls.
+/// eighth of the widest span down to 1, each move repeated while the error falls. A move
+/// re-fits only the region it changed (the regions' errors add up; storability is checked
+/// whole).
 fn descend(t: &BlockTexels, mut cand: Cand, mut err: f64) -> (f64, Cand) {
     let m = cand.mode();
+    let mut idx = [0u8; 16];
+    let mut parts = [0.0f64; 2];
+    let mut high0 = false;
+    for r in 0..m.regions {
+        let (e, high) = cand.fit_region(t, r, &mut idx);
+        parts[r] = e;
+        if r == 0 {
+            high0 = high;
+        }
+    }
     let span = cand
         .e
         .iter()
@@ -460,11 +472,14 @@ fn descend(t: &BlockTexels, mut cand: Cand, mut err: f64) -> (f64, Cand) {
                                 next.e[r][0][c] += dir * step;
                                 next.e[r][1][c] += dir * step;
                             }
-                            match next.fit(t) {
-                                Some((e, _)) if e < err => {
-                                    (cand, err, improved) = (next, e, true);
-                                }
-                                _ => break,
+                            let (e, high) = next.fit_region(t, r, &mut idx);
+                            let h0 = if r == 0 { high } else { high0 };
+                            let total = if r == 0 { e + parts[1] } else { parts[0] + e };
+                            if total < err && next.storable(h0) {
+                                (cand, err, improved) = (next, total, true);
+                                (parts[r], high0) = (e, h0);
+                            } else {
+                                break;
                             }
                         }
                     }
@@ -580,9 +595,15 @@ pub(crate) fn search(t: &BlockTexels, effort: Effort) -> Option<(f64, [u8; 16])>
             }
         }
     }
-    // Two regions: per partition, each region's starts.
+    // Two regions: per partition, each region's starts; a partition that splits the scored
+    // texels as an earlier one does (a level of 2² or 1² texels a face leaves 12 or 15
+    // texels unscored) is the same search and skipped.
+    let scored: u16 = (0..16).filter(|&k| t.weight[k] > 0.0).map(|k| 1 << k).sum();
     let part_starts: Vec<Option<Vec<Starts>>> = (0..32)
         .map(|part| {
+            if (0..part).any(|q| PARTITIONS[q] & scored == PARTITIONS[part] & scored) {
+                return None;
+            }
             let members = |r: u16| -> Vec<usize> {
                 (0..16)
                     .filter(|&k| (PARTITIONS[part] >> k) & 1 == r)
