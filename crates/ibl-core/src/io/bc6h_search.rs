@@ -8,8 +8,12 @@
 //!
 //! Sources: Microsoft, "BC6H Format" (Direct3D 11 functional specification: the mode table,
 //! the bit layouts, `unquantize`, `finish_unquantize`, the partition and anchor tables), the
-//! same tables as `bcdec_rs` 0.2.1 `bc6h_half` reads them. No erratum found between the two
-//! for the unsigned modes: every layout below was checked against `bcdec` bit for bit.
+//! same tables as `bcdec_rs` 0.2.1 `bc6h_half` reads them (the layouts transcribed from its
+//! reader, the palette arithmetic from the spec's formulas): every layout below is checked
+//! against `bcdec` bit for bit. No erratum found in either for the unsigned modes; the
+//! searched blocks also decode alike in texture2ddecoder (PyPI, AssetStudio's decoders),
+//! except where that one saturates a channel a hand decode from the spec does not
+//! (`notes/speed-bc6h.md`).
 
 // Index loops over texels, channels, regions and ends read closer to the format's tables.
 #![allow(clippy::needless_range_loop)]
@@ -356,7 +360,7 @@ fn pack(mut cand: Cand, mut idx: [u8; 16]) -> Option<[u8; 16]> {
     Some(b.bits.to_le_bytes())
 }
 
-/// A texel's colour in the 16-bit space endpoints unquantize to (half bits × 64/31).
+/// A texel's channel in the 16-bit space endpoints unquantize to (half bits × 64/31).
 fn unq(v: f32) -> f64 {
     half::f16::from_f32(v.max(0.0)).to_bits() as f64 * 64.0 / 31.0
 }
@@ -570,7 +574,7 @@ pub(crate) enum Effort {
     /// Every mode, and for each two-region mode all 32 partitions refined.
     Exhaustive,
     /// Every one-region mode; the two-region modes on the `n` partitions whose unrefined
-    /// start scores best (in mode 1, the finest two-region mode but 3).
+    /// start scores best, scored in mode 1 (10-bit endpoints) without its delta limits.
     Partitions(usize),
 }
 
