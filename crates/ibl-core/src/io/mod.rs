@@ -3,6 +3,7 @@
 
 pub mod atomic;
 mod bc6h;
+mod bc6h_search;
 pub mod budget;
 pub mod container;
 pub mod data;
