@@ -844,8 +844,8 @@ pub(crate) fn tree_convolve(
 }
 
 /// [`tree_convolve`] at several roughness values r > 0 around one direction (into `out`, one
-/// each): roughness values with the same leaf level share one cut (the finest horizon split
-/// of the group), as [`tree_levels`] groups a level's. What the runtime report's reference
+/// each): roughness values grouped by [`leaf_groups`] share one cut (the group's finest leaf
+/// level and horizon split), as [`tree_levels`] groups a level's. What the runtime report's reference
 /// evaluates at its 33 roughness values: a cut per group instead of per roughness.
 pub(crate) fn tree_convolve_many(
     tree: &CellTree,
@@ -861,17 +861,10 @@ pub(crate) fn tree_convolve_many(
         .iter()
         .map(|r| tree.leaf_level(r * r, p.kappa))
         .collect();
-    let mut done = vec![false; roughness.len()];
     let (mut a2s, mut acc, mut vals) = (Vec::new(), Vec::new(), Vec::new());
-    for i in 0..roughness.len() {
-        if done[i] {
-            continue;
-        }
-        let group: Vec<usize> = (i..roughness.len())
-            .filter(|&j| leaf[j] == leaf[i])
-            .collect();
+    for group in leaf_groups(&leaf) {
         let spec = CutSpec {
-            leaf: leaf[i],
+            leaf: group.iter().map(|&j| leaf[j]).max().unwrap_or(0),
             theta: p.theta,
             horizon: group
                 .iter()
@@ -891,7 +884,6 @@ pub(crate) fn tree_convolve_many(
             .convolve_multi(n, &a2s, &mut buffers.scratch, &mut acc, &mut vals);
         for (k, &j) in group.iter().enumerate() {
             out[j] = vals[k];
-            done[j] = true;
         }
     }
 }
@@ -928,20 +920,17 @@ pub(crate) fn tree_levels(
     p: &TreeParams,
     progress: &dyn Progress,
 ) -> (Vec<Cubemap>, Vec<TreeWork>) {
-    // Only roughness values with the same leaf level share a cut: a finer leaf level costs
-    // every cube of the group its near cells (4× per level).
+    // Roughness values whose leaf levels are within SHARED_LEAF_LEVELS of the finest share a
+    // cut: a finer leaf level costs the rougher cubes of the group their near cells (4× per
+    // level), but building one cut instead of several and sharing each cell's geometry cost
+    // less (a level and its fit nodes at 256² × 5: 0.72 → 0.62 s of CPU); much rougher
+    // values (a wider span of leaf levels) get a cut of their own.
     let leaf: Vec<usize> = roughness
         .iter()
         .map(|r| tree.leaf_level(r * r, p.kappa))
         .collect();
     let mut out: Vec<Option<(Cubemap, TreeWork)>> = roughness.iter().map(|_| None).collect();
-    for i in 0..roughness.len() {
-        if out[i].is_some() {
-            continue;
-        }
-        let group: Vec<usize> = (i..roughness.len())
-            .filter(|&j| leaf[j] == leaf[i])
-            .collect();
+    for group in leaf_groups(&leaf) {
         let rs: Vec<f32> = group.iter().map(|&j| roughness[j]).collect();
         let (cubes, work) = tree_levels_one_cut(tree, n, &rs, p, progress);
         for (j, c) in group.into_iter().zip(cubes) {
@@ -949,6 +938,26 @@ pub(crate) fn tree_levels(
         }
     }
     out.into_iter().map(|c| c.expect("every roughness")).unzip()
+}
+
+/// How many leaf levels coarser than a group's finest a roughness may ask for and still share
+/// the group's cut in [`tree_levels`] and [`tree_convolve_many`].
+const SHARED_LEAF_LEVELS: usize = 2;
+
+/// Indices of roughness values (by their leaf levels `leaf`) grouped to share a cut: the
+/// finest leaf level left, with every value at most [`SHARED_LEAF_LEVELS`] coarser, in index
+/// order; then the next.
+fn leaf_groups(leaf: &[usize]) -> Vec<Vec<usize>> {
+    let mut done = vec![false; leaf.len()];
+    let mut groups = Vec::new();
+    while let Some(finest) = (0..leaf.len()).filter(|&j| !done[j]).map(|j| leaf[j]).max() {
+        let group: Vec<usize> = (0..leaf.len())
+            .filter(|&j| !done[j] && finest - leaf[j] <= SHARED_LEAF_LEVELS)
+            .collect();
+        group.iter().for_each(|&j| done[j] = true);
+        groups.push(group);
+    }
+    groups
 }
 
 /// [`tree_levels`] for roughness values sharing one cut per tile.
@@ -1338,12 +1347,14 @@ mod tests {
     }
 
     #[test]
-    fn shared_cuts_of_the_report_agree_with_one_cut_per_roughness() {
-        // tree_convolve_many groups roughness values by leaf level: a group's cut splits the
-        // horizon as its roughest member asks, so members agree with their own cut to the
-        // tree's accuracy, and a member alone in its group to the bit.
+    fn shared_cuts_of_the_report_are_no_worse_than_one_cut_per_roughness() {
+        // tree_convolve_many groups roughness values by leaf level: a group's cut is as fine
+        // as its finest member asks, so against the brute force every member is about as
+        // accurate as with its own cut or better, and a member alone in its group is its own
+        // cut to the bit.
         let cube = random_cube(32, 8);
         let tree = CellTree::new(&cube);
+        let texels = SourceTexels::new(&cube);
         let p = TreeParams {
             theta: 0.7,
             kappa: 4.0,
@@ -1351,9 +1362,15 @@ mod tests {
         };
         let rs: Vec<f32> = (1..=32).map(|k| k as f32 / 32.0).collect();
         let leaf: Vec<usize> = rs.iter().map(|r| tree.leaf_level(r * r, p.kappa)).collect();
+        let groups = leaf_groups(&leaf);
+        assert!(groups.len() > 1, "{groups:?}");
+        assert_eq!(
+            leaf_groups(&[5, 5, 4, 3, 2, 1, 0, 6]),
+            vec![vec![0, 1, 2, 7], vec![3, 4, 5], vec![6]]
+        );
         let mut buf = TreeBuffers::default();
         let mut rng = Pcg32::new(5, 1);
-        let mut worst = 0.0f32;
+        let (mut shared, mut single, mut count) = (0.0f64, 0.0f64, 0.0f64);
         for _ in 0..12 {
             let d = Vec3::new(
                 rng.next_f32() - 0.5,
@@ -1365,16 +1382,25 @@ mod tests {
             tree_convolve_many(&tree, d, &rs, &p, &mut buf, &mut many);
             for (k, &r) in rs.iter().enumerate() {
                 let one = tree_convolve(&tree, d, r, &p, &mut buf);
-                if leaf.iter().filter(|&&l| l == leaf[k]).count() == 1 {
+                if groups.iter().any(|g| g == &[k]) {
                     assert_eq!(many[k], one, "r {r}");
                 }
+                let exact = texels.convolve(d, r * r);
                 for c in 0..3 {
-                    worst = worst.max((many[k][c] - one[c]).abs() / one[c].max(1e-6));
+                    shared += ((many[k][c] - exact[c]).abs() / exact[c]) as f64;
+                    single += ((one[c] - exact[c]).abs() / exact[c]) as f64;
+                    count += 1.0;
                 }
             }
         }
-        eprintln!("shared report cuts vs one cut per roughness: worst relative {worst:.2e}");
-        assert!(worst < 2e-3, "{worst}");
+        let (shared, single) = (shared / count, single / count);
+        eprintln!(
+            "report cuts vs brute force: shared {shared:.2e}, one per roughness {single:.2e}"
+        );
+        assert!(
+            shared < 3e-3 && shared <= 1.1 * single + 1e-6,
+            "{shared} vs {single}"
+        );
     }
 
     #[test]
