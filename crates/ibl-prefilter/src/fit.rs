@@ -177,18 +177,18 @@ pub fn fit_level(
     // (three at once were 40% of it at 512²).
     for c in 0..3 {
         // Each texel's error as a function of its step δ, as the vertices of that convex
-        // piecewise-linear function. Texels are independent here: in parallel, collected in
-        // order (the same result for any thread count).
-        let hulls: Vec<Hull> = (0..6 * per_face)
+        // piecewise-linear function. Texels are independent here: in parallel, in chunks of
+        // a fixed size collected in order (the same result for any thread count), each
+        // chunk's vertices in one buffer (one allocation per chunk, not per texel: the
+        // per-texel vectors were half the fit's time and most of its peak at 512²).
+        let chunks: Vec<HullChunk> = (0..(6 * per_face).div_ceil(HULL_CHUNK))
             .into_par_iter()
-            .map_init(
-                || {
-                    (
-                        Vec::with_capacity(plan.nodes.len() + 1),
-                        HullScratch::default(),
-                    )
-                },
-                |(terms, scratch), i| {
+            .map(|k| {
+                let range = k * HULL_CHUNK..((k + 1) * HULL_CHUNK).min(6 * per_face);
+                let mut chunk = HullChunk::with_capacity(range.len());
+                let mut terms = Vec::with_capacity(plan.nodes.len() + 1);
+                let mut scratch = HullScratch::default();
+                for i in range {
                     let (f, t) = (i / per_face, i % per_face);
                     let px = |c: &Cubemap| {
                         let d = &c.faces[f].data[3 * t..3 * t + 3];
@@ -210,12 +210,19 @@ pub fn fit_level(
                         let slope = node.w_self + node.w_hi * coarser_ratio;
                         terms.push(Term::new(base - p[c], slope, luma(p)));
                     }
-                    Hull::of_with(terms, -pl[c], scratch)
-                },
-            )
+                    chunk.push(&terms, -pl[c], &mut scratch);
+                }
+                chunk
+            })
             .collect();
+        let hulls = Hulls { chunks };
         let steps = match power {
-            Power::Free => hulls.iter().map(|h| h.argmin(0.0)).collect(),
+            Power::Free => (0..hulls.len())
+                .map(|t| {
+                    let (v, _) = hulls.get(t);
+                    v[argmin_index(v, 0.0)].0
+                })
+                .collect(),
             Power::Kept => power_kept_steps(&hulls, |i| omega[i % per_face] as f64),
         };
         drop(hulls);
@@ -238,13 +245,17 @@ pub fn fit_level(
 /// reaches minus the slope between them. The steps, sorted by that price, are taken until the
 /// power change crosses 0, and the last one only in part, so the change is exactly 0. Bright
 /// texels, whose relative error is cheapest to move, carry it.
-fn power_kept_steps(hulls: &[Hull], omega: impl Fn(usize) -> f64) -> Vec<f64> {
+fn power_kept_steps(hulls: &Hulls, omega: impl Fn(usize) -> f64) -> Vec<f64> {
     use rayon::prelude::*;
-    let at: Vec<usize> = hulls.par_iter().map(|h| h.argmin_index(0.0)).collect();
-    let mut steps: Vec<f64> = hulls
-        .iter()
-        .zip(&at)
-        .map(|(h, &i)| h.vertices[i].0)
+    let count = hulls.len();
+    // Per chunk in parallel, collected in order: the same for any thread count.
+    let at: Vec<u32> = hulls
+        .chunks
+        .par_iter()
+        .flat_map_iter(|c| (0..c.len()).map(move |t| argmin_index(c.get(t).0, 0.0) as u32))
+        .collect();
+    let mut steps: Vec<f64> = (0..count)
+        .map(|t| hulls.get(t).0[at[t] as usize].0)
         .collect();
     // Ordered sum: the same bits for any thread count.
     let change: f64 = steps.iter().enumerate().map(|(t, d)| omega(t) * d).sum();
@@ -253,28 +264,30 @@ fn power_kept_steps(hulls: &[Hull], omega: impl Fn(usize) -> f64) -> Vec<f64> {
     }
     // Too much power (change > 0): prices rise, texels step left; too little: right.
     let left = change > 0.0;
-    // (price to reach, texel, vertex moved to), every step a texel can take that way.
-    let mut events: Vec<(f64, usize, usize)> = hulls
-        .par_iter()
-        .zip(&at)
-        .enumerate()
-        .flat_map_iter(|(t, (h, &i))| {
-            let (v, ray) = (&h.vertices, h.ray);
+    // (price to reach, texel, vertex moved to), every step a texel can take that way; 16
+    // bytes an event (texels and vertices fit in u32).
+    let mut events: Vec<(f64, u32, u32)> = (0..count)
+        .into_par_iter()
+        .with_min_len(HULL_CHUNK)
+        .flat_map_iter(|t| {
+            let (v, ray) = hulls.get(t);
+            let i = at[t] as usize;
             let slope = move |j: usize| (v[j].1 - v[j - 1].1) / (v[j].0 - v[j - 1].0);
             // Left: vertices i−1 … 0; right: i+1 … and past the last vertex, where g rises
             // along its steepest piece without end (a step, marked by the vertex count, that
             // can take any amount).
-            let count = if left { i } else { v.len() - i };
-            (0..count).map(move |k| {
+            let n = if left { i } else { v.len() - i };
+            (0..n).map(move |k| {
+                let t = t as u32;
                 if left {
                     let j = i - k;
-                    (-slope(j), t, j - 1)
+                    (-slope(j), t, (j - 1) as u32)
                 } else {
                     let j = i + 1 + k;
                     if j < v.len() {
-                        (slope(j), t, j)
+                        (slope(j), t, j as u32)
                     } else {
-                        (ray, t, j)
+                        (ray, t, j as u32)
                     }
                 }
             })
@@ -288,16 +301,18 @@ fn power_kept_steps(hulls: &[Hull], omega: impl Fn(usize) -> f64) -> Vec<f64> {
     // walked one step at a time. A texel's steps have strictly rising prices (its hull is
     // convex with strict corners), so a whole half moves each of its texels to the farthest
     // vertex it reaches there.
-    let order = |a: &(f64, usize, usize), b: &(f64, usize, usize)| {
+    let order = |a: &(f64, u32, u32), b: &(f64, u32, u32)| {
         a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2))
     };
-    let vertex = |t: usize, j: usize| hulls[t].vertices.get(j).map(|v| v.0);
+    let vertex = |t: usize, j: usize| hulls.get(t).0.get(j).map(|v| v.0);
     // Power moved by one step (from the adjacent vertex; infinite for the unbounded one).
-    let moved = |&(_, t, j): &(f64, usize, usize)| -> f64 {
-        match vertex(t, j) {
+    let moved = |&(_, t, j): &(f64, u32, u32)| -> f64 {
+        let (t, j) = (t as usize, j as usize);
+        let v = hulls.get(t).0;
+        match v.get(j) {
             Some(to) => {
                 let from = if left { j + 1 } else { j - 1 };
-                omega(t) * (to - hulls[t].vertices[from].0)
+                omega(t) * (to.0 - v[from].0)
             }
             None => {
                 if left {
@@ -309,7 +324,7 @@ fn power_kept_steps(hulls: &[Hull], omega: impl Fn(usize) -> f64) -> Vec<f64> {
         }
     };
     let mut left_over = change;
-    let mut rest: &mut [(f64, usize, usize)] = &mut events;
+    let mut rest: &mut [(f64, u32, u32)] = &mut events;
     const WALK: usize = 2048;
     while rest.len() > WALK {
         let mid = rest.len() / 2;
@@ -321,7 +336,8 @@ fn power_kept_steps(hulls: &[Hull], omega: impl Fn(usize) -> f64) -> Vec<f64> {
             continue;
         }
         for &(_, t, j) in head.iter() {
-            let to = hulls[t].vertices[j].0;
+            let to = hulls.get(t as usize).0[j as usize].0;
+            let t = t as usize;
             // The farthest vertex this half reaches.
             if (left && to < steps[t]) || (!left && to > steps[t]) {
                 steps[t] = to;
@@ -332,6 +348,7 @@ fn power_kept_steps(hulls: &[Hull], omega: impl Fn(usize) -> f64) -> Vec<f64> {
     }
     rest.sort_unstable_by(order);
     for &(_, t, j) in rest.iter() {
+        let (t, j) = (t as usize, j as usize);
         let Some(to) = vertex(t, j) else {
             steps[t] -= left_over / omega(t);
             return steps;
@@ -348,17 +365,93 @@ fn power_kept_steps(hulls: &[Hull], omega: impl Fn(usize) -> f64) -> Vec<f64> {
     steps
 }
 
-/// Reusable buffers of [`Hull::of_with`].
+/// Texels a chunk of [`Hulls`] holds: the unit of the parallel build, fixed so that the
+/// result does not depend on the thread count.
+const HULL_CHUNK: usize = 4096;
+
+/// The hulls of a range of texels, their vertices in one buffer: texel t's are
+/// `vertices[start[t]..start[t + 1]]`.
+struct HullChunk {
+    vertices: Vec<(f64, f64)>,
+    start: Vec<u32>,
+    ray: Vec<f64>,
+}
+
+impl HullChunk {
+    fn with_capacity(texels: usize) -> Self {
+        let mut start = Vec::with_capacity(texels + 1);
+        start.push(0);
+        HullChunk {
+            vertices: Vec::with_capacity(4 * texels),
+            start,
+            ray: Vec::with_capacity(texels),
+        }
+    }
+
+    /// Appends the hull of one texel (see [`Hull::of`]).
+    fn push(&mut self, terms: &[Term], lowest: f64, scratch: &mut HullScratch) {
+        let ray = hull_into(terms, lowest, scratch, &mut self.vertices);
+        self.start.push(self.vertices.len() as u32);
+        self.ray.push(ray);
+    }
+
+    fn len(&self) -> usize {
+        self.ray.len()
+    }
+
+    /// Texel t's vertices and ray.
+    fn get(&self, t: usize) -> (&[(f64, f64)], f64) {
+        let (a, b) = (self.start[t] as usize, self.start[t + 1] as usize);
+        (&self.vertices[a..b], self.ray[t])
+    }
+}
+
+/// The hulls of every texel of a level (one channel), in chunks of [`HULL_CHUNK`] texels
+/// (every chunk full but the last).
+struct Hulls {
+    chunks: Vec<HullChunk>,
+}
+
+impl Hulls {
+    fn len(&self) -> usize {
+        self.chunks.iter().map(HullChunk::len).sum()
+    }
+
+    /// Texel t's vertices (sorted by δ) and the slope past the last one.
+    #[inline]
+    fn get(&self, t: usize) -> (&[(f64, f64)], f64) {
+        self.chunks[t / HULL_CHUNK].get(t % HULL_CHUNK)
+    }
+
+    #[cfg(test)]
+    fn of(hulls: &[Hull]) -> Hulls {
+        let chunks = hulls
+            .chunks(HULL_CHUNK)
+            .map(|hs| {
+                let mut c = HullChunk::with_capacity(hs.len());
+                for h in hs {
+                    c.vertices.extend_from_slice(&h.vertices);
+                    c.start.push(c.vertices.len() as u32);
+                    c.ray.push(h.ray);
+                }
+                c
+            })
+            .collect();
+        Hulls { chunks }
+    }
+}
+
+/// Reusable buffers of [`hull_into`].
 #[derive(Default)]
 struct HullScratch {
     live: Vec<Term>,
-    d: Vec<f64>,
-    vertices: Vec<(f64, f64)>,
 }
 
 /// A texel-channel's worst relative error g(δ) = max_k |offset_k + slope_k·δ| / scale_k on
 /// [lowest, ∞), by its vertices (δ_i, g_i) sorted by δ: g is convex and piecewise linear, so
-/// the minimiser of g(δ) + μδ is one of them for any price μ.
+/// the minimiser of g(δ) + μδ is one of them for any price μ (the tests' form of a hull;
+/// the fit stores them in [`Hulls`]).
+#[cfg(test)]
 #[derive(Clone, Debug, PartialEq)]
 struct Hull {
     vertices: Vec<(f64, f64)>,
@@ -366,100 +459,143 @@ struct Hull {
     ray: f64,
 }
 
+#[cfg(test)]
 impl Hull {
     /// The hull of the terms (those with a zero or non-finite scale, black there, left out; a
     /// single vertex at 0 when none is left).
-    #[cfg(test)]
     fn of(terms: &[Term], lowest: f64) -> Hull {
-        Self::of_with(terms, lowest, &mut HullScratch::default())
-    }
-
-    /// [`Hull::of`] with reusable buffers (one allocation: the vertices kept).
-    fn of_with(terms: &[Term], lowest: f64, scratch: &mut HullScratch) -> Hull {
-        let HullScratch { live, d, vertices } = scratch;
-        live.clear();
-        live.extend(
-            terms
-                .iter()
-                .filter(|t| {
-                    t.scale > 0.0
-                        && t.scale.is_finite()
-                        && t.offset.is_finite()
-                        && t.slope.is_finite()
-                })
-                .map(|t| Term::new(t.offset / t.scale, t.slope / t.scale, 1.0)),
-        );
-        let live = &*live;
-        if live.is_empty() || live.iter().all(|t| t.slope == 0.0) {
-            return Hull {
-                vertices: vec![(0.0f64.max(lowest), 0.0)],
-                ray: f64::INFINITY,
-            };
-        }
-        let g = |d: f64| {
-            live.iter()
-                .map(|t| (t.offset + t.slope * d).abs())
-                .fold(0.0, f64::max)
-        };
-        // Every vertex is a crossing of two of the 2k pieces ±(offset + slope·δ): a term's own
-        // zero, or two terms equal in magnitude; or the bound.
-        d.clear();
-        d.push(lowest);
-        for (i, a) in live.iter().enumerate() {
-            if a.slope != 0.0 {
-                d.push(-a.offset / a.slope);
-            }
-            for b in &live[i + 1..] {
-                for sign in [1.0, -1.0] {
-                    let den = a.slope - sign * b.slope;
-                    if den != 0.0 {
-                        d.push((sign * b.offset - a.offset) / den);
-                    }
-                }
-            }
-        }
-        d.retain(|x| x.is_finite() && *x >= lowest);
-        // Unstable is the same order: total_cmp ties are bit-identical.
-        d.sort_unstable_by(f64::total_cmp);
-        d.dedup();
-        // Keep the corners: points where the slope of g turns (the others lie on a segment).
-        vertices.clear();
-        for p in d.iter().map(|&x| (x, g(x))) {
-            while vertices.len() >= 2 {
-                let (a, b) = (vertices[vertices.len() - 2], vertices[vertices.len() - 1]);
-                // b is not a corner when it lies on or above the chord from a to p.
-                let cross = (b.0 - a.0) * (p.1 - a.1) - (b.1 - a.1) * (p.0 - a.0);
-                if cross <= 0.0 {
-                    vertices.pop();
-                } else {
-                    break;
-                }
-            }
-            vertices.push(p);
-        }
-        let ray = live.iter().map(|t| t.slope.abs()).fold(0.0, f64::max);
-        Hull {
-            vertices: vertices.to_vec(),
-            ray,
-        }
-    }
-
-    /// The vertex minimising g(δ) + μδ (the first of equals).
-    fn argmin_index(&self, mu: f64) -> usize {
-        let mut best = (0, self.vertices[0].1 + mu * self.vertices[0].0);
-        for (i, v) in self.vertices.iter().enumerate().skip(1) {
-            let c = v.1 + mu * v.0;
-            if c < best.1 {
-                best = (i, c);
-            }
-        }
-        best.0
+        let mut vertices = Vec::new();
+        let ray = hull_into(terms, lowest, &mut HullScratch::default(), &mut vertices);
+        Hull { vertices, ray }
     }
 
     /// argmin over δ of g(δ) + μδ.
     fn argmin(&self, mu: f64) -> f64 {
-        self.vertices[self.argmin_index(mu)].0
+        self.vertices[argmin_index(&self.vertices, mu)].0
     }
+}
+
+/// Appends the vertices of the hull of `terms` on [lowest, ∞) to `out` ([`Hull`]) and returns
+/// its ray. g is the upper envelope of the 2k lines ±(offset_k + slope_k·δ) (scaled), walked
+/// from `lowest` rightwards: from the line on top there (the steeper of equals), the next
+/// piece is the line of larger slope that crosses the current one first (the steepest of
+/// those crossing at the same point), until none is steeper. At most 2k pieces of 2k
+/// candidates each, where taking every crossing of two pieces as a candidate vertex, sorted
+/// and then filtered to the corners (before) was O(k³) and a sort per texel.
+///
+/// A vertex's δ is the crossing of its two lines by the formula that crossing was computed by
+/// before (the lower-indexed term first), and its g the same maximum, so the vertices are the
+/// same numbers; a point the old candidate filter kept by round-off on a straight piece (a
+/// crossing of two lines below the envelope) is not a vertex here.
+fn hull_into(
+    terms: &[Term],
+    lowest: f64,
+    scratch: &mut HullScratch,
+    out: &mut Vec<(f64, f64)>,
+) -> f64 {
+    let live = &mut scratch.live;
+    live.clear();
+    live.extend(
+        terms
+            .iter()
+            .filter(|t| {
+                t.scale > 0.0 && t.scale.is_finite() && t.offset.is_finite() && t.slope.is_finite()
+            })
+            .map(|t| Term::new(t.offset / t.scale, t.slope / t.scale, 1.0)),
+    );
+    let live = &*live;
+    if live.is_empty() || live.iter().all(|t| t.slope == 0.0) {
+        out.push((0.0f64.max(lowest), 0.0));
+        return f64::INFINITY;
+    }
+    let g = |d: f64| {
+        live.iter()
+            .map(|t| (t.offset + t.slope * d).abs())
+            .fold(0.0, f64::max)
+    };
+    // Line (k, s): s·(offset_k + slope_k·δ), s = ±1.
+    let slope = |(k, s): (usize, f64)| s * live[k].slope;
+    let value = |(k, s): (usize, f64), d: f64| s * (live[k].offset + live[k].slope * d);
+    // Where two lines cross, as the candidate vertices were computed before: a term's own
+    // zero, or two terms equal in magnitude.
+    let crossing = |(i, si): (usize, f64), (j, sj): (usize, f64)| -> Option<f64> {
+        if i == j {
+            let a = live[i];
+            return (a.slope != 0.0).then(|| -a.offset / a.slope);
+        }
+        let (a, b) = (live[i.min(j)], live[i.max(j)]);
+        let sign = si * sj;
+        let den = a.slope - sign * b.slope;
+        (den != 0.0).then(|| (sign * b.offset - a.offset) / den)
+    };
+    let lines = (0..live.len()).flat_map(|k| [(k, 1.0), (k, -1.0)]);
+    // On top at `lowest`: the largest value, the steeper of equals.
+    let mut cur = lines
+        .clone()
+        .map(|l| (value(l, lowest), slope(l), l))
+        .fold(
+            None,
+            |best: Option<(f64, f64, (usize, f64))>, x| match best {
+                Some(b) if (b.0, b.1) >= (x.0, x.1) => Some(b),
+                _ => Some(x),
+            },
+        )
+        .expect("a live term")
+        .2;
+    let first = out.len();
+    let mut x = lowest;
+    out.push((x, g(x)));
+    loop {
+        let s0 = slope(cur);
+        let mut next: Option<(f64, f64, (usize, f64))> = None;
+        for l in lines.clone() {
+            let s = slope(l);
+            if s <= s0 {
+                continue;
+            }
+            let Some(xc) = crossing(cur, l).filter(|v| v.is_finite()) else {
+                continue;
+            };
+            let xc = xc.max(x);
+            match next {
+                Some((bx, bs, _)) if bx < xc || (bx == xc && bs >= s) => {}
+                _ => next = Some((xc, s, l)),
+            }
+        }
+        let Some((xc, _, l)) = next else {
+            break;
+        };
+        cur = l;
+        if xc > x {
+            x = xc;
+            // Keep the corners only: a point on or above the chord of its neighbours (a
+            // round-off corner) is dropped, as before, so prices rise strictly.
+            let p = (x, g(x));
+            while out.len() - first >= 2 {
+                let (a, b) = (out[out.len() - 2], out[out.len() - 1]);
+                let cross = (b.0 - a.0) * (p.1 - a.1) - (b.1 - a.1) * (p.0 - a.0);
+                if cross <= 0.0 {
+                    out.pop();
+                } else {
+                    break;
+                }
+            }
+            out.push(p);
+        }
+    }
+    live.iter().map(|t| t.slope.abs()).fold(0.0, f64::max)
+}
+
+/// The vertex minimising g(δ) + μδ (the first of equals).
+fn argmin_index(vertices: &[(f64, f64)], mu: f64) -> usize {
+    let mut best = (0, vertices[0].1 + mu * vertices[0].0);
+    for (i, v) in vertices.iter().enumerate().skip(1) {
+        let c = v.1 + mu * v.0;
+        if c < best.1 {
+            best = (i, c);
+        }
+    }
+    best.0
 }
 
 fn luma(p: [f64; 3]) -> f64 {
@@ -631,6 +767,79 @@ mod tests {
         }
     }
 
+    /// The hull against its definition, independently of how it is built: on random terms
+    /// (some with zero slopes, equal slopes, zero or non-finite scales), the piecewise-linear
+    /// function of its vertices and ray equals g(δ) = max_k |offset_k + slope_k·δ| / scale_k on
+    /// a dense grid of [lowest, ∞), its slopes rise strictly (every vertex a corner), and the
+    /// first vertex is the bound.
+    #[test]
+    fn hull_is_the_upper_envelope_with_strict_corners() {
+        use ibl_core::sampling::Pcg32;
+        let mut rng = Pcg32::new(31, 2);
+        for case in 0..20000 {
+            let k = 1 + case % 7;
+            let terms: Vec<Term> = (0..k)
+                .map(|i| {
+                    let u = |rng: &mut Pcg32| rng.next_f64() * 2.0 - 1.0;
+                    let slope = match (case / 7 + i) % 5 {
+                        0 => 0.0,
+                        1 => 0.5,
+                        _ => u(&mut rng),
+                    };
+                    let scale = match (case / 3 + i) % 11 {
+                        0 => 0.0,
+                        1 => f64::INFINITY,
+                        _ => 0.1 + rng.next_f64(),
+                    };
+                    Term::new(u(&mut rng) * 3.0, slope, scale)
+                })
+                .collect();
+            let lowest = -4.0 * rng.next_f64();
+            let h = Hull::of(&terms, lowest);
+            let live: Vec<&Term> = terms
+                .iter()
+                .filter(|t| t.scale > 0.0 && t.scale.is_finite())
+                .collect();
+            if live.iter().all(|t| t.slope == 0.0) {
+                assert_eq!(h.vertices, vec![(0.0f64.max(lowest), 0.0)], "case {case}");
+                continue;
+            }
+            let g = |d: f64| {
+                live.iter()
+                    .map(|t| (t.offset + t.slope * d).abs() / t.scale)
+                    .fold(0.0, f64::max)
+            };
+            let v = &h.vertices;
+            assert_eq!(v[0].0, lowest, "case {case}");
+            let slopes: Vec<f64> = v
+                .windows(2)
+                .map(|w| (w[1].1 - w[0].1) / (w[1].0 - w[0].0))
+                .chain([h.ray])
+                .collect();
+            assert!(
+                slopes.windows(2).all(|s| s[1] > s[0]),
+                "case {case}: slopes {slopes:?} of {v:?}"
+            );
+            let piecewise = |d: f64| match v.iter().position(|p| p.0 > d) {
+                None => v[v.len() - 1].1 + h.ray * (d - v[v.len() - 1].0),
+                Some(0) => unreachable!("below the bound"),
+                Some(i) => {
+                    let (a, b) = (v[i - 1], v[i]);
+                    a.1 + (b.1 - a.1) * (d - a.0) / (b.0 - a.0)
+                }
+            };
+            let far = v[v.len() - 1].0 + 10.0;
+            for s in 0..=400 {
+                let d = lowest + (far - lowest) * s as f64 / 400.0;
+                let (got, want) = (piecewise(d), g(d));
+                assert!(
+                    (got - want).abs() <= 1e-9 * (1.0 + want),
+                    "case {case}: at {d} hull {got} vs g {want}; {v:?}"
+                );
+            }
+        }
+    }
+
     #[test]
     fn a_finer_level_read_at_coarse_texel_centres_is_the_mean_of_its_four_texels() {
         // A coarse texel's centre is the shared corner of the 2×2 finer texels under it: the
@@ -716,7 +925,7 @@ mod tests {
                 })
                 .collect();
             let omega = |t: usize| 0.5 + (t % 7) as f64 * 0.1;
-            let steps = power_kept_steps(&hulls, omega);
+            let steps = power_kept_steps(&Hulls::of(&hulls), omega);
             let free: Vec<f64> = hulls.iter().map(|h| h.argmin(0.0)).collect();
             let power: f64 = steps.iter().enumerate().map(|(t, d)| omega(t) * d).sum();
             let scale: f64 = free
