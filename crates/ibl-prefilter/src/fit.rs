@@ -69,7 +69,67 @@ pub enum Coarser {
 
 /// What the engine reads of `level` at the texel centres of an n×n level (its bilinear tap
 /// there, seamless across faces): how a neighbouring level enters this one's fit.
+///
+/// The neighbours of a chain level are twice and half its size, and there the taps need no
+/// direction: a coarse texel's centre is the shared corner of 2×2 finer texels (weights ½,
+/// always inside the face), and a fine texel's centre lies a quarter of a coarse texel from
+/// its nearest coarse centres (weights ¼, ¾), inside the face but for the outermost ring,
+/// which is read through the sampler (re-projected across the edge). The same lerps as
+/// [`Cubemap::sample_bilinear`], whose weights there are these to f32 round-off (through the
+/// normalised direction); the sampler on every texel was 10–25% of the fit's time.
 pub fn read_at_texels(level: &Cubemap, n: usize) -> Cubemap {
+    let m = level.size;
+    let lerp = |a: f32, b: f32, t: f32| a + (b - a) * t;
+    if m == 2 * n {
+        let mut out = Cubemap::new(n);
+        for (o, src) in out.faces.iter_mut().zip(&level.faces) {
+            for j in 0..n {
+                for i in 0..n {
+                    let (a, b) = (src.texel(2 * i, 2 * j), src.texel(2 * i + 1, 2 * j));
+                    let (c, e) = (src.texel(2 * i, 2 * j + 1), src.texel(2 * i + 1, 2 * j + 1));
+                    let t = o.texel_mut(i, j);
+                    for k in 0..3 {
+                        let (top, bot) = (lerp(a[k], b[k], 0.5), lerp(c[k], e[k], 0.5));
+                        t[k] = lerp(top, bot, 0.5);
+                    }
+                }
+            }
+        }
+        return out;
+    }
+    if n == 2 * m && m >= 2 {
+        let mut out = Cubemap::new(n);
+        // Fine texel i's centre at coarse coordinate (i − 1)/2 + ¼: even i past coarse
+        // centre i/2 − 1 by ¾, odd i past (i − 1)/2 by ¼.
+        let tap = |i: usize| -> (usize, f32) {
+            if i % 2 == 0 {
+                (i / 2 - 1, 0.75)
+            } else {
+                ((i - 1) / 2, 0.25)
+            }
+        };
+        for (fi, (o, src)) in out.faces.iter_mut().zip(&level.faces).enumerate() {
+            let face = ibl_core::cube::Face::from_index(fi);
+            for j in 0..n {
+                for i in 0..n {
+                    let t = o.texel_mut(i, j);
+                    if i == 0 || j == 0 || i == n - 1 || j == n - 1 {
+                        let d = ibl_core::cube::texel_direction(face, i, j, n);
+                        t.copy_from_slice(&level.sample_bilinear(d));
+                        continue;
+                    }
+                    let ((x0, fx), (y0, fy)) = (tap(i), tap(j));
+                    let (a, b) = (src.texel(x0, y0), src.texel(x0 + 1, y0));
+                    let (c, e) = (src.texel(x0, y0 + 1), src.texel(x0 + 1, y0 + 1));
+                    for k in 0..3 {
+                        let (top, bot) = (lerp(a[k], b[k], fx), lerp(c[k], e[k], fx));
+                        t[k] = lerp(top, bot, fy);
+                    }
+                }
+            }
+        }
+        return out;
+    }
     Cubemap::from_fn(n, |d| level.sample_bilinear(d))
 }
 
@@ -218,12 +278,16 @@ pub fn fit_level(
         let hulls = Hulls { chunks };
         let steps = match power {
             Power::Free => (0..hulls.len())
-                .map(|t| {
-                    let (v, _) = hulls.get(t);
-                    v[argmin_index(v, 0.0)].0
-                })
+                .map(|t| hulls.get(t).0[hulls.chunks[t / HULL_CHUNK].at[t % HULL_CHUNK] as usize].0)
                 .collect(),
-            Power::Kept => power_kept_steps(&hulls, |i| omega[i % per_face] as f64),
+            Power::Kept => {
+                // Texel i's solid angle, its index within its face a mask when n is a power
+                // of two (a division per call was a third of the steps' time).
+                let mask = per_face.is_power_of_two().then(|| per_face - 1);
+                power_kept_steps(&hulls, |i| {
+                    omega[mask.map_or_else(|| i % per_face, |m| i & m)] as f64
+                })
+            }
         };
         drop(hulls);
         for (i, delta) in steps.into_iter().enumerate() {
@@ -245,17 +309,12 @@ pub fn fit_level(
 /// reaches minus the slope between them. The steps, sorted by that price, are taken until the
 /// power change crosses 0, and the last one only in part, so the change is exactly 0. Bright
 /// texels, whose relative error is cheapest to move, carry it.
-fn power_kept_steps(hulls: &Hulls, omega: impl Fn(usize) -> f64) -> Vec<f64> {
-    use rayon::prelude::*;
+fn power_kept_steps(hulls: &Hulls, omega: impl Fn(usize) -> f64 + Sync) -> Vec<f64> {
     let count = hulls.len();
     // Per chunk in parallel, collected in order: the same for any thread count.
-    let at: Vec<u32> = hulls
-        .chunks
-        .par_iter()
-        .flat_map_iter(|c| (0..c.len()).map(move |t| argmin_index(c.get(t).0, 0.0) as u32))
-        .collect();
+    let at = |t: usize| hulls.chunks[t / HULL_CHUNK].at[t % HULL_CHUNK];
     let mut steps: Vec<f64> = (0..count)
-        .map(|t| hulls.get(t).0[at[t] as usize].0)
+        .map(|t| hulls.get(t).0[at(t) as usize].0)
         .collect();
     // Ordered sum: the same bits for any thread count.
     let change: f64 = steps.iter().enumerate().map(|(t, d)| omega(t) * d).sum();
@@ -264,45 +323,29 @@ fn power_kept_steps(hulls: &Hulls, omega: impl Fn(usize) -> f64) -> Vec<f64> {
     }
     // Too much power (change > 0): prices rise, texels step left; too little: right.
     let left = change > 0.0;
-    // (price to reach, texel, vertex moved to), every step a texel can take that way; 16
-    // bytes an event (texels and vertices fit in u32).
-    let mut events: Vec<(f64, u32, u32)> = (0..count)
-        .into_par_iter()
-        .with_min_len(HULL_CHUNK)
-        .flat_map_iter(|t| {
-            let (v, ray) = hulls.get(t);
-            let i = at[t] as usize;
-            let slope = move |j: usize| (v[j].1 - v[j - 1].1) / (v[j].0 - v[j - 1].0);
-            // Left: vertices i−1 … 0; right: i+1 … and past the last vertex, where g rises
-            // along its steepest piece without end (a step, marked by the vertex count, that
-            // can take any amount).
-            let n = if left { i } else { v.len() - i };
-            (0..n).map(move |k| {
-                let t = t as u32;
-                if left {
-                    let j = i - k;
-                    (-slope(j), t, (j - 1) as u32)
+    // Texel t's steps that way, (price to reach, texel, vertex moved to), in order of rising
+    // price (its hull is convex with strict corners). Left: vertices i−1 … 0; right: i+1 …
+    // and past the last vertex, where g rises along its steepest piece without end (a step,
+    // marked by the vertex count, that can take any amount).
+    let events_of = |t: usize| {
+        let (v, ray) = hulls.get(t);
+        let i = at(t) as usize;
+        let slope = move |j: usize| (v[j].1 - v[j - 1].1) / (v[j].0 - v[j - 1].0);
+        let n = if left { i } else { v.len() - i };
+        (0..n).map(move |k| {
+            let texel = t as u32;
+            if left {
+                let j = i - k;
+                (-slope(j), texel, (j - 1) as u32)
+            } else {
+                let j = i + 1 + k;
+                if j < v.len() {
+                    (slope(j), texel, j as u32)
                 } else {
-                    let j = i + 1 + k;
-                    if j < v.len() {
-                        (slope(j), t, j as u32)
-                    } else {
-                        (ray, t, j as u32)
-                    }
+                    (ray, texel, j as u32)
                 }
-            })
+            }
         })
-        .collect();
-    // A total order (price, texel, vertex): the same sequence for any thread count. Walking
-    // all of it in that order (a sort of every event) cost more than the rest of the fit; the
-    // crossing of 0 is found instead by a selection on the cumulative power moved: split the
-    // events at their median (deterministic introselect), take the cheaper half whole when
-    // the change does not cross 0 inside it, else look inside it; small ranges are sorted and
-    // walked one step at a time. A texel's steps have strictly rising prices (its hull is
-    // convex with strict corners), so a whole half moves each of its texels to the farthest
-    // vertex it reaches there.
-    let order = |a: &(f64, u32, u32), b: &(f64, u32, u32)| {
-        a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2))
     };
     let vertex = |t: usize, j: usize| hulls.get(t).0.get(j).map(|v| v.0);
     // Power moved by one step (from the adjacent vertex; infinite for the unbounded one).
@@ -323,7 +366,57 @@ fn power_kept_steps(hulls: &Hulls, omega: impl Fn(usize) -> f64) -> Vec<f64> {
             }
         }
     };
+    // The steps are taken in the total order (price, texel, vertex) until the power change
+    // crosses 0. Sorting every step (or selecting medians of all of them, before) cost more
+    // than the hulls: instead a radix select. One pass sums the power each range of prices
+    // moves (2^[`PRICE_BUCKET_BITS`] ranges, by the leading bits of the price in `total_cmp`
+    // order), which gives the range where the change crosses 0; a second takes every step
+    // below that range (a texel's steps rise in price, so each moves to the farthest vertex
+    // it reaches there) and keeps only the steps inside it, which are then ordered. Both
+    // passes in texel order: the same sums, bits, for any thread count.
+    let bucket = |price: f64| -> usize {
+        let k = price.to_bits();
+        let k = if (k as i64) < 0 { !k } else { k | (1 << 63) };
+        (k >> (64 - PRICE_BUCKET_BITS)) as usize
+    };
+    let mut sums = vec![0.0f64; 1 << PRICE_BUCKET_BITS];
+    for t in 0..count {
+        for e in events_of(t) {
+            sums[bucket(e.0)] += moved(&e);
+        }
+    }
     let mut left_over = change;
+    let mut crossing = usize::MAX;
+    for (b, &sum) in sums.iter().enumerate() {
+        if sum == 0.0 {
+            continue;
+        }
+        if (left_over + sum) * left_over <= 0.0 || !sum.is_finite() {
+            crossing = b;
+            break;
+        }
+        left_over += sum;
+    }
+    drop(sums);
+    let mut events: Vec<(f64, u32, u32)> = Vec::new();
+    for t in 0..count {
+        for e in events_of(t) {
+            let b = bucket(e.0);
+            if b < crossing {
+                steps[t] = vertex(t, e.2 as usize).expect("a bounded step: finite power");
+            } else if b == crossing {
+                events.push(e);
+            } else {
+                break;
+            }
+        }
+    }
+    // Inside the crossing range: split at the median (deterministic introselect), take the
+    // cheaper half whole when the change does not cross 0 inside it, else look inside it;
+    // small ranges are sorted and walked one step at a time.
+    let order = |a: &(f64, u32, u32), b: &(f64, u32, u32)| {
+        a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2))
+    };
     let mut rest: &mut [(f64, u32, u32)] = &mut events;
     const WALK: usize = 2048;
     while rest.len() > WALK {
@@ -365,6 +458,10 @@ fn power_kept_steps(hulls: &Hulls, omega: impl Fn(usize) -> f64) -> Vec<f64> {
     steps
 }
 
+/// Leading bits of a price that name its range in [`power_kept_steps`]'s radix select
+/// (sign, exponent and 4 bits of mantissa: ranges a sixteenth of a binade wide).
+const PRICE_BUCKET_BITS: u32 = 16;
+
 /// Texels a chunk of [`Hulls`] holds: the unit of the parallel build, fixed so that the
 /// result does not depend on the thread count.
 const HULL_CHUNK: usize = 4096;
@@ -375,6 +472,8 @@ struct HullChunk {
     vertices: Vec<(f64, f64)>,
     start: Vec<u32>,
     ray: Vec<f64>,
+    /// The free minimiser's vertex (of g alone, the price 0).
+    at: Vec<u32>,
 }
 
 impl HullChunk {
@@ -385,14 +484,18 @@ impl HullChunk {
             vertices: Vec::with_capacity(4 * texels),
             start,
             ray: Vec::with_capacity(texels),
+            at: Vec::with_capacity(texels),
         }
     }
 
     /// Appends the hull of one texel (see [`Hull::of`]).
     fn push(&mut self, terms: &[Term], lowest: f64, scratch: &mut HullScratch) {
+        let first = self.vertices.len();
         let ray = hull_into(terms, lowest, scratch, &mut self.vertices);
         self.start.push(self.vertices.len() as u32);
         self.ray.push(ray);
+        self.at
+            .push(argmin_index(&self.vertices[first..], 0.0) as u32);
     }
 
     fn len(&self) -> usize {
@@ -433,6 +536,7 @@ impl Hulls {
                     c.vertices.extend_from_slice(&h.vertices);
                     c.start.push(c.vertices.len() as u32);
                     c.ray.push(h.ray);
+                    c.at.push(argmin_index(&h.vertices, 0.0) as u32);
                 }
                 c
             })
@@ -445,6 +549,7 @@ impl Hulls {
 #[derive(Default)]
 struct HullScratch {
     live: Vec<Term>,
+    lines: Vec<(f64, f64)>,
 }
 
 /// A texel-channel's worst relative error g(δ) = max_k |offset_k + slope_k·δ| / scale_k on
@@ -513,63 +618,55 @@ fn hull_into(
             .map(|t| (t.offset + t.slope * d).abs())
             .fold(0.0, f64::max)
     };
-    // Line (k, s): s·(offset_k + slope_k·δ), s = ±1.
-    let slope = |(k, s): (usize, f64)| s * live[k].slope;
-    let value = |(k, s): (usize, f64), d: f64| s * (live[k].offset + live[k].slope * d);
-    // Where two lines cross, as the candidate vertices were computed before: a term's own
-    // zero, or two terms equal in magnitude.
-    let crossing = |(i, si): (usize, f64), (j, sj): (usize, f64)| -> Option<f64> {
-        if i == j {
-            let a = live[i];
-            return (a.slope != 0.0).then(|| -a.offset / a.slope);
-        }
-        let (a, b) = (live[i.min(j)], live[i.max(j)]);
-        let sign = si * sj;
-        let den = a.slope - sign * b.slope;
-        (den != 0.0).then(|| (sign * b.offset - a.offset) / den)
-    };
-    let lines = (0..live.len()).flat_map(|k| [(k, 1.0), (k, -1.0)]);
+    // The 2k lines m·δ + q: (slope, intercept) = ±(slope_k, offset_k).
+    let lines = &mut scratch.lines;
+    lines.clear();
+    lines.extend(
+        live.iter()
+            .flat_map(|t| [(t.slope, t.offset), (-t.slope, -t.offset)]),
+    );
+    let lines = &*lines;
     // On top at `lowest`: the largest value, the steeper of equals.
-    let mut cur = lines
-        .clone()
-        .map(|l| (value(l, lowest), slope(l), l))
-        .fold(
-            None,
-            |best: Option<(f64, f64, (usize, f64))>, x| match best {
-                Some(b) if (b.0, b.1) >= (x.0, x.1) => Some(b),
-                _ => Some(x),
-            },
-        )
-        .expect("a live term")
-        .2;
+    let mut cur = 0;
+    let mut top = (f64::NEG_INFINITY, f64::NEG_INFINITY);
+    for (i, &(m, q)) in lines.iter().enumerate() {
+        let v = (q + m * lowest, m);
+        if v > top {
+            (top, cur) = (v, i);
+        }
+    }
     let first = out.len();
     let mut x = lowest;
     out.push((x, g(x)));
     loop {
-        let s0 = slope(cur);
-        let mut next: Option<(f64, f64, (usize, f64))> = None;
-        for l in lines.clone() {
-            let s = slope(l);
-            if s <= s0 {
+        let (m0, q0) = lines[cur];
+        // The steeper line crossing the current one first (the steepest of equals): the
+        // crossing of line i is (q0 − q_i) / (m_i − m0), its denominator positive, compared
+        // by cross-multiplication (one division a vertex rather than one a candidate).
+        let mut next: Option<(f64, f64, usize)> = None;
+        for (i, &(m, q)) in lines.iter().enumerate() {
+            if m <= m0 {
                 continue;
             }
-            let Some(xc) = crossing(cur, l).filter(|v| v.is_finite()) else {
-                continue;
-            };
-            let xc = xc.max(x);
+            let (num, den) = (q0 - q, m - m0);
             match next {
-                Some((bx, bs, _)) if bx < xc || (bx == xc && bs >= s) => {}
-                _ => next = Some((xc, s, l)),
+                Some((bn, bd, j))
+                    if bn * den < num * bd || (bn * den == num * bd && lines[j].0 >= m) => {}
+                _ => next = Some((num, den, i)),
             }
         }
-        let Some((xc, _, l)) = next else {
+        let Some((num, den, i)) = next else {
             break;
         };
-        cur = l;
+        cur = i;
+        let xc = num / den;
+        if !xc.is_finite() {
+            break;
+        }
         if xc > x {
             x = xc;
             // Keep the corners only: a point on or above the chord of its neighbours (a
-            // round-off corner) is dropped, as before, so prices rise strictly.
+            // round-off corner) is dropped, so prices rise strictly.
             let p = (x, g(x));
             while out.len() - first >= 2 {
                 let (a, b) = (out[out.len() - 2], out[out.len() - 1]);
@@ -840,6 +937,50 @@ mod tests {
         }
     }
 
+    /// The direct taps of a neighbour twice or half the size give what the sampler reads at
+    /// the texel centres (to f32 round-off), edges and corners included; other sizes are read
+    /// through the sampler.
+    #[test]
+    fn read_at_texels_matches_the_sampler() {
+        use ibl_core::sampling::Pcg32;
+        let mut rng = Pcg32::new(3, 11);
+        for (m, n) in [
+            (2, 1),
+            (4, 2),
+            (16, 8),
+            (1, 2),
+            (2, 4),
+            (8, 16),
+            (32, 64),
+            (4, 4),
+            (1, 1),
+        ] {
+            let mut level = Cubemap::new(m);
+            for face in &mut level.faces {
+                for v in &mut face.data {
+                    *v = 10f32.powf(4.0 * rng.next_f32() - 2.0);
+                }
+            }
+            let got = read_at_texels(&level, n);
+            let want = Cubemap::from_fn(n, |d| level.sample_bilinear(d));
+            assert_eq!(got.size, n);
+            // The sampler's weights carry the f32 round-off of face coordinates of size ~n
+            // (n·2⁻²⁴ a weight): what separates the two reads, ~10⁻⁵ of the level's largest
+            // value at 64²; a wrong tap or weight is off by a sizeable fraction of it.
+            let top = level
+                .faces
+                .iter()
+                .flat_map(|f| &f.data)
+                .fold(0.0f32, |a, &b| a.max(b));
+            for (g, w) in got.faces.iter().zip(&want.faces) {
+                for (a, b) in g.data.iter().zip(&w.data) {
+                    let tol = 1e-7 * n.max(m) as f32 * top + 1e-6 * b.abs();
+                    assert!((a - b).abs() <= tol, "{m} → {n}: {a} vs {b}");
+                }
+            }
+        }
+    }
+
     #[test]
     fn a_finer_level_read_at_coarse_texel_centres_is_the_mean_of_its_four_texels() {
         // A coarse texel's centre is the shared corner of the 2×2 finer texels under it: the
@@ -966,6 +1107,104 @@ mod tests {
                     }
                 }
             }
+        }
+    }
+
+    /// The radix select and the median splits inside the crossing range take the same steps
+    /// as the plain definition: every step sorted by (price, texel, vertex) and walked until
+    /// the change crosses 0. Thousands of texels with prices over several binades, and copies
+    /// of one hull (equal prices: one range holding more steps than are walked directly).
+    #[test]
+    fn power_kept_steps_match_a_walk_of_every_step_sorted() {
+        use ibl_core::sampling::Pcg32;
+        fn by_sorting(hulls: &[Hull], omega: impl Fn(usize) -> f64) -> Vec<f64> {
+            let at: Vec<usize> = hulls
+                .iter()
+                .map(|h| argmin_index(&h.vertices, 0.0))
+                .collect();
+            let mut steps: Vec<f64> = hulls
+                .iter()
+                .zip(&at)
+                .map(|(h, &i)| h.vertices[i].0)
+                .collect();
+            let mut left_over: f64 = steps.iter().enumerate().map(|(t, d)| omega(t) * d).sum();
+            let left = left_over > 0.0;
+            let mut events = Vec::new();
+            for (t, (h, &i)) in hulls.iter().zip(&at).enumerate() {
+                let v = &h.vertices;
+                let slope = |j: usize| (v[j].1 - v[j - 1].1) / (v[j].0 - v[j - 1].0);
+                if left {
+                    events.extend((1..=i).map(|j| (-slope(j), t, j - 1)));
+                } else {
+                    events.extend((i + 1..v.len()).map(|j| (slope(j), t, j)));
+                    events.push((h.ray, t, v.len()));
+                }
+            }
+            events.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
+            for (_, t, j) in events {
+                let Some(&(to, _)) = hulls[t].vertices.get(j) else {
+                    steps[t] -= left_over / omega(t);
+                    break;
+                };
+                let moved = omega(t) * (to - steps[t]);
+                if (left_over + moved) * left_over <= 0.0 {
+                    steps[t] += (to - steps[t]) * (-left_over / moved);
+                    break;
+                }
+                left_over += moved;
+                steps[t] = to;
+            }
+            steps
+        }
+        let mut rng = Pcg32::new(41, 6);
+        for case in 0..12 {
+            let count = [3000, 20000][case % 2];
+            // From case 6 most texels copy the first, from case 9 all do.
+            let (copies, share) = (case >= 6, if case >= 9 { 1.0 } else { 0.7 });
+            let mut hulls = Vec::new();
+            let mut template = None;
+            for _ in 0..count {
+                if copies && template.is_some() && rng.next_f64() < share {
+                    hulls.push(Hull::clone(template.as_ref().unwrap()));
+                    continue;
+                }
+                let y = 10f64.powf(4.0 * rng.next_f64() - 2.0);
+                let pl = y * (0.5 + rng.next_f64());
+                let terms: Vec<Term> = std::iter::once(Term::new(0.0, 1.0, y))
+                    .chain((0..4).map(|_| {
+                        let off = (rng.next_f64() - 0.5 + 0.4 * (case % 3) as f64 - 0.4) * pl;
+                        Term::new(off, 0.2 + 0.8 * rng.next_f64(), y * (0.5 + rng.next_f64()))
+                    }))
+                    .collect();
+                let h = Hull::of(&terms, -pl);
+                template.get_or_insert_with(|| h.clone());
+                hulls.push(h);
+            }
+            let omega = |t: usize| 0.5 + (t % 7) as f64 * 0.1;
+            let got = power_kept_steps(&Hulls::of(&hulls), omega);
+            let want = by_sorting(&hulls, omega);
+            let mut partial = 0;
+            for (t, (a, b)) in got.iter().zip(&want).enumerate() {
+                if a != b {
+                    // The step taken in part: the change before it summed in another order.
+                    partial += 1;
+                    assert!(
+                        (a - b).abs() <= 1e-9 * (a.abs() + b.abs()),
+                        "case {case} texel {t}: {a} vs {b}"
+                    );
+                }
+            }
+            assert!(partial <= 1, "case {case}: {partial} texels differ");
+            let power: f64 = got.iter().enumerate().map(|(t, d)| omega(t) * d).sum();
+            let scale: f64 = got
+                .iter()
+                .enumerate()
+                .map(|(t, d)| omega(t) * d.abs())
+                .sum();
+            assert!(
+                power.abs() <= 1e-9 * scale,
+                "case {case}: {power} of {scale}"
+            );
         }
     }
 
