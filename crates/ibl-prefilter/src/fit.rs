@@ -248,8 +248,8 @@ pub fn fit_level(
                 let mut chunk = HullChunk::with_capacity(range.len());
                 let mut terms = Vec::with_capacity(plan.nodes.len() + 1);
                 let mut scratch = HullScratch::default();
-                for i in range {
-                    let (f, t) = (i / per_face, i % per_face);
+                let (mut f, mut t) = (range.start / per_face, range.start % per_face);
+                for _ in range {
                     let px = |c: &Cubemap| {
                         let d = &c.faces[f].data[3 * t..3 * t + 3];
                         [d[0] as f64, d[1] as f64, d[2] as f64]
@@ -271,6 +271,10 @@ pub fn fit_level(
                         terms.push(Term::new(base - p[c], slope, luma(p)));
                     }
                     chunk.push(&terms, -pl[c], &mut scratch);
+                    t += 1;
+                    if t == per_face {
+                        (f, t) = (f + 1, 0);
+                    }
                 }
                 chunk
             })
@@ -606,7 +610,10 @@ fn hull_into(
             .filter(|t| {
                 t.scale > 0.0 && t.scale.is_finite() && t.offset.is_finite() && t.slope.is_finite()
             })
-            .map(|t| Term::new(t.offset / t.scale, t.slope / t.scale, 1.0)),
+            .map(|t| {
+                let inv = 1.0 / t.scale;
+                Term::new(t.offset * inv, t.slope * inv, 1.0)
+            }),
     );
     let live = &*live;
     if live.is_empty() || live.iter().all(|t| t.slope == 0.0) {
