@@ -313,12 +313,17 @@ pub fn fit_level(
 /// reaches minus the slope between them. The steps, sorted by that price, are taken until the
 /// power change crosses 0, and the last one only in part, so the change is exactly 0. Bright
 /// texels, whose relative error is cheapest to move, carry it.
-fn power_kept_steps(hulls: &Hulls, omega: impl Fn(usize) -> f64 + Sync) -> Vec<f64> {
-    let count = hulls.len();
-    // Per chunk in parallel, collected in order: the same for any thread count.
-    let at = |t: usize| hulls.chunks[t / HULL_CHUNK].at[t % HULL_CHUNK];
-    let mut steps: Vec<f64> = (0..count)
-        .map(|t| hulls.get(t).0[at(t) as usize].0)
+fn power_kept_steps<'a>(hulls: &'a Hulls, omega: impl Fn(usize) -> f64 + Sync) -> Vec<f64> {
+    // Every texel with its chunk and its index there (in texel order, chunk by chunk).
+    let texels = || {
+        hulls
+            .chunks
+            .iter()
+            .enumerate()
+            .flat_map(|(k, c)| (0..c.len()).map(move |u| (k * HULL_CHUNK + u, c, u)))
+    };
+    let mut steps: Vec<f64> = texels()
+        .map(|(_, c, u)| c.get(u).0[c.at[u] as usize].0)
         .collect();
     // Ordered sum: the same bits for any thread count.
     let change: f64 = steps.iter().enumerate().map(|(t, d)| omega(t) * d).sum();
@@ -331,26 +336,7 @@ fn power_kept_steps(hulls: &Hulls, omega: impl Fn(usize) -> f64 + Sync) -> Vec<f
     // price (its hull is convex with strict corners). Left: vertices i−1 … 0; right: i+1 …
     // and past the last vertex, where g rises along its steepest piece without end (a step,
     // marked by the vertex count, that can take any amount).
-    let events_of = |t: usize| {
-        let (v, ray) = hulls.get(t);
-        let i = at(t) as usize;
-        let slope = move |j: usize| (v[j].1 - v[j - 1].1) / (v[j].0 - v[j - 1].0);
-        let n = if left { i } else { v.len() - i };
-        (0..n).map(move |k| {
-            let texel = t as u32;
-            if left {
-                let j = i - k;
-                (-slope(j), texel, (j - 1) as u32)
-            } else {
-                let j = i + 1 + k;
-                if j < v.len() {
-                    (slope(j), texel, j as u32)
-                } else {
-                    (ray, texel, j as u32)
-                }
-            }
-        })
-    };
+    let events_of = |(t, c, u): (usize, &'a HullChunk, usize)| steps_of(c, u, t, left);
     let vertex = |t: usize, j: usize| hulls.get(t).0.get(j).map(|v| v.0);
     // Power moved by one step (from the adjacent vertex; infinite for the unbounded one).
     let moved = |&(_, t, j): &(f64, u32, u32)| -> f64 {
@@ -384,8 +370,8 @@ fn power_kept_steps(hulls: &Hulls, omega: impl Fn(usize) -> f64 + Sync) -> Vec<f
         (k >> (64 - PRICE_BUCKET_BITS)) as usize
     };
     let mut sums = vec![0.0f64; 1 << PRICE_BUCKET_BITS];
-    for t in 0..count {
-        for e in events_of(t) {
+    for texel in texels() {
+        for e in events_of(texel) {
             sums[bucket(e.0)] += moved(&e);
         }
     }
@@ -403,11 +389,12 @@ fn power_kept_steps(hulls: &Hulls, omega: impl Fn(usize) -> f64 + Sync) -> Vec<f
     }
     drop(sums);
     let mut events: Vec<(f64, u32, u32)> = Vec::new();
-    for t in 0..count {
-        for e in events_of(t) {
+    for texel in texels() {
+        let (t, c, u) = texel;
+        for e in events_of(texel) {
             let b = bucket(e.0);
             if b < crossing {
-                steps[t] = vertex(t, e.2 as usize).expect("a bounded step: finite power");
+                steps[t] = c.get(u).0[e.2 as usize].0;
             } else if b == crossing {
                 events.push(e);
             } else {
@@ -460,6 +447,33 @@ fn power_kept_steps(hulls: &Hulls, omega: impl Fn(usize) -> f64 + Sync) -> Vec<f
         steps[t] = to;
     }
     steps
+}
+
+/// Texel t's steps the way `left` says ([`power_kept_steps`]), u its index in its chunk c.
+fn steps_of(
+    c: &HullChunk,
+    u: usize,
+    t: usize,
+    left: bool,
+) -> impl Iterator<Item = (f64, u32, u32)> + '_ {
+    let (v, ray) = c.get(u);
+    let i = c.at[u] as usize;
+    let slope = move |j: usize| (v[j].1 - v[j - 1].1) / (v[j].0 - v[j - 1].0);
+    let n = if left { i } else { v.len() - i };
+    (0..n).map(move |k| {
+        let texel = t as u32;
+        if left {
+            let j = i - k;
+            (-slope(j), texel, (j - 1) as u32)
+        } else {
+            let j = i + 1 + k;
+            if j < v.len() {
+                (slope(j), texel, j as u32)
+            } else {
+                (ray, texel, j as u32)
+            }
+        }
+    })
 }
 
 /// Leading bits of a price that name its range in [`power_kept_steps`]'s radix select
@@ -674,7 +688,7 @@ fn hull_into(
             x = xc;
             // Keep the corners only: a point on or above the chord of its neighbours (a
             // round-off corner) is dropped, so prices rise strictly.
-            let p = (x, g(x));
+            let p = (x, lines[cur].1 + lines[cur].0 * x);
             while out.len() - first >= 2 {
                 let (a, b) = (out[out.len() - 2], out[out.len() - 1]);
                 let cross = (b.0 - a.0) * (p.1 - a.1) - (b.1 - a.1) * (p.0 - a.0);
