@@ -102,7 +102,7 @@ pub fn read_at_texels(level: &Cubemap, n: usize) -> Cubemap {
         // Fine texel i's centre at coarse coordinate (i − 1)/2 + ¼: even i past coarse
         // centre i/2 − 1 by ¾, odd i past (i − 1)/2 by ¼.
         let tap = |i: usize| -> (usize, f32) {
-            if i % 2 == 0 {
+            if i.is_multiple_of(2) {
                 (i / 2 - 1, 0.75)
             } else {
                 ((i - 1) / 2, 0.25)
@@ -1188,9 +1188,11 @@ mod tests {
             let mut hulls = Vec::new();
             let mut template = None;
             for _ in 0..count {
-                if copies && template.is_some() && rng.next_f64() < share {
-                    hulls.push(Hull::clone(template.as_ref().unwrap()));
-                    continue;
+                if let Some(h) = template.as_ref().filter(|_| copies) {
+                    if rng.next_f64() < share {
+                        hulls.push(Hull::clone(h));
+                        continue;
+                    }
                 }
                 let y = 10f64.powf(4.0 * rng.next_f64() - 2.0);
                 let pl = y * (0.5 + rng.next_f64());
