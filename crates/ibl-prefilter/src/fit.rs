@@ -69,7 +69,67 @@ pub enum Coarser {
 
 /// What the engine reads of `level` at the texel centres of an n×n level (its bilinear tap
 /// there, seamless across faces): how a neighbouring level enters this one's fit.
+///
+/// The neighbours of a chain level are twice and half its size, and there the taps need no
+/// direction: a coarse texel's centre is the shared corner of 2×2 finer texels (weights ½,
+/// always inside the face), and a fine texel's centre lies a quarter of a coarse texel from
+/// its nearest coarse centres (weights ¼, ¾), inside the face but for the outermost ring,
+/// which is read through the sampler (re-projected across the edge). The same lerps as
+/// [`Cubemap::sample_bilinear`], whose weights there are these to f32 round-off (through the
+/// normalised direction); the sampler on every texel was 10–25% of the fit's time.
 pub fn read_at_texels(level: &Cubemap, n: usize) -> Cubemap {
+    let m = level.size;
+    let lerp = |a: f32, b: f32, t: f32| a + (b - a) * t;
+    if m == 2 * n {
+        let mut out = Cubemap::new(n);
+        for (o, src) in out.faces.iter_mut().zip(&level.faces) {
+            for j in 0..n {
+                for i in 0..n {
+                    let (a, b) = (src.texel(2 * i, 2 * j), src.texel(2 * i + 1, 2 * j));
+                    let (c, e) = (src.texel(2 * i, 2 * j + 1), src.texel(2 * i + 1, 2 * j + 1));
+                    let t = o.texel_mut(i, j);
+                    for k in 0..3 {
+                        let (top, bot) = (lerp(a[k], b[k], 0.5), lerp(c[k], e[k], 0.5));
+                        t[k] = lerp(top, bot, 0.5);
+                    }
+                }
+            }
+        }
+        return out;
+    }
+    if n == 2 * m && m >= 2 {
+        let mut out = Cubemap::new(n);
+        // Fine texel i's centre at coarse coordinate (i − 1)/2 + ¼: even i past coarse
+        // centre i/2 − 1 by ¾, odd i past (i − 1)/2 by ¼.
+        let tap = |i: usize| -> (usize, f32) {
+            if i.is_multiple_of(2) {
+                (i / 2 - 1, 0.75)
+            } else {
+                ((i - 1) / 2, 0.25)
+            }
+        };
+        for (fi, (o, src)) in out.faces.iter_mut().zip(&level.faces).enumerate() {
+            let face = ibl_core::cube::Face::from_index(fi);
+            for j in 0..n {
+                for i in 0..n {
+                    let t = o.texel_mut(i, j);
+                    if i == 0 || j == 0 || i == n - 1 || j == n - 1 {
+                        let d = ibl_core::cube::texel_direction(face, i, j, n);
+                        t.copy_from_slice(&level.sample_bilinear(d));
+                        continue;
+                    }
+                    let ((x0, fx), (y0, fy)) = (tap(i), tap(j));
+                    let (a, b) = (src.texel(x0, y0), src.texel(x0 + 1, y0));
+                    let (c, e) = (src.texel(x0, y0 + 1), src.texel(x0 + 1, y0 + 1));
+                    for k in 0..3 {
+                        let (top, bot) = (lerp(a[k], b[k], fx), lerp(c[k], e[k], fx));
+                        t[k] = lerp(top, bot, fy);
+                    }
+                }
+            }
+        }
+        return out;
+    }
     Cubemap::from_fn(n, |d| level.sample_bilinear(d))
 }
 
@@ -177,19 +237,19 @@ pub fn fit_level(
     // (three at once were 40% of it at 512²).
     for c in 0..3 {
         // Each texel's error as a function of its step δ, as the vertices of that convex
-        // piecewise-linear function. Texels are independent here: in parallel, collected in
-        // order (the same result for any thread count).
-        let hulls: Vec<Hull> = (0..6 * per_face)
+        // piecewise-linear function. Texels are independent here: in parallel, in chunks of
+        // a fixed size collected in order (the same result for any thread count), each
+        // chunk's vertices in one buffer (one allocation per chunk, not per texel: the
+        // per-texel vectors were half the fit's time and most of its peak at 512²).
+        let chunks: Vec<HullChunk> = (0..(6 * per_face).div_ceil(HULL_CHUNK))
             .into_par_iter()
-            .map_init(
-                || {
-                    (
-                        Vec::with_capacity(plan.nodes.len() + 1),
-                        HullScratch::default(),
-                    )
-                },
-                |(terms, scratch), i| {
-                    let (f, t) = (i / per_face, i % per_face);
+            .map(|k| {
+                let range = k * HULL_CHUNK..((k + 1) * HULL_CHUNK).min(6 * per_face);
+                let mut chunk = HullChunk::with_capacity(range.len());
+                let mut terms = Vec::with_capacity(plan.nodes.len() + 1);
+                let mut scratch = HullScratch::default();
+                let (mut f, mut t) = (range.start / per_face, range.start % per_face);
+                for _ in range {
                     let px = |c: &Cubemap| {
                         let d = &c.faces[f].data[3 * t..3 * t + 3];
                         [d[0] as f64, d[1] as f64, d[2] as f64]
@@ -210,13 +270,28 @@ pub fn fit_level(
                         let slope = node.w_self + node.w_hi * coarser_ratio;
                         terms.push(Term::new(base - p[c], slope, luma(p)));
                     }
-                    Hull::of_with(terms, -pl[c], scratch)
-                },
-            )
+                    chunk.push(&terms, -pl[c], &mut scratch);
+                    t += 1;
+                    if t == per_face {
+                        (f, t) = (f + 1, 0);
+                    }
+                }
+                chunk
+            })
             .collect();
+        let hulls = Hulls { chunks };
         let steps = match power {
-            Power::Free => hulls.iter().map(|h| h.argmin(0.0)).collect(),
-            Power::Kept => power_kept_steps(&hulls, |i| omega[i % per_face] as f64),
+            Power::Free => (0..hulls.len())
+                .map(|t| hulls.get(t).0[hulls.chunks[t / HULL_CHUNK].at[t % HULL_CHUNK] as usize].0)
+                .collect(),
+            Power::Kept => {
+                // Texel i's solid angle, its index within its face a mask when n is a power
+                // of two (a division per call was a third of the steps' time).
+                let mask = per_face.is_power_of_two().then(|| per_face - 1);
+                power_kept_steps(&hulls, |i| {
+                    omega[mask.map_or_else(|| i % per_face, |m| i & m)] as f64
+                })
+            }
         };
         drop(hulls);
         for (i, delta) in steps.into_iter().enumerate() {
@@ -238,13 +313,17 @@ pub fn fit_level(
 /// reaches minus the slope between them. The steps, sorted by that price, are taken until the
 /// power change crosses 0, and the last one only in part, so the change is exactly 0. Bright
 /// texels, whose relative error is cheapest to move, carry it.
-fn power_kept_steps(hulls: &[Hull], omega: impl Fn(usize) -> f64) -> Vec<f64> {
-    use rayon::prelude::*;
-    let at: Vec<usize> = hulls.par_iter().map(|h| h.argmin_index(0.0)).collect();
-    let mut steps: Vec<f64> = hulls
-        .iter()
-        .zip(&at)
-        .map(|(h, &i)| h.vertices[i].0)
+fn power_kept_steps<'a>(hulls: &'a Hulls, omega: impl Fn(usize) -> f64 + Sync) -> Vec<f64> {
+    // Every texel with its chunk and its index there (in texel order, chunk by chunk).
+    let texels = || {
+        hulls
+            .chunks
+            .iter()
+            .enumerate()
+            .flat_map(|(k, c)| (0..c.len()).map(move |u| (k * HULL_CHUNK + u, c, u)))
+    };
+    let mut steps: Vec<f64> = texels()
+        .map(|(_, c, u)| c.get(u).0[c.at[u] as usize].0)
         .collect();
     // Ordered sum: the same bits for any thread count.
     let change: f64 = steps.iter().enumerate().map(|(t, d)| omega(t) * d).sum();
@@ -253,51 +332,20 @@ fn power_kept_steps(hulls: &[Hull], omega: impl Fn(usize) -> f64) -> Vec<f64> {
     }
     // Too much power (change > 0): prices rise, texels step left; too little: right.
     let left = change > 0.0;
-    // (price to reach, texel, vertex moved to), every step a texel can take that way.
-    let mut events: Vec<(f64, usize, usize)> = hulls
-        .par_iter()
-        .zip(&at)
-        .enumerate()
-        .flat_map_iter(|(t, (h, &i))| {
-            let (v, ray) = (&h.vertices, h.ray);
-            let slope = move |j: usize| (v[j].1 - v[j - 1].1) / (v[j].0 - v[j - 1].0);
-            // Left: vertices i−1 … 0; right: i+1 … and past the last vertex, where g rises
-            // along its steepest piece without end (a step, marked by the vertex count, that
-            // can take any amount).
-            let count = if left { i } else { v.len() - i };
-            (0..count).map(move |k| {
-                if left {
-                    let j = i - k;
-                    (-slope(j), t, j - 1)
-                } else {
-                    let j = i + 1 + k;
-                    if j < v.len() {
-                        (slope(j), t, j)
-                    } else {
-                        (ray, t, j)
-                    }
-                }
-            })
-        })
-        .collect();
-    // A total order (price, texel, vertex): the same sequence for any thread count. Walking
-    // all of it in that order (a sort of every event) cost more than the rest of the fit; the
-    // crossing of 0 is found instead by a selection on the cumulative power moved: split the
-    // events at their median (deterministic introselect), take the cheaper half whole when
-    // the change does not cross 0 inside it, else look inside it; small ranges are sorted and
-    // walked one step at a time. A texel's steps have strictly rising prices (its hull is
-    // convex with strict corners), so a whole half moves each of its texels to the farthest
-    // vertex it reaches there.
-    let order = |a: &(f64, usize, usize), b: &(f64, usize, usize)| {
-        a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2))
-    };
-    let vertex = |t: usize, j: usize| hulls[t].vertices.get(j).map(|v| v.0);
+    // Texel t's steps that way, (price to reach, texel, vertex moved to), in order of rising
+    // price (its hull is convex with strict corners). Left: vertices i−1 … 0; right: i+1 …
+    // and past the last vertex, where g rises along its steepest piece without end (a step,
+    // marked by the vertex count, that can take any amount).
+    let events_of = |(t, c, u): (usize, &'a HullChunk, usize)| steps_of(c, u, t, left);
+    let vertex = |t: usize, j: usize| hulls.get(t).0.get(j).map(|v| v.0);
     // Power moved by one step (from the adjacent vertex; infinite for the unbounded one).
-    let moved = |&(_, t, j): &(f64, usize, usize)| -> f64 {
-        match vertex(t, j) {
+    let moved = |&(_, t, j): &(f64, u32, u32)| -> f64 {
+        let (t, j) = (t as usize, j as usize);
+        let v = hulls.get(t).0;
+        match v.get(j) {
             Some(to) => {
                 let from = if left { j + 1 } else { j - 1 };
-                omega(t) * (to - hulls[t].vertices[from].0)
+                omega(t) * (to.0 - v[from].0)
             }
             None => {
                 if left {
@@ -308,8 +356,59 @@ fn power_kept_steps(hulls: &[Hull], omega: impl Fn(usize) -> f64) -> Vec<f64> {
             }
         }
     };
+    // The steps are taken in the total order (price, texel, vertex) until the power change
+    // crosses 0. Sorting every step (or selecting medians of all of them, before) cost more
+    // than the hulls: instead a radix select. One pass sums the power each range of prices
+    // moves (2^[`PRICE_BUCKET_BITS`] ranges, by the leading bits of the price in `total_cmp`
+    // order), which gives the range where the change crosses 0; a second takes every step
+    // below that range (a texel's steps rise in price, so each moves to the farthest vertex
+    // it reaches there) and keeps only the steps inside it, which are then ordered. Both
+    // passes in texel order: the same sums, bits, for any thread count.
+    let bucket = |price: f64| -> usize {
+        let k = price.to_bits();
+        let k = if (k as i64) < 0 { !k } else { k | (1 << 63) };
+        (k >> (64 - PRICE_BUCKET_BITS)) as usize
+    };
+    let mut sums = vec![0.0f64; 1 << PRICE_BUCKET_BITS];
+    for texel in texels() {
+        for e in events_of(texel) {
+            sums[bucket(e.0)] += moved(&e);
+        }
+    }
     let mut left_over = change;
-    let mut rest: &mut [(f64, usize, usize)] = &mut events;
+    let mut crossing = usize::MAX;
+    for (b, &sum) in sums.iter().enumerate() {
+        if sum == 0.0 {
+            continue;
+        }
+        if (left_over + sum) * left_over <= 0.0 || !sum.is_finite() {
+            crossing = b;
+            break;
+        }
+        left_over += sum;
+    }
+    drop(sums);
+    let mut events: Vec<(f64, u32, u32)> = Vec::new();
+    for texel in texels() {
+        let (t, c, u) = texel;
+        for e in events_of(texel) {
+            let b = bucket(e.0);
+            if b < crossing {
+                steps[t] = c.get(u).0[e.2 as usize].0;
+            } else if b == crossing {
+                events.push(e);
+            } else {
+                break;
+            }
+        }
+    }
+    // Inside the crossing range: split at the median (deterministic introselect), take the
+    // cheaper half whole when the change does not cross 0 inside it, else look inside it;
+    // small ranges are sorted and walked one step at a time.
+    let order = |a: &(f64, u32, u32), b: &(f64, u32, u32)| {
+        a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2))
+    };
+    let mut rest: &mut [(f64, u32, u32)] = &mut events;
     const WALK: usize = 2048;
     while rest.len() > WALK {
         let mid = rest.len() / 2;
@@ -321,7 +420,8 @@ fn power_kept_steps(hulls: &[Hull], omega: impl Fn(usize) -> f64) -> Vec<f64> {
             continue;
         }
         for &(_, t, j) in head.iter() {
-            let to = hulls[t].vertices[j].0;
+            let to = hulls.get(t as usize).0[j as usize].0;
+            let t = t as usize;
             // The farthest vertex this half reaches.
             if (left && to < steps[t]) || (!left && to > steps[t]) {
                 steps[t] = to;
@@ -332,6 +432,7 @@ fn power_kept_steps(hulls: &[Hull], omega: impl Fn(usize) -> f64) -> Vec<f64> {
     }
     rest.sort_unstable_by(order);
     for &(_, t, j) in rest.iter() {
+        let (t, j) = (t as usize, j as usize);
         let Some(to) = vertex(t, j) else {
             steps[t] -= left_over / omega(t);
             return steps;
@@ -348,17 +449,132 @@ fn power_kept_steps(hulls: &[Hull], omega: impl Fn(usize) -> f64) -> Vec<f64> {
     steps
 }
 
-/// Reusable buffers of [`Hull::of_with`].
+/// Texel t's steps the way `left` says ([`power_kept_steps`]), u its index in its chunk c.
+fn steps_of(
+    c: &HullChunk,
+    u: usize,
+    t: usize,
+    left: bool,
+) -> impl Iterator<Item = (f64, u32, u32)> + '_ {
+    let (v, ray) = c.get(u);
+    let i = c.at[u] as usize;
+    let slope = move |j: usize| (v[j].1 - v[j - 1].1) / (v[j].0 - v[j - 1].0);
+    let n = if left { i } else { v.len() - i };
+    (0..n).map(move |k| {
+        let texel = t as u32;
+        if left {
+            let j = i - k;
+            (-slope(j), texel, (j - 1) as u32)
+        } else {
+            let j = i + 1 + k;
+            if j < v.len() {
+                (slope(j), texel, j as u32)
+            } else {
+                (ray, texel, j as u32)
+            }
+        }
+    })
+}
+
+/// Leading bits of a price that name its range in [`power_kept_steps`]'s radix select
+/// (sign, exponent and 4 bits of mantissa: ranges a sixteenth of a binade wide).
+const PRICE_BUCKET_BITS: u32 = 16;
+
+/// Texels a chunk of [`Hulls`] holds: the unit of the parallel build, fixed so that the
+/// result does not depend on the thread count.
+const HULL_CHUNK: usize = 4096;
+
+/// The hulls of a range of texels, their vertices in one buffer: texel t's are
+/// `vertices[start[t]..start[t + 1]]`.
+struct HullChunk {
+    vertices: Vec<(f64, f64)>,
+    start: Vec<u32>,
+    ray: Vec<f64>,
+    /// The free minimiser's vertex (of g alone, the price 0).
+    at: Vec<u32>,
+}
+
+impl HullChunk {
+    fn with_capacity(texels: usize) -> Self {
+        let mut start = Vec::with_capacity(texels + 1);
+        start.push(0);
+        HullChunk {
+            vertices: Vec::with_capacity(4 * texels),
+            start,
+            ray: Vec::with_capacity(texels),
+            at: Vec::with_capacity(texels),
+        }
+    }
+
+    /// Appends the hull of one texel (see [`Hull::of`]).
+    fn push(&mut self, terms: &[Term], lowest: f64, scratch: &mut HullScratch) {
+        let first = self.vertices.len();
+        let ray = hull_into(terms, lowest, scratch, &mut self.vertices);
+        self.start.push(self.vertices.len() as u32);
+        self.ray.push(ray);
+        self.at
+            .push(argmin_index(&self.vertices[first..], 0.0) as u32);
+    }
+
+    fn len(&self) -> usize {
+        self.ray.len()
+    }
+
+    /// Texel t's vertices and ray.
+    fn get(&self, t: usize) -> (&[(f64, f64)], f64) {
+        let (a, b) = (self.start[t] as usize, self.start[t + 1] as usize);
+        (&self.vertices[a..b], self.ray[t])
+    }
+}
+
+/// The hulls of every texel of a level (one channel), in chunks of [`HULL_CHUNK`] texels
+/// (every chunk full but the last).
+struct Hulls {
+    chunks: Vec<HullChunk>,
+}
+
+impl Hulls {
+    fn len(&self) -> usize {
+        self.chunks.iter().map(HullChunk::len).sum()
+    }
+
+    /// Texel t's vertices (sorted by δ) and the slope past the last one.
+    #[inline]
+    fn get(&self, t: usize) -> (&[(f64, f64)], f64) {
+        self.chunks[t / HULL_CHUNK].get(t % HULL_CHUNK)
+    }
+
+    #[cfg(test)]
+    fn of(hulls: &[Hull]) -> Hulls {
+        let chunks = hulls
+            .chunks(HULL_CHUNK)
+            .map(|hs| {
+                let mut c = HullChunk::with_capacity(hs.len());
+                for h in hs {
+                    c.vertices.extend_from_slice(&h.vertices);
+                    c.start.push(c.vertices.len() as u32);
+                    c.ray.push(h.ray);
+                    c.at.push(argmin_index(&h.vertices, 0.0) as u32);
+                }
+                c
+            })
+            .collect();
+        Hulls { chunks }
+    }
+}
+
+/// Reusable buffers of [`hull_into`].
 #[derive(Default)]
 struct HullScratch {
     live: Vec<Term>,
-    d: Vec<f64>,
-    vertices: Vec<(f64, f64)>,
+    lines: Vec<(f64, f64)>,
 }
 
 /// A texel-channel's worst relative error g(δ) = max_k |offset_k + slope_k·δ| / scale_k on
 /// [lowest, ∞), by its vertices (δ_i, g_i) sorted by δ: g is convex and piecewise linear, so
-/// the minimiser of g(δ) + μδ is one of them for any price μ.
+/// the minimiser of g(δ) + μδ is one of them for any price μ (the tests' form of a hull;
+/// the fit stores them in [`Hulls`]).
+#[cfg(test)]
 #[derive(Clone, Debug, PartialEq)]
 struct Hull {
     vertices: Vec<(f64, f64)>,
@@ -366,100 +582,141 @@ struct Hull {
     ray: f64,
 }
 
+#[cfg(test)]
 impl Hull {
     /// The hull of the terms (those with a zero or non-finite scale, black there, left out; a
     /// single vertex at 0 when none is left).
-    #[cfg(test)]
     fn of(terms: &[Term], lowest: f64) -> Hull {
-        Self::of_with(terms, lowest, &mut HullScratch::default())
-    }
-
-    /// [`Hull::of`] with reusable buffers (one allocation: the vertices kept).
-    fn of_with(terms: &[Term], lowest: f64, scratch: &mut HullScratch) -> Hull {
-        let HullScratch { live, d, vertices } = scratch;
-        live.clear();
-        live.extend(
-            terms
-                .iter()
-                .filter(|t| {
-                    t.scale > 0.0
-                        && t.scale.is_finite()
-                        && t.offset.is_finite()
-                        && t.slope.is_finite()
-                })
-                .map(|t| Term::new(t.offset / t.scale, t.slope / t.scale, 1.0)),
-        );
-        let live = &*live;
-        if live.is_empty() || live.iter().all(|t| t.slope == 0.0) {
-            return Hull {
-                vertices: vec![(0.0f64.max(lowest), 0.0)],
-                ray: f64::INFINITY,
-            };
-        }
-        let g = |d: f64| {
-            live.iter()
-                .map(|t| (t.offset + t.slope * d).abs())
-                .fold(0.0, f64::max)
-        };
-        // Every vertex is a crossing of two of the 2k pieces ±(offset + slope·δ): a term's own
-        // zero, or two terms equal in magnitude; or the bound.
-        d.clear();
-        d.push(lowest);
-        for (i, a) in live.iter().enumerate() {
-            if a.slope != 0.0 {
-                d.push(-a.offset / a.slope);
-            }
-            for b in &live[i + 1..] {
-                for sign in [1.0, -1.0] {
-                    let den = a.slope - sign * b.slope;
-                    if den != 0.0 {
-                        d.push((sign * b.offset - a.offset) / den);
-                    }
-                }
-            }
-        }
-        d.retain(|x| x.is_finite() && *x >= lowest);
-        // Unstable is the same order: total_cmp ties are bit-identical.
-        d.sort_unstable_by(f64::total_cmp);
-        d.dedup();
-        // Keep the corners: points where the slope of g turns (the others lie on a segment).
-        vertices.clear();
-        for p in d.iter().map(|&x| (x, g(x))) {
-            while vertices.len() >= 2 {
-                let (a, b) = (vertices[vertices.len() - 2], vertices[vertices.len() - 1]);
-                // b is not a corner when it lies on or above the chord from a to p.
-                let cross = (b.0 - a.0) * (p.1 - a.1) - (b.1 - a.1) * (p.0 - a.0);
-                if cross <= 0.0 {
-                    vertices.pop();
-                } else {
-                    break;
-                }
-            }
-            vertices.push(p);
-        }
-        let ray = live.iter().map(|t| t.slope.abs()).fold(0.0, f64::max);
-        Hull {
-            vertices: vertices.to_vec(),
-            ray,
-        }
-    }
-
-    /// The vertex minimising g(δ) + μδ (the first of equals).
-    fn argmin_index(&self, mu: f64) -> usize {
-        let mut best = (0, self.vertices[0].1 + mu * self.vertices[0].0);
-        for (i, v) in self.vertices.iter().enumerate().skip(1) {
-            let c = v.1 + mu * v.0;
-            if c < best.1 {
-                best = (i, c);
-            }
-        }
-        best.0
+        let mut vertices = Vec::new();
+        let ray = hull_into(terms, lowest, &mut HullScratch::default(), &mut vertices);
+        Hull { vertices, ray }
     }
 
     /// argmin over δ of g(δ) + μδ.
     fn argmin(&self, mu: f64) -> f64 {
-        self.vertices[self.argmin_index(mu)].0
+        self.vertices[argmin_index(&self.vertices, mu)].0
     }
+}
+
+/// Appends the vertices of the hull of `terms` on [lowest, ∞) to `out` ([`Hull`]) and returns
+/// its ray. g is the upper envelope of the 2k lines ±(offset_k + slope_k·δ) (scaled), walked
+/// from `lowest` rightwards: from the line on top there (the steeper of equals), the next
+/// piece is the line of larger slope that crosses the current one first (the steepest of
+/// those crossing at the same point), until none is steeper. At most 2k pieces of 2k
+/// candidates each, where taking every crossing of two pieces as a candidate vertex, sorted
+/// and then filtered to the corners (before) was O(k³) and a sort per texel.
+///
+/// The same function as before to round-off (a vertex's δ is its two lines' crossing, its g
+/// the value of the line on top there), but only its corners: the old candidate filter kept,
+/// by round-off, points on straight pieces (crossings of two lines below the envelope) as
+/// vertices in 72% of random hulls, and their near-equal prices, sometimes falling from one
+/// vertex to the next, sent a texel back a vertex in the final walk of [`power_kept_steps`]
+/// (measured on an 8² level of city, Filament 128²: the constrained objective 0.414221
+/// there, 0.414217 now).
+fn hull_into(
+    terms: &[Term],
+    lowest: f64,
+    scratch: &mut HullScratch,
+    out: &mut Vec<(f64, f64)>,
+) -> f64 {
+    let live = &mut scratch.live;
+    live.clear();
+    live.extend(
+        terms
+            .iter()
+            .filter(|t| {
+                t.scale > 0.0 && t.scale.is_finite() && t.offset.is_finite() && t.slope.is_finite()
+            })
+            .map(|t| {
+                let inv = 1.0 / t.scale;
+                Term::new(t.offset * inv, t.slope * inv, 1.0)
+            }),
+    );
+    let live = &*live;
+    if live.is_empty() || live.iter().all(|t| t.slope == 0.0) {
+        out.push((0.0f64.max(lowest), 0.0));
+        return f64::INFINITY;
+    }
+    let g = |d: f64| {
+        live.iter()
+            .map(|t| (t.offset + t.slope * d).abs())
+            .fold(0.0, f64::max)
+    };
+    // The 2k lines m·δ + q: (slope, intercept) = ±(slope_k, offset_k).
+    let lines = &mut scratch.lines;
+    lines.clear();
+    lines.extend(
+        live.iter()
+            .flat_map(|t| [(t.slope, t.offset), (-t.slope, -t.offset)]),
+    );
+    let lines = &*lines;
+    // On top at `lowest`: the largest value, the steeper of equals.
+    let mut cur = 0;
+    let mut top = (f64::NEG_INFINITY, f64::NEG_INFINITY);
+    for (i, &(m, q)) in lines.iter().enumerate() {
+        let v = (q + m * lowest, m);
+        if v > top {
+            (top, cur) = (v, i);
+        }
+    }
+    let first = out.len();
+    let mut x = lowest;
+    out.push((x, g(x)));
+    loop {
+        let (m0, q0) = lines[cur];
+        // The steeper line crossing the current one first (the steepest of equals): the
+        // crossing of line i is (q0 − q_i) / (m_i − m0), its denominator positive, compared
+        // by cross-multiplication (one division a vertex rather than one a candidate).
+        let mut next: Option<(f64, f64, usize)> = None;
+        for (i, &(m, q)) in lines.iter().enumerate() {
+            if m <= m0 {
+                continue;
+            }
+            let (num, den) = (q0 - q, m - m0);
+            match next {
+                Some((bn, bd, j))
+                    if bn * den < num * bd || (bn * den == num * bd && lines[j].0 >= m) => {}
+                _ => next = Some((num, den, i)),
+            }
+        }
+        let Some((num, den, i)) = next else {
+            break;
+        };
+        cur = i;
+        let xc = num / den;
+        if !xc.is_finite() {
+            break;
+        }
+        if xc > x {
+            x = xc;
+            // Keep the corners only: a point on or above the chord of its neighbours (a
+            // round-off corner) is dropped, so prices rise strictly.
+            let p = (x, lines[cur].1 + lines[cur].0 * x);
+            while out.len() - first >= 2 {
+                let (a, b) = (out[out.len() - 2], out[out.len() - 1]);
+                let cross = (b.0 - a.0) * (p.1 - a.1) - (b.1 - a.1) * (p.0 - a.0);
+                if cross <= 0.0 {
+                    out.pop();
+                } else {
+                    break;
+                }
+            }
+            out.push(p);
+        }
+    }
+    live.iter().map(|t| t.slope.abs()).fold(0.0, f64::max)
+}
+
+/// The vertex minimising g(δ) + μδ (the first of equals).
+fn argmin_index(vertices: &[(f64, f64)], mu: f64) -> usize {
+    let mut best = (0, vertices[0].1 + mu * vertices[0].0);
+    for (i, v) in vertices.iter().enumerate().skip(1) {
+        let c = v.1 + mu * v.0;
+        if c < best.1 {
+            best = (i, c);
+        }
+    }
+    best.0
 }
 
 fn luma(p: [f64; 3]) -> f64 {
@@ -631,6 +888,123 @@ mod tests {
         }
     }
 
+    /// The hull against its definition, independently of how it is built: on random terms
+    /// (some with zero slopes, equal slopes, zero or non-finite scales), the piecewise-linear
+    /// function of its vertices and ray equals g(δ) = max_k |offset_k + slope_k·δ| / scale_k on
+    /// a dense grid of [lowest, ∞), its slopes rise strictly (every vertex a corner), and the
+    /// first vertex is the bound.
+    #[test]
+    fn hull_is_the_upper_envelope_with_strict_corners() {
+        use ibl_core::sampling::Pcg32;
+        let mut rng = Pcg32::new(31, 2);
+        for case in 0..20000 {
+            let k = 1 + case % 7;
+            let terms: Vec<Term> = (0..k)
+                .map(|i| {
+                    let u = |rng: &mut Pcg32| rng.next_f64() * 2.0 - 1.0;
+                    let slope = match (case / 7 + i) % 5 {
+                        0 => 0.0,
+                        1 => 0.5,
+                        _ => u(&mut rng),
+                    };
+                    let scale = match (case / 3 + i) % 11 {
+                        0 => 0.0,
+                        1 => f64::INFINITY,
+                        _ => 0.1 + rng.next_f64(),
+                    };
+                    Term::new(u(&mut rng) * 3.0, slope, scale)
+                })
+                .collect();
+            let lowest = -4.0 * rng.next_f64();
+            let h = Hull::of(&terms, lowest);
+            let live: Vec<&Term> = terms
+                .iter()
+                .filter(|t| t.scale > 0.0 && t.scale.is_finite())
+                .collect();
+            if live.iter().all(|t| t.slope == 0.0) {
+                assert_eq!(h.vertices, vec![(0.0f64.max(lowest), 0.0)], "case {case}");
+                continue;
+            }
+            let g = |d: f64| {
+                live.iter()
+                    .map(|t| (t.offset + t.slope * d).abs() / t.scale)
+                    .fold(0.0, f64::max)
+            };
+            let v = &h.vertices;
+            assert_eq!(v[0].0, lowest, "case {case}");
+            let slopes: Vec<f64> = v
+                .windows(2)
+                .map(|w| (w[1].1 - w[0].1) / (w[1].0 - w[0].0))
+                .chain([h.ray])
+                .collect();
+            assert!(
+                slopes.windows(2).all(|s| s[1] > s[0]),
+                "case {case}: slopes {slopes:?} of {v:?}"
+            );
+            let piecewise = |d: f64| match v.iter().position(|p| p.0 > d) {
+                None => v[v.len() - 1].1 + h.ray * (d - v[v.len() - 1].0),
+                Some(0) => unreachable!("below the bound"),
+                Some(i) => {
+                    let (a, b) = (v[i - 1], v[i]);
+                    a.1 + (b.1 - a.1) * (d - a.0) / (b.0 - a.0)
+                }
+            };
+            let far = v[v.len() - 1].0 + 10.0;
+            for s in 0..=400 {
+                let d = lowest + (far - lowest) * s as f64 / 400.0;
+                let (got, want) = (piecewise(d), g(d));
+                assert!(
+                    (got - want).abs() <= 1e-9 * (1.0 + want),
+                    "case {case}: at {d} hull {got} vs g {want}; {v:?}"
+                );
+            }
+        }
+    }
+
+    /// The direct taps of a neighbour twice or half the size give what the sampler reads at
+    /// the texel centres (to f32 round-off), edges and corners included; other sizes are read
+    /// through the sampler.
+    #[test]
+    fn read_at_texels_matches_the_sampler() {
+        use ibl_core::sampling::Pcg32;
+        let mut rng = Pcg32::new(3, 11);
+        for (m, n) in [
+            (2, 1),
+            (4, 2),
+            (16, 8),
+            (1, 2),
+            (2, 4),
+            (8, 16),
+            (32, 64),
+            (4, 4),
+            (1, 1),
+        ] {
+            let mut level = Cubemap::new(m);
+            for face in &mut level.faces {
+                for v in &mut face.data {
+                    *v = 10f32.powf(4.0 * rng.next_f32() - 2.0);
+                }
+            }
+            let got = read_at_texels(&level, n);
+            let want = Cubemap::from_fn(n, |d| level.sample_bilinear(d));
+            assert_eq!(got.size, n);
+            // The sampler's weights carry the f32 round-off of face coordinates of size ~n
+            // (n·2⁻²⁴ a weight): what separates the two reads, ~10⁻⁵ of the level's largest
+            // value at 64²; a wrong tap or weight is off by a sizeable fraction of it.
+            let top = level
+                .faces
+                .iter()
+                .flat_map(|f| &f.data)
+                .fold(0.0f32, |a, &b| a.max(b));
+            for (g, w) in got.faces.iter().zip(&want.faces) {
+                for (a, b) in g.data.iter().zip(&w.data) {
+                    let tol = 1e-7 * n.max(m) as f32 * top + 1e-6 * b.abs();
+                    assert!((a - b).abs() <= tol, "{m} → {n}: {a} vs {b}");
+                }
+            }
+        }
+    }
+
     #[test]
     fn a_finer_level_read_at_coarse_texel_centres_is_the_mean_of_its_four_texels() {
         // A coarse texel's centre is the shared corner of the 2×2 finer texels under it: the
@@ -716,7 +1090,7 @@ mod tests {
                 })
                 .collect();
             let omega = |t: usize| 0.5 + (t % 7) as f64 * 0.1;
-            let steps = power_kept_steps(&hulls, omega);
+            let steps = power_kept_steps(&Hulls::of(&hulls), omega);
             let free: Vec<f64> = hulls.iter().map(|h| h.argmin(0.0)).collect();
             let power: f64 = steps.iter().enumerate().map(|(t, d)| omega(t) * d).sum();
             let scale: f64 = free
@@ -757,6 +1131,106 @@ mod tests {
                     }
                 }
             }
+        }
+    }
+
+    /// The radix select and the median splits inside the crossing range take the same steps
+    /// as the plain definition: every step sorted by (price, texel, vertex) and walked until
+    /// the change crosses 0. Thousands of texels with prices over several binades, and copies
+    /// of one hull (equal prices: one range holding more steps than are walked directly).
+    #[test]
+    fn power_kept_steps_match_a_walk_of_every_step_sorted() {
+        use ibl_core::sampling::Pcg32;
+        fn by_sorting(hulls: &[Hull], omega: impl Fn(usize) -> f64) -> Vec<f64> {
+            let at: Vec<usize> = hulls
+                .iter()
+                .map(|h| argmin_index(&h.vertices, 0.0))
+                .collect();
+            let mut steps: Vec<f64> = hulls
+                .iter()
+                .zip(&at)
+                .map(|(h, &i)| h.vertices[i].0)
+                .collect();
+            let mut left_over: f64 = steps.iter().enumerate().map(|(t, d)| omega(t) * d).sum();
+            let left = left_over > 0.0;
+            let mut events = Vec::new();
+            for (t, (h, &i)) in hulls.iter().zip(&at).enumerate() {
+                let v = &h.vertices;
+                let slope = |j: usize| (v[j].1 - v[j - 1].1) / (v[j].0 - v[j - 1].0);
+                if left {
+                    events.extend((1..=i).map(|j| (-slope(j), t, j - 1)));
+                } else {
+                    events.extend((i + 1..v.len()).map(|j| (slope(j), t, j)));
+                    events.push((h.ray, t, v.len()));
+                }
+            }
+            events.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
+            for (_, t, j) in events {
+                let Some(&(to, _)) = hulls[t].vertices.get(j) else {
+                    steps[t] -= left_over / omega(t);
+                    break;
+                };
+                let moved = omega(t) * (to - steps[t]);
+                if (left_over + moved) * left_over <= 0.0 {
+                    steps[t] += (to - steps[t]) * (-left_over / moved);
+                    break;
+                }
+                left_over += moved;
+                steps[t] = to;
+            }
+            steps
+        }
+        let mut rng = Pcg32::new(41, 6);
+        for case in 0..12 {
+            let count = [3000, 20000][case % 2];
+            // From case 6 most texels copy the first, from case 9 all do.
+            let (copies, share) = (case >= 6, if case >= 9 { 1.0 } else { 0.7 });
+            let mut hulls = Vec::new();
+            let mut template = None;
+            for _ in 0..count {
+                if let Some(h) = template.as_ref().filter(|_| copies) {
+                    if rng.next_f64() < share {
+                        hulls.push(Hull::clone(h));
+                        continue;
+                    }
+                }
+                let y = 10f64.powf(4.0 * rng.next_f64() - 2.0);
+                let pl = y * (0.5 + rng.next_f64());
+                let terms: Vec<Term> = std::iter::once(Term::new(0.0, 1.0, y))
+                    .chain((0..4).map(|_| {
+                        let off = (rng.next_f64() - 0.5 + 0.4 * (case % 3) as f64 - 0.4) * pl;
+                        Term::new(off, 0.2 + 0.8 * rng.next_f64(), y * (0.5 + rng.next_f64()))
+                    }))
+                    .collect();
+                let h = Hull::of(&terms, -pl);
+                template.get_or_insert_with(|| h.clone());
+                hulls.push(h);
+            }
+            let omega = |t: usize| 0.5 + (t % 7) as f64 * 0.1;
+            let got = power_kept_steps(&Hulls::of(&hulls), omega);
+            let want = by_sorting(&hulls, omega);
+            let mut partial = 0;
+            for (t, (a, b)) in got.iter().zip(&want).enumerate() {
+                if a != b {
+                    // The step taken in part: the change before it summed in another order.
+                    partial += 1;
+                    assert!(
+                        (a - b).abs() <= 1e-9 * (a.abs() + b.abs()),
+                        "case {case} texel {t}: {a} vs {b}"
+                    );
+                }
+            }
+            assert!(partial <= 1, "case {case}: {partial} texels differ");
+            let power: f64 = got.iter().enumerate().map(|(t, d)| omega(t) * d).sum();
+            let scale: f64 = got
+                .iter()
+                .enumerate()
+                .map(|(t, d)| omega(t) * d.abs())
+                .sum();
+            assert!(
+                power.abs() <= 1e-9 * scale,
+                "case {case}: {power} of {scale}"
+            );
         }
     }
 
