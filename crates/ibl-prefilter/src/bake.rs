@@ -1209,13 +1209,10 @@ fn fit_to_lookup(
                 kernel_seconds += tk.elapsed().as_secs_f64();
                 stages[l].fitting = Some((plan, at_nodes));
             }
-            // A level with no read correction is read as it is (a copy of level 0 was most of
-            // the reads' time at 512²).
-            let read = |st: &Stage| match st.correction {
-                None => fit::read_at_texels(&st.values, n),
-                Some(_) => fit::read_at_texels(&st.stored(), n),
-            };
-            let (lo, hi) = (read(&stages[l - 1]), read(&stages[l + 1]));
+            // A level with no read correction is read as it is, not copied (`Stage::stored`
+            // borrows it; a copy of level 0 was most of the reads' time at 512²).
+            let lo = fit::read_at_texels(&stages[l - 1].stored(), n);
+            let hi = fit::read_at_texels(&stages[l + 1].stored(), n);
             let coarser = if sweep == 0 {
                 fit::Coarser::Follows
             } else {
