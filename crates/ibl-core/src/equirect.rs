@@ -153,15 +153,18 @@ pub fn equirect_to_cube(
     rotate_deg: f32,
     progress: &dyn crate::progress::Progress,
 ) -> Cubemap {
-    let tables = crate::area::EquirectTables::new(src);
-    let step = 2.0 / n as f64;
-    let rot = (rotate_deg as f64).to_radians();
-    crate::traverse::map_cube_texels_with(n, progress, Vec::new, |cuts, face, i, j| match filter {
-        Filter::Area => {
-            let (s0, t0) = (i as f64 * step - 1.0, j as f64 * step - 1.0);
-            crate::area::footprint_mean(&tables, face, s0, s0 + step, t0, t0 + step, rot, cuts).0
-        }
-        Filter::Bilinear => {
+    let plan = match filter {
+        Filter::Area => Some(crate::area::AreaPlan::new(
+            src,
+            n,
+            (rotate_deg as f64).to_radians(),
+        )),
+        Filter::Bilinear => None,
+    };
+    let scratch = crate::area::Scratch::default;
+    crate::traverse::map_cube_texels_with(n, progress, scratch, |sc, face, i, j| match &plan {
+        Some(plan) => plan.footprint_mean(sc, face, i, j).0,
+        None => {
             let d = face.direction(texel_coord(i, n), texel_coord(j, n));
             sample_bilinear(src, rotate_y(d, -rotate_deg))
         }
