@@ -11,12 +11,17 @@
 //! Work per texel, and why it is arranged so: on a side face the column cuts, the Gauss nodes
 //! and their weights depend on the texel's column alone, so [`AreaPlan`] computes them once per
 //! column of texels (n per face instead of n² times); what is left per texel is, per node, two
-//! square roots for the run's ends, the row search (started from the previous node's rows, so
-//! a step or two instead of an arccos) and one multiply-add per source pixel of the run. The
-//! source is read in place, row-major (a texel row's runs walk along the same few source rows;
-//! a column-major copy would double the source's memory). Every sum is formed in the same order
-//! and with the same operands as before this plan (kept in `area_before.rs` as the tests'
-//! reference), so the result is bit-identical to it.
+//! square roots for the run's ends. On a polar face the cuts are the texel's own (its corners'
+//! directions and the meridians between them); the cut directions come without trigonometry
+//! (corners by x/r, z/r; meridians from a table) and each node's by turning its piece's start
+//! through a short series. The three nodes of a piece share its source column, so their runs
+//! are summed row by row: one row search per piece end (started from the previous piece's
+//! rows, so a step or two instead of an arccos) and one read of each source pixel. The source
+//! is read in place, row-major (a texel row's runs walk along the same few source rows; a
+//! column-major copy would double the source's memory). The terms are those of the code this
+//! replaced (`area_before.rs`, the tests' reference) summed in another order, so the results
+//! agree to rounding (the tests measure it), and every texel is a function of its coordinates
+//! alone: the same bits for any thread count.
 
 use crate::cube::Face;
 use crate::image::Image;
@@ -61,22 +66,28 @@ pub(crate) struct AreaPlan<'a> {
     cos_row: Vec<f64>,
     /// Indexed by `Face as usize`; empty for ±Y.
     side: [SideColumns; 6],
+    /// (cos, sin) of the azimuth 2π(k/W − 0.5) − rot of column boundary k, k = 0 … W−1.
+    meridian: Vec<[f64; 2]>,
 }
 
-/// One Gauss node's vertical run: source column, the cosines of its ends and its weight.
+/// A column piece's three Gauss nodes: the source column, the cosines of each node's run
+/// ends and its weight (a node whose ray misses the texel has an empty run and weight 0).
 #[derive(Clone, Copy, Debug)]
-struct Run {
+struct Piece {
     col: usize,
-    c_top: f64,
-    c_bot: f64,
-    scale: f64,
+    c_top: [f64; 3],
+    c_bot: [f64; 3],
+    scale: [f64; 3],
 }
 
-/// Per-thread scratch: the polar faces' cut list, a texel's runs and the row-search starts.
+/// The run of a node that adds nothing.
+const EMPTY_RUN: (f64, f64, f64) = (f64::NEG_INFINITY, f64::INFINITY, 0.0);
+
+/// Per-thread scratch: the polar faces' cut list, a texel's pieces and the row-search starts.
 #[derive(Default)]
 pub(crate) struct Scratch {
-    cuts: Vec<f64>,
-    runs: Vec<Run>,
+    cuts: Vec<(f64, [f64; 2])>,
+    pieces: Vec<Piece>,
     hint: [usize; 2],
 }
 
@@ -114,6 +125,12 @@ impl<'a> AreaPlan<'a> {
             rot: rotate_rad,
             cos_row: (0..=h).map(|j| (PI * j as f64 / h as f64).cos()).collect(),
             side,
+            meridian: (0..w)
+                .map(|k| {
+                    let (sn, cs) = (2.0 * PI * (k as f64 / w as f64 - 0.5) - rotate_rad).sin_cos();
+                    [cs, sn]
+                })
+                .collect(),
         }
     }
 
@@ -123,11 +140,12 @@ impl<'a> AreaPlan<'a> {
     #[inline(always)]
     fn row_of_cos(&self, c: f64, hint: &mut usize) -> usize {
         let c = c.clamp(-1.0, 1.0);
-        let mut j = (*hint).min(self.h - 1);
-        // A far start (a new face row) jumps by the cheap arccos first.
-        if self.cos_row[j] < c - 0.05 || self.cos_row[j + 1] > c + 0.05 {
-            j = ((crate::approx::acos(c) * self.h as f64 / PI) as usize).min(self.h - 1);
-        }
+        // A new face row (no hint) starts from the cheap arccos.
+        let mut j = if *hint >= self.h {
+            ((crate::approx::acos(c) * self.h as f64 / PI) as usize).min(self.h - 1)
+        } else {
+            *hint
+        };
         while j + 1 < self.h && self.cos_row[j + 1] >= c {
             j += 1;
         }
@@ -142,35 +160,54 @@ impl<'a> AreaPlan<'a> {
     #[inline]
     fn column_of_phi(&self, phi: f64) -> usize {
         let u = 0.5 + phi / (2.0 * PI);
-        ((u * self.w as f64).floor() as i64).rem_euclid(self.w as i64) as usize
+        let w = self.w as i64;
+        let mut x = (u * self.w as f64).floor() as i64;
+        // Within a turn of [0, W) but for large rotations: a compare, not a division.
+        if x < 0 {
+            x += w;
+        } else if x >= w {
+            x -= w;
+        }
+        if !(0..w).contains(&x) {
+            x = x.rem_euclid(w);
+        }
+        x as usize
     }
 
-    /// Adds Σ_rows L(col, row)·(cos θ_lo − cos θ_hi)·scale for the polar-angle run whose
-    /// cosines go from `c_top` (smaller θ) down to `c_bot`, to `acc`; returns the weight added.
+    /// Adds Σ_nodes Σ_rows L(col, row)·(cos θ_lo − cos θ_hi)·scale over a piece's three
+    /// node runs (each from cosine `c_top`, the smaller θ, down to `c_bot`) to `acc`, row by
+    /// row (the nodes share the column, so each source pixel is read once and the row
+    /// search is done for the piece, not per node); returns the weight added.
     #[inline(always)]
-    fn accumulate_run(
-        &self,
-        col: usize,
-        c_top: f64,
-        c_bot: f64,
-        scale: f64,
-        acc: &mut [f64; 3],
-        hint: &mut [usize; 2],
-    ) -> f64 {
-        if c_top <= c_bot {
+    fn accumulate_piece(&self, p: &Piece, acc: &mut [f64; 3], hint: &mut [usize; 2]) -> f64 {
+        let top = p.c_top[0].max(p.c_top[1]).max(p.c_top[2]);
+        let bot = p.c_bot[0].min(p.c_bot[1]).min(p.c_bot[2]);
+        if top <= bot {
             return 0.0;
         }
-        let j0 = self.row_of_cos(c_top, &mut hint[0]);
-        let j1 = self.row_of_cos(c_bot, &mut hint[1]);
+        let j0 = self.row_of_cos(top, &mut hint[0]);
+        let j1 = self.row_of_cos(bot, &mut hint[1]);
         let ch = self.src.channels;
         let stride = self.w * ch;
-        let data = &self.src.data[col * ch..];
+        let data = &self.src.data[p.col * ch..];
         let mut total = 0.0;
         for (k, bounds) in self.cos_row[j0..=j1 + 1].windows(2).enumerate() {
-            let hi = c_top.min(bounds[0]);
-            let lo = c_bot.max(bounds[1]);
-            if hi <= lo {
-                continue;
+            let mut w = 0.0;
+            for g in 0..3 {
+                // Plain compares (no NaN here): one instruction each, not f64::min's four.
+                let hi = if p.c_top[g] < bounds[0] {
+                    p.c_top[g]
+                } else {
+                    bounds[0]
+                };
+                let lo = if p.c_bot[g] > bounds[1] {
+                    p.c_bot[g]
+                } else {
+                    bounds[1]
+                };
+                if hi > lo {
+                    w += (hi - lo) * p.scale[g];
+                }
             }
             let t = &data[(j0 + k) * stride..];
             // Image::rgb's reading of 1, 2, 3 or 4 channels.
@@ -179,7 +216,6 @@ impl<'a> AreaPlan<'a> {
                 2 => [t[0], t[1], 0.0],
                 _ => [t[0], t[1], t[2]],
             };
-            let w = (hi - lo) * scale;
             acc[0] += l[0] as f64 * w;
             acc[1] += l[1] as f64 * w;
             acc[2] += l[2] as f64 * w;
@@ -195,6 +231,9 @@ impl<'a> AreaPlan<'a> {
         let mut acc = [0.0f64; 3];
         let (s0, t0) = (i as f64 * self.step - 1.0, j as f64 * self.step - 1.0);
         let (s1, t1) = (s0 + self.step, t0 + self.step);
+        if i == 0 {
+            sc.hint = [usize::MAX; 2];
+        }
         let total = match face {
             Face::Py | Face::Ny => self.polar_face(sc, face, s0, s1, t0, t1, &mut acc),
             _ => self.side_face(sc, face, i, t0, t1, &mut acc),
@@ -220,32 +259,32 @@ impl<'a> AreaPlan<'a> {
         let cols = &self.side[face as usize];
         let (tt0, tt1) = (t0 * t0, t1 * t1);
         // The runs' ends first (independent square roots, which overlap), then the sums.
-        sc.runs.clear();
+        sc.pieces.clear();
         for p in &cols.pieces[cols.start[i]..cols.start[i + 1]] {
-            for g in 0..3 {
-                let big_a = p.big_a[g];
-                // cos θ = −t / sqrt(A + t²): the top edge t0 has the smaller θ.
-                sc.runs.push(Run {
-                    col: p.col,
-                    c_top: -t0 / (big_a + tt0).sqrt(),
-                    c_bot: -t1 / (big_a + tt1).sqrt(),
-                    scale: p.scale[g],
-                });
-            }
+            // cos θ = −t / sqrt(A + t²): the top edge t0 has the smaller θ.
+            sc.pieces.push(Piece {
+                col: p.col,
+                c_top: p.big_a.map(|a| -t0 / (a + tt0).sqrt()),
+                c_bot: p.big_a.map(|a| -t1 / (a + tt1).sqrt()),
+                scale: p.scale,
+            });
         }
-        self.accumulate_runs(sc, acc)
+        self.accumulate_pieces(sc, acc)
     }
 
-    /// Σ of [`Self::accumulate_run`] over the scratch's runs, in their order.
+    /// Σ of [`Self::accumulate_piece`] over the scratch's pieces, in their order.
     #[inline(always)]
-    fn accumulate_runs(&self, sc: &mut Scratch, acc: &mut [f64; 3]) -> f64 {
+    fn accumulate_pieces(&self, sc: &mut Scratch, acc: &mut [f64; 3]) -> f64 {
         let mut total = 0.0;
-        for r in &sc.runs {
-            total += self.accumulate_run(r.col, r.c_top, r.c_bot, r.scale, acc, &mut sc.hint);
+        for p in &sc.pieces {
+            total += self.accumulate_piece(p, acc, &mut sc.hint);
         }
         total
     }
 
+    /// A polar-face texel: the square [x0,x1]×[z0,z1] of the face plane seen from the pole,
+    /// cut into angular pieces at the meridians and at its corners' directions (where the
+    /// ray–square distance has kinks), 3 Gauss nodes per piece.
     #[allow(clippy::too_many_arguments)]
     fn polar_face(
         &self,
@@ -265,26 +304,47 @@ impl<'a> AreaPlan<'a> {
         let (x0, x1) = (s0, s1);
         let (z0, z1) = if north { (t0, t1) } else { (-t1, -t0) };
         let contains_pole = x0 <= 0.0 && x1 >= 0.0 && z0 <= 0.0 && z1 >= 0.0;
-        let corners = [(x0, z0), (x1, z0), (x0, z1), (x1, z1)].map(|(x, z)| z.atan2(x));
-        // Angular range of the square seen from the pole, unwrapped around its centre angle.
-        let (phi_lo, phi_hi) = if contains_pole {
-            (-PI, PI)
-        } else {
-            let centre = (0.5 * (z0 + z1)).atan2(0.5 * (x0 + x1));
-            let mut lo = f64::INFINITY;
-            let mut hi = f64::NEG_INFINITY;
-            for c in corners {
-                let mut a = c - centre;
-                a = (a + PI).rem_euclid(2.0 * PI) - PI;
-                lo = lo.min(a);
-                hi = hi.max(a);
+        let xz = [(x0, z0), (x1, z0), (x0, z1), (x1, z1)];
+        let corners = xz.map(|(x, z)| z.atan2(x));
+        // Corner k's direction without trigonometry (but for a corner at the pole, whose
+        // angle atan2 chose by the zeros' signs).
+        let unit = |k: usize| {
+            let (x, z) = xz[k];
+            let r = (x * x + z * z).sqrt();
+            if r > 0.0 {
+                [x / r, z / r]
+            } else {
+                let (sn, cs) = corners[k].sin_cos();
+                [cs, sn]
             }
-            (centre + lo, centre + hi)
         };
-        // The ray–square distance has kinks at the corner directions: cut there too.
-        cuts.push(phi_lo);
-        cuts.push(phi_hi);
-        for mut a in corners {
+        // Angular range of the square seen from the pole (less than π wide when it does not
+        // contain the pole), unwrapped around its first corner, with the directions of its ends.
+        let (phi_lo, phi_hi, dir_lo, dir_hi) = if contains_pole {
+            (-PI, PI, [-1.0, 0.0], [-1.0, 0.0])
+        } else {
+            let (mut lo, mut hi) = (0.0, 0.0);
+            let (mut k_lo, mut k_hi) = (0, 0);
+            for (k, &c) in corners.iter().enumerate().skip(1) {
+                let mut a = c - corners[0];
+                if a > PI {
+                    a -= 2.0 * PI;
+                } else if a < -PI {
+                    a += 2.0 * PI;
+                }
+                if a < lo {
+                    (lo, k_lo) = (a, k);
+                }
+                if a > hi {
+                    (hi, k_hi) = (a, k);
+                }
+            }
+            (corners[0] + lo, corners[0] + hi, unit(k_lo), unit(k_hi))
+        };
+        // Each cut with the unit direction (cos φ, sin φ) of its azimuth.
+        cuts.push((phi_lo, dir_lo));
+        // The ray–square distance has kinks at the other corners' directions: cut there too.
+        for (k, mut a) in corners.into_iter().enumerate() {
             while a < phi_lo {
                 a += 2.0 * PI;
             }
@@ -292,7 +352,7 @@ impl<'a> AreaPlan<'a> {
                 a -= 2.0 * PI;
             }
             if a > phi_lo && a < phi_hi {
-                cuts.push(a);
+                cuts.push((a, unit(k)));
             }
         }
         // Meridians: with the rotation, column boundary k sits at azimuth 2π(k/W − 0.5) − rot.
@@ -301,22 +361,38 @@ impl<'a> AreaPlan<'a> {
         let k_hi = (0.5 + (phi_hi + rot) / (2.0 * PI)) * w;
         let mut k = k_lo;
         while k < k_hi {
-            cuts.push(2.0 * PI * (k / w - 0.5) - rot);
+            let m = self.meridian[(k as i64).rem_euclid(self.w as i64) as usize];
+            cuts.push((2.0 * PI * (k / w - 0.5) - rot, m));
             k += 1.0;
         }
-        // Ascending already but for the first six; the sort finds that out in one pass.
-        cuts.sort_unstable_by(|a, b| a.partial_cmp(b).unwrap());
-        sc.runs.clear();
+        // Between the ends, in order (the meridians come sorted: an insertion sort's pass).
+        let inner = cuts.len();
+        cuts[1..inner].sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+        cuts.push((phi_hi, dir_hi));
+        sc.pieces.clear();
         for piece in cuts.windows(2) {
-            let (a, b) = (piece[0], piece[1]);
+            let ((a, [ca, sa]), (b, _)) = (piece[0], piece[1]);
             if b <= a {
                 continue;
             }
             let col = self.column_of_phi(0.5 * (a + b) + rot);
             let half = 0.5 * (b - a);
-            for (xg, gw) in GAUSS {
-                let phi = 0.5 * (a + b) + half * xg;
-                let (sn, cs) = phi.sin_cos();
+            let mut p = Piece {
+                col,
+                c_top: [0.0; 3],
+                c_bot: [0.0; 3],
+                scale: [0.0; 3],
+            };
+            for (g, (xg, gw)) in GAUSS.into_iter().enumerate() {
+                // The node's direction: the piece start's turned by d = φ − a, by the series
+                // below on the narrow pieces every source wider than a few dozen pixels makes.
+                let d = half * (1.0 + xg);
+                let (sn, cs) = if half <= SMALL_TURN {
+                    let (sd, cd) = small_sin_cos(d);
+                    (sa * cd + ca * sd, ca * cd - sa * sd)
+                } else {
+                    (0.5 * (a + b) + half * xg).sin_cos()
+                };
                 // Ray–square intersection (slab method) in the face plane.
                 let (mut r_in, mut r_out) = (0.0f64, f64::INFINITY);
                 for (d, lo, hi) in [(cs, x0, x1), (sn, z0, z1)] {
@@ -326,11 +402,18 @@ impl<'a> AreaPlan<'a> {
                         }
                         continue;
                     }
-                    let (ta, tb) = (lo / d, hi / d);
-                    r_in = r_in.max(ta.min(tb));
-                    r_out = r_out.min(ta.max(tb));
+                    let inv = 1.0 / d;
+                    let (ta, tb) = (lo * inv, hi * inv);
+                    let (near, far) = if ta < tb { (ta, tb) } else { (tb, ta) };
+                    if near > r_in {
+                        r_in = near;
+                    }
+                    if far < r_out {
+                        r_out = far;
+                    }
                 }
                 if r_out <= r_in {
+                    (p.c_top[g], p.c_bot[g], p.scale[g]) = EMPTY_RUN;
                     continue;
                 }
                 // cos θ' = 1/sqrt(1+ρ²) from the pole; on the south face θ = π − θ'.
@@ -341,16 +424,29 @@ impl<'a> AreaPlan<'a> {
                 } else {
                     (-c_far, -c_near)
                 };
-                sc.runs.push(Run {
-                    col,
-                    c_top,
-                    c_bot,
-                    scale: gw * half,
-                });
+                (p.c_top[g], p.c_bot[g], p.scale[g]) = (c_top, c_bot, gw * half);
             }
+            sc.pieces.push(p);
         }
-        self.accumulate_runs(sc, acc)
+        self.accumulate_pieces(sc, acc)
     }
+}
+
+/// Largest half-width of a polar piece whose nodes are turned by [`small_sin_cos`]: pieces
+/// are at most one source column wide (2π/W), so this covers every source from W = 63 up.
+const SMALL_TURN: f64 = 0.05;
+
+/// (sin d, cos d) for |d| ≤ 2·[`SMALL_TURN`] by their Taylor series to d⁹ and d¹⁰: the first
+/// terms left out, d¹¹/11! and d¹²/12!, are below 3e-19 there, under half an ulp of the result.
+#[inline(always)]
+fn small_sin_cos(d: f64) -> (f64, f64) {
+    let x = d * d;
+    // Horner in d² with the factorials' reciprocals (multiplies, not divisions).
+    let s = d * (1.0 + x * (-1.0 / 6.0 + x * (1.0 / 120.0 + x * (-1.0 / 5040.0 + x / 362_880.0))));
+    let c = 1.0
+        + x * (-0.5
+            + x * (1.0 / 24.0 + x * (-1.0 / 720.0 + x * (1.0 / 40320.0 - x / 3_628_800.0))));
+    (s, c)
 }
 
 /// Horizontal frame of a side face: direction(s, t) = (P + sQ) − t·ŷ with P, Q unit (x, z).
@@ -509,11 +605,15 @@ mod tests {
     }
 
     #[test]
-    fn same_bits_as_the_previous_implementation() {
-        // Every texel, every face, the same bits as the code this plan replaced, over source
-        // and face sizes that make texels span many, one and a fraction of a source pixel,
-        // with and without a rotation, and for 1 to 4 channels.
-        let cases: [(usize, usize, usize, f64); 7] = [
+    fn same_result_as_the_previous_implementation() {
+        // Every texel, every face, against the code this plan replaced (area_before.rs), over
+        // source and face sizes that make texels span many, one and a fraction of a source
+        // pixel, with and without a rotation, for 1 to 4 channels, and sources narrow enough
+        // (W < 63) that the polar nodes take sin_cos instead of the series. The sums are the
+        // same terms in another order (the three nodes of a piece added row by row) and the
+        // polar nodes are turned by a series: the covered solid angle (f64) agrees to float
+        // rounding and the means to the last bit or two of their f32.
+        let cases: [(usize, usize, usize, f64); 8] = [
             (64, 32, 8, 0.0),
             (64, 32, 7, 0.3),
             (128, 64, 16, -2.1),
@@ -521,8 +621,10 @@ mod tests {
             (200, 100, 13, 1.0),
             (16, 8, 1, 0.0),
             (96, 48, 2, 4.0),
+            (512, 256, 40, 0.7),
         ];
-        let mut compared = 0usize;
+        let (mut compared, mut same) = (0usize, 0usize);
+        let (mut worst_mean, mut worst_total) = (0.0f64, 0.0f64);
         for (k, &(w, h, n, rot)) in cases.iter().enumerate() {
             let img = source(w, h, 1 + k % 4);
             let old = before::EquirectTables::new(&img);
@@ -544,16 +646,25 @@ mod tests {
                             &mut Vec::new(),
                         );
                         let got = plan.footprint_mean(&mut sc, face, i, j);
-                        assert_eq!(
-                            (got.0.map(f32::to_bits), got.1.to_bits()),
-                            (want.0.map(f32::to_bits), want.1.to_bits()),
-                            "{w}x{h} -> {n} rot {rot} {face:?} ({i},{j})"
-                        );
+                        let at = format!("{w}x{h} -> {n} rot {rot} {face:?} ({i},{j})");
+                        let total = ((got.1 - want.1) / want.1).abs();
+                        let mut mean = 0.0f64;
+                        for c in 0..3 {
+                            let (g, w) = (got.0[c] as f64, want.0[c] as f64);
+                            mean = mean.max((g - w).abs() / w.abs().max(1e-30));
+                        }
+                        assert!(total < 1e-12 && mean < 1e-6, "{at}: {got:?} vs {want:?}");
+                        worst_mean = worst_mean.max(mean);
+                        worst_total = worst_total.max(total);
                         compared += 1;
+                        same += usize::from(got.0 == want.0);
                     }
                 }
             }
         }
-        eprintln!("area plan vs previous implementation: {compared} texels, all bit-identical");
+        eprintln!(
+            "area plan vs previous implementation: {compared} texels, {same} with the same f32 \
+             means; worst relative difference {worst_mean:.1e} (means), {worst_total:.1e} (solid angle)"
+        );
     }
 }

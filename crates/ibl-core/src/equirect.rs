@@ -276,6 +276,20 @@ mod tests {
     }
 
     #[test]
+    fn area_filter_is_bit_identical_for_any_thread_count() {
+        // The row-search hints and the scratch are per thread; each texel must still be a
+        // function of its coordinates alone.
+        let (w, h) = (200, 100);
+        let mut src = Image::new(w, h, 4);
+        for (k, v) in src.data.iter_mut().enumerate() {
+            *v = ((k * 7919) % 1013) as f32 * 0.01 + if k % 331 == 0 { 1e4 } else { 0.0 };
+        }
+        ibl_testkit::thread_count_independent(&[1, 2, 3], || {
+            equirect_to_cube(&src, 23, Filter::Area, 17.0, &crate::progress::NoProgress)
+        });
+    }
+
+    #[test]
     fn constant_equirect_gives_constant_cube_and_back() {
         let mut src = Image::new(64, 32, 3);
         src.data.iter_mut().for_each(|v| *v = 2.5);
