@@ -237,6 +237,9 @@ pub fn encode(path: &Path, img: &Image, depth: FloatDepth) -> Result<Vec<u8>> {
     let mut out = Cursor::new(Vec::new());
     image
         .write()
+        // On this thread: callers encode many faces at once on the rayon pool already, and
+        // the crate's parallel writer builds a thread pool per file.
+        .non_parallel()
         .to_buffered(&mut out)
         .map_err(|e| Error::invalid(path, format!("EXR encoding failed: {e}")))?;
     Ok(out.into_inner())
