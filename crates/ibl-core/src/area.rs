@@ -88,6 +88,8 @@ const EMPTY_RUN: (f64, f64, f64) = (f64::NEG_INFINITY, f64::INFINITY, 0.0);
 pub(crate) struct Scratch {
     cuts: Vec<(f64, [f64; 2])>,
     pieces: Vec<Piece>,
+    /// The last polar texel's right edge (x1, z0, z1 as bits) and its corners' azimuths.
+    right_edge: Option<([u64; 3], f64, f64)>,
     hint: [usize; 2],
 }
 
@@ -297,15 +299,23 @@ impl<'a> AreaPlan<'a> {
         acc: &mut [f64; 3],
     ) -> f64 {
         let rot = self.rot;
-        let cuts = &mut sc.cuts;
-        cuts.clear();
+        sc.cuts.clear();
         // Face-plane coordinates (X, Z) = horizontal part of the direction: py (s, t), ny (s, −t).
         let north = face == Face::Py;
         let (x0, x1) = (s0, s1);
         let (z0, z1) = if north { (t0, t1) } else { (-t1, -t0) };
         let contains_pole = x0 <= 0.0 && x1 >= 0.0 && z0 <= 0.0 && z1 >= 0.0;
         let xz = [(x0, z0), (x1, z0), (x0, z1), (x1, z1)];
-        let corners = xz.map(|(x, z)| z.atan2(x));
+        // The left corners are the previous texel's right ones when it was the left
+        // neighbour (same bits in, same atan2 out): two atan2 per texel instead of four.
+        let key = [x0, z0, z1].map(f64::to_bits);
+        let (left0, left1) = match sc.right_edge {
+            Some((k, a, b)) if k == key => (a, b),
+            _ => (z0.atan2(x0), z1.atan2(x0)),
+        };
+        let corners = [left0, z0.atan2(x1), left1, z1.atan2(x1)];
+        sc.right_edge = Some(([x1, z0, z1].map(f64::to_bits), corners[1], corners[3]));
+        let cuts = &mut sc.cuts;
         // Corner k's direction without trigonometry (but for a corner at the pole, whose
         // angle atan2 chose by the zeros' signs).
         let unit = |k: usize| {
