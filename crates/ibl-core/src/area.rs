@@ -207,9 +207,9 @@ impl<'a> AreaPlan<'a> {
                 } else {
                     bounds[1]
                 };
-                if hi > lo {
-                    w += (hi - lo) * p.scale[g];
-                }
+                // Branch-free (a node's run may end above or start below this row).
+                let d = hi - lo;
+                w += if d > 0.0 { d } else { 0.0 } * p.scale[g];
             }
             let t = &data[(j0 + k) * stride..];
             // Image::rgb's reading of 1, 2, 3 or 4 channels.
