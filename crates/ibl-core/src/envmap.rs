@@ -306,6 +306,24 @@ fn read_hdr_image_shaped(
     sanitize: bool,
     shape: &(dyn Fn(u64, u64) -> Result<()> + Sync),
 ) -> Result<(Image, TexelReport, Option<String>)> {
+    // Large files whose format decodes from a stream are not held whole: the header, the
+    // size and the name check need the first bytes only.
+    const HEAD: usize = 64 << 10;
+    let file_len = std::fs::metadata(path)
+        .map_err(|e| Error::io(path, e))?
+        .len();
+    if file_len > 2 * HEAD as u64 {
+        let head = read_head(path, HEAD)?;
+        if let Some((w, h)) = io::declared_size(&head) {
+            shape(w, h)?;
+        }
+        if let Some(img) = io::decode_file_streamed(path, &head, file_len) {
+            let mut img = img?;
+            shape(img.width as u64, img.height as u64)?;
+            let report = check_finite(&mut img, path, sanitize)?;
+            return Ok((img, report, io::content_mismatch(path, &head)));
+        }
+    }
     let bytes = io::budget::read_file(path)?;
     if let Some((w, h)) = io::declared_size(&bytes) {
         shape(w, h)?;
@@ -314,6 +332,17 @@ fn read_hdr_image_shaped(
     shape(img.width as u64, img.height as u64)?;
     let report = check_finite(&mut img, path, sanitize)?;
     Ok((img, report, io::content_mismatch(path, &bytes)))
+}
+
+/// The first `len` bytes of `path` (fewer if it is shorter).
+fn read_head(path: &Path, len: usize) -> Result<Vec<u8>> {
+    use std::io::Read;
+    let f = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut head = Vec::with_capacity(len);
+    f.take(len as u64)
+        .read_to_end(&mut head)
+        .map_err(|e| Error::io(path, e))?;
+    Ok(head)
 }
 
 /// The NaN/Inf half of [`check_texels`]: refused unless `sanitize` (then 0). Negative values
@@ -726,6 +755,36 @@ mod tests {
         let p = dir.join(name);
         std::fs::write(&p, bytes).unwrap();
         p
+    }
+
+    #[test]
+    fn a_large_hdr_read_from_a_stream_is_the_same_image_and_truncation_still_fails() {
+        // Above 128 KiB a Radiance file is decoded from a buffered reader (its bytes not held
+        // whole): the same texels as decoding its bytes, the same checks before decoding.
+        let d = tempfile::tempdir().unwrap();
+        let (w, h) = (512, 256);
+        let data: Vec<f32> = (0..w * h * 3)
+            .map(|k| ((k * 7919) % 1009) as f32 * 0.37 + (k % 3) as f32)
+            .collect();
+        let img = Image::from_data(w, h, 3, data).unwrap();
+        let p = write_as(d.path(), "big.hdr", "hdr", &img);
+        let bytes = std::fs::read(&p).unwrap();
+        assert!(bytes.len() > 128 << 10, "{}", bytes.len());
+        let want = io::decode_image(&p, &bytes, ColorSpace::Linear).unwrap();
+        let (got, _, note) = read_hdr_image(&p, false).unwrap();
+        assert_eq!(got, want);
+        assert!(note.is_none());
+        // The same bytes under another name: read by content, with the warning.
+        let q = d.path().join("big.exr");
+        std::fs::write(&q, &bytes).unwrap();
+        let (got, _, note) = read_hdr_image(&q, false).unwrap();
+        assert_eq!(got, want);
+        assert!(note.unwrap().contains("Radiance"));
+        // Cut short: an error naming the file, never a panic or a black band.
+        let cut = d.path().join("cut.hdr");
+        std::fs::write(&cut, &bytes[..bytes.len() * 2 / 3]).unwrap();
+        let err = read_hdr_image(&cut, false).unwrap_err().to_string();
+        assert!(err.contains("cut.hdr"), "{err}");
     }
 
     #[test]

@@ -153,15 +153,18 @@ pub fn equirect_to_cube(
     rotate_deg: f32,
     progress: &dyn crate::progress::Progress,
 ) -> Cubemap {
-    let tables = crate::area::EquirectTables::new(src);
-    let step = 2.0 / n as f64;
-    let rot = (rotate_deg as f64).to_radians();
-    crate::traverse::map_cube_texels_with(n, progress, Vec::new, |cuts, face, i, j| match filter {
-        Filter::Area => {
-            let (s0, t0) = (i as f64 * step - 1.0, j as f64 * step - 1.0);
-            crate::area::footprint_mean(&tables, face, s0, s0 + step, t0, t0 + step, rot, cuts).0
-        }
-        Filter::Bilinear => {
+    let plan = match filter {
+        Filter::Area => Some(crate::area::AreaPlan::new(
+            src,
+            n,
+            (rotate_deg as f64).to_radians(),
+        )),
+        Filter::Bilinear => None,
+    };
+    let scratch = crate::area::Scratch::default;
+    crate::traverse::map_cube_texels_with(n, progress, scratch, |sc, face, i, j| match &plan {
+        Some(plan) => plan.footprint_mean(sc, face, i, j).0,
+        None => {
             let d = face.direction(texel_coord(i, n), texel_coord(j, n));
             sample_bilinear(src, rotate_y(d, -rotate_deg))
         }
@@ -270,6 +273,20 @@ mod tests {
         let mare = err / count as f64;
         eprintln!("exact area filter vs 512²-read grid, worst-case checker: mean abs relative difference {mare:.2e}");
         assert!(mare < 2e-3, "{mare}");
+    }
+
+    #[test]
+    fn area_filter_is_bit_identical_for_any_thread_count() {
+        // The row-search hints and the scratch are per thread; each texel must still be a
+        // function of its coordinates alone.
+        let (w, h) = (200, 100);
+        let mut src = Image::new(w, h, 4);
+        for (k, v) in src.data.iter_mut().enumerate() {
+            *v = ((k * 7919) % 1013) as f32 * 0.01 + if k % 331 == 0 { 1e4 } else { 0.0 };
+        }
+        ibl_testkit::thread_count_independent(&[1, 2, 3], || {
+            equirect_to_cube(&src, 23, Filter::Area, 17.0, &crate::progress::NoProgress)
+        });
     }
 
     #[test]

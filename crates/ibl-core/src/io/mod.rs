@@ -182,6 +182,23 @@ fn image_signature(bytes: &[u8]) -> Option<&'static str> {
     }
 }
 
+/// Decodes the image file at `path` (`file_len` bytes, whose first bytes are `head`) from a
+/// stream, without holding its bytes, when its format allows (Radiance HDR, header in
+/// `head`); `None` for the others (read them whole and [`decode_image`]).
+pub(crate) fn decode_file_streamed(
+    path: &Path,
+    head: &[u8],
+    file_len: u64,
+) -> Option<Result<Image>> {
+    if image_signature(head) != Some("hdr") {
+        return None;
+    }
+    let header = rgbe::header_len(head)?;
+    Some(guard(path, "Radiance HDR", || {
+        rgbe::decode_file(path, header, file_len)
+    }))
+}
+
 /// The format an extension names, in the terms of [`image_signature`] and
 /// [`container::Container`].
 fn format_of_extension(ext: &str) -> Option<&'static str> {
