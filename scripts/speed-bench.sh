@@ -43,6 +43,10 @@ fixtures = sorted(f for f in os.listdir(fx) if f.endswith(".exr"))
 city = os.path.join(fx, "city.exr") if os.path.exists(os.path.join(fx, "city.exr")) else os.path.join(fx, fixtures[0])
 
 def run(binary, inp, args, out, json_out=False):
+    # A fresh folder per run: the base build predates --overwrite and the output record, and
+    # the new one refuses files it did not write (ours to remove: the bench's own folder).
+    out = out + ("_base" if binary == old else "_new")
+    subprocess.run(["rm", "-rf", out], check=True)
     cmd = ["/usr/bin/time", "-f", "%U %S %M %e", binary, inp, "-o", out] + args + (["--json"] if json_out else ["-q"])
     p = subprocess.run(cmd, capture_output=True, text=True, check=True)
     u, s, m, e = p.stderr.strip().splitlines()[-1].split()
@@ -83,6 +87,7 @@ for f in fixtures:
     inp = os.path.join(fx, f)
     oa, ob = os.path.join(work, "rt_base"), os.path.join(work, "rt_new")
     run(old, inp, [], oa); run(new, inp, [], ob)
+    oa, ob = oa + "_base", ob + "_new"
     ra = json.load(open(os.path.join(oa, "prefilter.json")))["runtime"]
     rb = json.load(open(os.path.join(ob, "prefilter.json")))["runtime"]
     d = [(100 * (y - x), r) for x, y, r in zip(ra["mean_abs_rel"], rb["mean_abs_rel"], ra["roughness"])]
@@ -102,6 +107,7 @@ for f in fixtures:
     inp = os.path.join(fx, f)
     oa, ob = os.path.join(work, "rc_base"), os.path.join(work, "rc_new")
     run(old, inp, [], oa); run(new, inp, [], ob)
+    oa, ob = oa + "_base", ob + "_new"
     ra = json.loads(subprocess.run([check, inp, oa], capture_output=True, text=True, check=True).stdout)
     rb = json.loads(subprocess.run([check, inp, ob], capture_output=True, text=True, check=True).stdout)
     d = [(100 * (y - x), r) for x, y, r in zip(ra["mean_abs_rel"], rb["mean_abs_rel"], ra["roughness"])]
