@@ -24,6 +24,7 @@
 //! v = A⁻¹(b − μΩ), μ = (Ωᵀ A⁻¹ b − P) / (Ωᵀ A⁻¹ Ω).
 
 use ibl_core::cube::{bilinear_taps, solid_angle_table, texel_direction, Cubemap, Face};
+use ibl_core::linalg::Cholesky;
 use ibl_core::luminance;
 use serde::Serialize;
 
@@ -212,66 +213,6 @@ fn solve_pinned(
         v[p] = x[r] - mu * y[r];
     }
     v.iter().all(|v| v.is_finite()).then_some(v)
-}
-
-/// `ibl_core::linalg::solve_spd` split in two: the factorisation of the symmetric positive
-/// definite k×k matrix G (Cholesky of D⁻¹GD⁻¹, D = √diag G) once, then any number of
-/// right-hand sides. The same operations in the same order as `solve_spd`, so the same bits
-/// (`cholesky_solves_as_solve_spd`); `None` where `solve_spd` gives none.
-struct Cholesky {
-    k: usize,
-    d: Vec<f64>,
-    l: Vec<f64>,
-}
-
-impl Cholesky {
-    fn new(g: &[f64], k: usize) -> Option<Self> {
-        assert_eq!(g.len(), k * k);
-        let d: Vec<f64> = (0..k).map(|i| g[i * k + i].sqrt()).collect();
-        if d.iter().any(|v| v.is_nan() || *v <= 0.0 || !v.is_finite()) {
-            return None;
-        }
-        let mut l = vec![0.0f64; k * k];
-        for i in 0..k {
-            for j in 0..=i {
-                let mut sum = g[i * k + j] / (d[i] * d[j]);
-                for p in 0..j {
-                    sum -= l[i * k + p] * l[j * k + p];
-                }
-                if i == j {
-                    if sum.is_nan() || sum <= 1e-12 {
-                        return None;
-                    }
-                    l[i * k + i] = sum.sqrt();
-                } else {
-                    l[i * k + j] = sum / l[j * k + j];
-                }
-            }
-        }
-        Some(Cholesky { k, d, l })
-    }
-
-    /// G⁻¹b: L y = D⁻¹ b, Lᵀ z = y, x = D⁻¹ z.
-    fn solve(&self, b: &[f64]) -> Vec<f64> {
-        let (k, d, l) = (self.k, &self.d, &self.l);
-        assert_eq!(b.len(), k);
-        let mut y = vec![0.0f64; k];
-        for i in 0..k {
-            let mut sum = b[i] / d[i];
-            for p in 0..i {
-                sum -= l[i * k + p] * y[p];
-            }
-            y[i] = sum / l[i * k + i];
-        }
-        for i in (0..k).rev() {
-            let mut sum = y[i];
-            for p in i + 1..k {
-                sum -= l[p * k + i] * y[p];
-            }
-            y[i] = sum / l[i * k + i];
-        }
-        y.iter().zip(d).map(|(z, di)| z / di).collect()
-    }
 }
 
 /// Levels of at most this many texels an edge have their read's power kept (every target,
@@ -632,33 +573,6 @@ mod tests {
         let mut black = Cubemap::new(4);
         keep_read_power(&mut black, [1.0; 3], &read_weights(4));
         assert!(black.faces.iter().all(|f| f.data.iter().all(|v| *v == 0.0)));
-    }
-
-    /// The factorisation reused gives what `solve_spd` gives, bit for bit, on random SPD
-    /// systems of several sizes, and refuses what it refuses.
-    #[test]
-    fn cholesky_solves_as_solve_spd() {
-        use ibl_core::linalg::solve_spd;
-        let mut rng = Pcg32::new(8, 8);
-        for k in [1usize, 2, 7, 40, 96] {
-            let m: Vec<f64> = (0..k * k).map(|_| rng.next_f64() - 0.5).collect();
-            let mut g = vec![0.0f64; k * k];
-            for i in 0..k {
-                for j in 0..k {
-                    g[i * k + j] = (0..k).map(|p| m[i * k + p] * m[j * k + p]).sum::<f64>()
-                        + if i == j { 0.1 } else { 0.0 };
-                }
-            }
-            let chol = Cholesky::new(&g, k).expect("SPD");
-            for _ in 0..3 {
-                let b: Vec<f64> = (0..k).map(|_| rng.next_f64() * 10.0 - 5.0).collect();
-                assert_eq!(chol.solve(&b), solve_spd(&g, &b, k).unwrap(), "k {k}");
-            }
-        }
-        let singular = [1.0, 1.0, 1.0, 1.0];
-        assert!(
-            Cholesky::new(&singular, 2).is_none() && solve_spd(&singular, &[1.0, 1.0], 2).is_none()
-        );
     }
 
     #[test]
