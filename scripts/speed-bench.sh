@@ -78,44 +78,37 @@ for name, args in jobs:
     lines.append(f"| {name} | {A:.2f} | {B:.2f} | {A / B:.2f}× | {WA:.2f} | {WB:.2f} | {WA / WB:.2f}× | {max(ma):.0f} | {max(mb):.0f} |")
     print(lines[-1], flush=True)
 
-lines.append("\n### Runtime error: the same within 0.1 point\n")
-lines.append("`prefilter.json`'s `runtime` block (mean relative error of the target's lookup at 33 roughness values) of the "
-             "default bake, base against new, largest change over the roughness grid (`scripts/runtime-compare.py`):\n")
-lines.append("| fixture | base mean | new mean | largest change (points) | at r | ok |")
-lines.append("|---|---:|---:|---:|---:|---|")
-for f in fixtures:
-    inp = os.path.join(fx, f)
-    oa, ob = os.path.join(work, "rt_base"), os.path.join(work, "rt_new")
-    run(old, inp, [], oa); run(new, inp, [], ob)
-    oa, ob = oa + "_base", ob + "_new"
-    ra = json.load(open(os.path.join(oa, "prefilter.json")))["runtime"]
-    rb = json.load(open(os.path.join(ob, "prefilter.json")))["runtime"]
+def runtime_row(f, ra, rb):
+    """A fixture's row: both builds' mean runtime error and the largest change over the grid."""
     d = [(100 * (y - x), r) for x, y, r in zip(ra["mean_abs_rel"], rb["mean_abs_rel"], ra["roughness"])]
     worst = max(d, key=lambda t: abs(t[0]))
     ma = 100 * sum(ra["mean_abs_rel"]) / len(ra["mean_abs_rel"])
     mb = 100 * sum(rb["mean_abs_rel"]) / len(rb["mean_abs_rel"])
-    lines.append(f"| {f} | {ma:.3f}% | {mb:.3f}% | {worst[0]:+.3f} | {worst[1]:.3f} | {'yes' if abs(worst[0]) <= 0.1 else 'NO'} |")
-    print(lines[-1], flush=True)
+    return f"| {f} | {ma:.3f}% | {mb:.3f}% | {worst[0]:+.3f} | {worst[1]:.3f} | {'yes' if abs(worst[0]) <= 0.1 else 'NO'} |"
 
+# Each fixture baked once by each build; its runtime error read from the sidecar and
+# recomputed against the brute force.
+own, brute = [], []
+for f in fixtures:
+    inp = os.path.join(fx, f)
+    oa, ob = os.path.join(work, "rt"), os.path.join(work, "rt")
+    run(old, inp, [], oa); run(new, inp, [], ob)
+    oa, ob = oa + "_base", ob + "_new"
+    side = lambda o: json.load(open(os.path.join(o, "prefilter.json")))["runtime"]
+    own.append(runtime_row(f, side(oa), side(ob)))
+    check_of = lambda o: json.loads(subprocess.run([check, inp, o], capture_output=True, text=True, check=True).stdout)
+    brute.append(runtime_row(f, check_of(oa), check_of(ob)))
+    print(own[-1], brute[-1], flush=True)
+head = ["| fixture | base mean | new mean | largest change (points) | at r | ok |", "|---|---:|---:|---:|---:|---|"]
+lines.append("\n### Runtime error: the same within 0.1 point\n")
+lines.append("`prefilter.json`'s `runtime` block (mean relative error of the target's lookup at 33 roughness values) of the "
+             "default bake, base against new, largest change over the roughness grid (`scripts/runtime-compare.py`):\n")
+lines += head + own
 lines.append("\n### Runtime error against the brute force\n")
 lines.append("The same two chains' runtime error recomputed by `examples/runtime-check` (the target's lookup emulated "
              "on the chain as written, against the exact kernel summed over every source texel: neither build's tree, "
              "whose own reference can share its levels' errors); largest change over the 33 roughness values:\n")
-lines.append("| fixture | base mean | new mean | largest change (points) | at r | ok |")
-lines.append("|---|---:|---:|---:|---:|---|")
-for f in fixtures:
-    inp = os.path.join(fx, f)
-    oa, ob = os.path.join(work, "rc_base"), os.path.join(work, "rc_new")
-    run(old, inp, [], oa); run(new, inp, [], ob)
-    oa, ob = oa + "_base", ob + "_new"
-    ra = json.loads(subprocess.run([check, inp, oa], capture_output=True, text=True, check=True).stdout)
-    rb = json.loads(subprocess.run([check, inp, ob], capture_output=True, text=True, check=True).stdout)
-    d = [(100 * (y - x), r) for x, y, r in zip(ra["mean_abs_rel"], rb["mean_abs_rel"], ra["roughness"])]
-    worst = max(d, key=lambda t: abs(t[0]))
-    ma = 100 * sum(ra["mean_abs_rel"]) / len(ra["mean_abs_rel"])
-    mb = 100 * sum(rb["mean_abs_rel"]) / len(rb["mean_abs_rel"])
-    lines.append(f"| {f} | {ma:.3f}% | {mb:.3f}% | {worst[0]:+.3f} | {worst[1]:.3f} | {'yes' if worst[0] <= 0.1 else 'NO'} |")
-    print(lines[-1], flush=True)
+lines += head + brute
 
 # Floors: memory bandwidth (numpy copy of 256 MiB).
 import numpy as np, time
