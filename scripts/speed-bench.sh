@@ -58,6 +58,9 @@ jobs = [
     ("no flags (gltf 256² × 7)", []),
     ("exact (`--fit-lookup false`) 256², 5 levels", ["--size", "256", "--levels", "5", "--fit-lookup", "false"]),
     ("exact 512², 6 levels", ["--size", "512", "--levels", "6", "--fit-lookup", "false"]),
+    # BC6H against the float bake of the same chain (issue 25 item 5): the encode's cost.
+    ("256², 9 levels, rgba16f KTX2", ["--size", "256", "--levels", "9", "--layout", "ktx2", "--format", "rgba16f"]),
+    ("256², 9 levels, BC6H KTX2", ["--size", "256", "--levels", "9", "--layout", "ktx2", "--format", "bc6h"]),
 ]
 lines = []
 lines.append("## Speed (issue 25)\n")
