@@ -17,7 +17,7 @@
 //! Measured limit (issue 25 item 5): a 4² face is one block, and on the fixtures' rough
 //! levels its 16 texels vary more than two 8-colour lines can follow within the modes'
 //! endpoint precision; a search with 24× more starts gains under 0.1 point (see
-//! `notes/speed-bc6h.md`), so 4² levels stay at 2.2–3.9% mean relative error.
+//! `docs/notes/speed-bc6h.md`), so 4² levels stay at 2.2–3.9% mean relative error.
 
 // Index loops over texels, channels and modes read closer to the block format's tables.
 #![allow(clippy::needless_range_loop)]
@@ -317,68 +317,5 @@ mod tests {
         decode(&encode_searched(&img), &mut back);
         let (mean, _) = relative_errors(&[img], &[back]);
         assert!(mean < 1e-3, "{mean}");
-    }
-}
-
-/// Development probe (ignored): `BC6H_PROBE=DIR cargo test --release -p ibl-core probe_small
-/// -- --ignored --nocapture` prints each ≤8² level's error for every float chain under DIR.
-#[cfg(test)]
-mod probe {
-    use super::*;
-    use crate::io::texture::relative_errors;
-
-    #[test]
-    #[ignore]
-    fn probe_small_levels() {
-        let Ok(root) = std::env::var("BC6H_PROBE") else {
-            return;
-        };
-        let mut dirs: Vec<_> = std::fs::read_dir(root)
-            .unwrap()
-            .map(|e| e.unwrap().path())
-            .collect();
-        dirs.sort();
-        for dir in dirs {
-            let mips = crate::envmap::read_cube_chain(&dir).unwrap();
-            let mut line = format!("{:24}", dir.file_name().unwrap().to_string_lossy());
-            for cube in mips.levels.iter().filter(|c| c.size <= SEARCH_MAX) {
-                let t = std::time::Instant::now();
-                let back: Vec<Image> = cube
-                    .faces
-                    .iter()
-                    .map(|f| {
-                        let mut b = Image::new(f.width, f.height, 3);
-                        decode(&encode(f, Bc6hQuality::Basic), &mut b);
-                        b
-                    })
-                    .collect();
-                let (mean, _) = relative_errors(&cube.faces, &back);
-                if cube.size == 4 && std::env::var("BC6H_VERBOSE").is_ok() {
-                    for (f, b) in cube.faces.iter().zip(&back) {
-                        let (m, _) =
-                            relative_errors(std::slice::from_ref(f), std::slice::from_ref(b));
-                        let eps = metric_eps(f);
-                        let t = block_texels(f, 0, eps);
-                        let found = crate::io::bc6h_search::search(&t, Effort::Exhaustive)
-                            .unwrap()
-                            .0;
-                        let wide = crate::io::bc6h_search::search_wide(&t, 24);
-                        println!(
-                            "face {:.2}%: search {:.3}% wide {:.3}%",
-                            100.0 * m,
-                            100.0 * found / 48.0,
-                            100.0 * wide / 48.0
-                        );
-                    }
-                }
-                line += &format!(
-                    " {}²: {:.2}% ({:.2}s)",
-                    cube.size,
-                    100.0 * mean,
-                    t.elapsed().as_secs_f64()
-                );
-            }
-            println!("{line}");
-        }
     }
 }

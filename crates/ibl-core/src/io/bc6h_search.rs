@@ -13,7 +13,7 @@
 //! against `bcdec` bit for bit. No erratum found in either for the unsigned modes; the
 //! searched blocks also decode alike in texture2ddecoder (PyPI, AssetStudio's decoders),
 //! except where that one saturates a channel a hand decode from the spec does not
-//! (`notes/speed-bc6h.md`).
+//! (`docs/notes/speed-bc6h.md`).
 
 // Index loops over texels, channels, regions and ends read closer to the format's tables.
 #![allow(clippy::needless_range_loop)]
