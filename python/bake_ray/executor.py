@@ -9,9 +9,11 @@ import ipaddress
 import json
 import os
 import shutil
+import signal
 import socket
 import subprocess
 import tempfile
+import threading
 import time
 
 from .task import find_bake, run_stage
@@ -33,6 +35,28 @@ class BakeRayError(Exception):
     def __init__(self, message, code=2):
         super().__init__(message)
         self.code = code
+
+
+class _InterruptFlag:
+    """A SIGINT handler that records the first Ctrl-C and raises on the second; a no-op
+    outside the main thread, where Python cannot install signal handlers."""
+
+    def __init__(self):
+        self.set = False
+        self._installed = threading.current_thread() is threading.main_thread()
+        if self._installed:
+            self._previous = signal.signal(signal.SIGINT, self._handle)
+
+    def _handle(self, signum, frame):
+        if self.set:
+            raise KeyboardInterrupt
+        self.set = True
+
+    def restore(self):
+        if self._installed:
+            # None: the previous handler was not installed from Python; the default stands in.
+            signal.signal(signal.SIGINT, self._previous or signal.default_int_handler)
+            self._installed = False
 
 
 def locate_bake(bin_dir=None):
@@ -208,119 +232,136 @@ def run(
     interrupted = False
     started_ray = False
     if to_run:
-        import ray  # only when there is work: a run with nothing to do starts no Ray
-
-        if not ray.is_initialized():
-            # A local instance, or a cluster on this machine, stays on 127.0.0.1; a remote
-            # cluster (--address HOST:PORT) is joined from this machine's outward address.
-            kwargs = dict(log_to_driver=False, configure_logging=False)
-            if loopback:
-                kwargs["_node_ip_address"] = "127.0.0.1"
-            if address is None:
-                kwargs["include_dashboard"] = False
-            # "local": a new instance, never one found through RAY_ADDRESS or /tmp/ray.
-            ray.init(address=address or "local", **kwargs)
-            started_ray = True
-        nodes = sorted(n["NodeID"] for n in ray.nodes() if n.get("Alive"))
-        options = dict(num_cpus=num_cpus, max_retries=max_retries, retry_exceptions=False)
-        if spread:
-            options["scheduling_strategy"] = "SPREAD"
-        remote = ray.remote(run_stage).options(**options)
-        refs = {}
-        shipped = {}
-
-        def ship(path):
-            if path not in shipped:
-                with open(path, "rb") as f:
-                    shipped[path] = ray.put(f.read())
-            return shipped[path]
-
-        failed_before = {sid for sid, r in report.items() if r["status"] == FAILED}
-        for s in to_run:  # the plan lists stages in dependency order
-            entry = s["entry"]
-            slots, blobs = [], []
-            blocked_by = None
-            for k, read in enumerate(entry["reads"]):
-                up = read.get("stage")
-                if up is not None and up in refs:
-                    slots.append(["stage", k])
-                    blobs.append(refs[up])
-                    continue
-                if up is not None and (up in failed_before or report[up]["status"] == BLOCKED):
-                    blocked_by = up
-                    break
-                # An input, or a stage built before this run: its files from this machine
-                # (a built stage's `rel` already starts with its folder, its prefix).
-                for f in read["files"]:
-                    slots.append(["file", k, f["rel"]])
-                    blobs.append(ship(f["path"]))
-            if blocked_by is not None:
-                report[s["id"]].update(status=BLOCKED, reason="not run: '%s' failed" % blocked_by)
-                continue
-            spec = {"entry": entry, "bake": bake, "slots": slots}
-            refs[s["id"]] = remote.remote(spec, *blobs)
-            submitted += 1
-            log("bake-ray: submitted %s (%s)" % (s["id"], s["reason"]))
-
-        pending = {ref: sid for sid, ref in refs.items()}
-        work = tempfile.mkdtemp(prefix="bake-ray-")
+        # Ctrl-C is taken between stages, never inside one: a KeyboardInterrupt raised in the
+        # middle of a commit or of a temporary folder's removal escapes as another error (an
+        # interrupted rmtree raised EBADF in CI) and the completed stages were not reported;
+        # one raised inside ray.init was swallowed. The first SIGINT sets a flag the driver
+        # polls; a second one interrupts at once.
+        stop = _InterruptFlag()
         try:
-            while pending:
-                ready, _ = ray.wait(list(pending), num_returns=1)
-                # Commit every finished stage at once (one `bake commit` for several).
-                ready, _ = ray.wait(list(pending), num_returns=len(pending), timeout=0) if ready else (ready, None)
-                batch = []
-                for ref in ready:
-                    sid = pending.pop(ref)
-                    st = report[sid]
-                    try:
-                        res = ray.get(ref)
-                    except Exception as e:  # the worker crashed more than max_retries times
-                        ups = [r.get("stage") for r in by_id[sid]["entry"]["reads"]]
-                        bad = [u for u in ups if u and report[u]["status"] in (FAILED, BLOCKED)]
-                        if bad:
-                            st.update(status=BLOCKED, reason="not run: '%s' failed" % bad[0])
-                        else:
-                            st.update(status=FAILED, reason="task failed: %s" % _first_line(e))
-                            log("bake-ray: error: stage '%s': %s" % (sid, st["reason"]))
+            import ray  # only when there is work: a run with nothing to do starts no Ray
+
+            if not ray.is_initialized():
+                # A local instance, or a cluster on this machine, stays on 127.0.0.1; a remote
+                # cluster (--address HOST:PORT) is joined from this machine's outward address.
+                kwargs = dict(log_to_driver=False, configure_logging=False)
+                if loopback:
+                    kwargs["_node_ip_address"] = "127.0.0.1"
+                if address is None:
+                    kwargs["include_dashboard"] = False
+                # "local": a new instance, never one found through RAY_ADDRESS or /tmp/ray.
+                ray.init(address=address or "local", **kwargs)
+                started_ray = True
+            nodes = sorted(n["NodeID"] for n in ray.nodes() if n.get("Alive"))
+            options = dict(num_cpus=num_cpus, max_retries=max_retries, retry_exceptions=False)
+            if spread:
+                options["scheduling_strategy"] = "SPREAD"
+            remote = ray.remote(run_stage).options(**options)
+            refs = {}
+            shipped = {}
+
+            def ship(path):
+                if path not in shipped:
+                    with open(path, "rb") as f:
+                        shipped[path] = ray.put(f.read())
+                return shipped[path]
+
+            failed_before = {sid for sid, r in report.items() if r["status"] == FAILED}
+            for s in to_run:  # the plan lists stages in dependency order
+                if stop.set:
+                    break  # interrupted while Ray started: submit nothing more
+                entry = s["entry"]
+                slots, blobs = [], []
+                blocked_by = None
+                for k, read in enumerate(entry["reads"]):
+                    up = read.get("stage")
+                    if up is not None and up in refs:
+                        slots.append(["stage", k])
+                        blobs.append(refs[up])
                         continue
-                    st["node"] = res.get("node")
-                    st["seconds"] = res.get("seconds", 0.0)
-                    if res.get("blocked"):
-                        st.update(status=BLOCKED, reason="not run: '%s' failed" % res["blocked"])
-                    elif not res.get("ok"):
-                        st.update(status=FAILED, reason=res.get("error", "failed"))
-                        log("bake-ray: error: stage '%s': %s" % (sid, st["reason"]))
-                    else:
-                        folder = os.path.join(work, "%d" % len(os.listdir(work)))
-                        try:
-                            _write_result(folder, res)
-                        except BakeRayError as e:
-                            shutil.rmtree(folder, ignore_errors=True)
-                            st.update(status=FAILED, reason=str(e))
-                            log("bake-ray: error: stage '%s': %s" % (sid, st["reason"]))
-                            continue
-                        batch.append((sid, folder))
-                if batch:
-                    done = commit(bake, pipeline, results=[f for _, f in batch])
-                    for sid, folder in batch:
-                        r = done.get(sid, {"status": "failed", "reason": "not committed"})
+                    if up is not None and (up in failed_before or report[up]["status"] == BLOCKED):
+                        blocked_by = up
+                        break
+                    # An input, or a stage built before this run: its files from this machine
+                    # (a built stage's `rel` already starts with its folder, its prefix).
+                    for f in read["files"]:
+                        slots.append(["file", k, f["rel"]])
+                        blobs.append(ship(f["path"]))
+                if blocked_by is not None:
+                    report[s["id"]].update(status=BLOCKED, reason="not run: '%s' failed" % blocked_by)
+                    continue
+                spec = {"entry": entry, "bake": bake, "slots": slots}
+                refs[s["id"]] = remote.remote(spec, *blobs)
+                submitted += 1
+                log("bake-ray: submitted %s (%s)" % (s["id"], s["reason"]))
+
+            pending = {ref: sid for sid, ref in refs.items()}
+            work = tempfile.mkdtemp(prefix="bake-ray-")
+            try:
+                while pending and not stop.set:
+                    ready, _ = ray.wait(list(pending), num_returns=1, timeout=0.25)
+                    if not ready:
+                        continue
+                    # Commit every finished stage at once (one `bake commit` for several).
+                    ready, _ = ray.wait(list(pending), num_returns=len(pending), timeout=0)
+                    batch = []
+                    for ref in ready:
+                        sid = pending.pop(ref)
                         st = report[sid]
-                        if r["status"] == "failed":
-                            st.update(status=FAILED, reason=r["reason"])
-                            log("bake-ray: error: stage '%s': %s" % (sid, r["reason"]))
+                        try:
+                            res = ray.get(ref)
+                        except Exception as e:  # the worker crashed more than max_retries times
+                            ups = [r.get("stage") for r in by_id[sid]["entry"]["reads"]]
+                            bad = [u for u in ups if u and report[u]["status"] in (FAILED, BLOCKED)]
+                            if bad:
+                                st.update(status=BLOCKED, reason="not run: '%s' failed" % bad[0])
+                            else:
+                                st.update(status=FAILED, reason="task failed: %s" % _first_line(e))
+                                log("bake-ray: error: stage '%s': %s" % (sid, st["reason"]))
+                            continue
+                        st["node"] = res.get("node")
+                        st["seconds"] = res.get("seconds", 0.0)
+                        if res.get("blocked"):
+                            st.update(status=BLOCKED, reason="not run: '%s' failed" % res["blocked"])
+                        elif not res.get("ok"):
+                            st.update(status=FAILED, reason=res.get("error", "failed"))
+                            log("bake-ray: error: stage '%s': %s" % (sid, st["reason"]))
                         else:
-                            st["status"] = RAN if r["status"] == "ran" else UP_TO_DATE
-                            log("bake-ray: ran %s on node %s (%.2f s)" % (sid, (st["node"] or "?")[:8], st["seconds"]))
-                        shutil.rmtree(folder, ignore_errors=True)
-        except KeyboardInterrupt:
-            interrupted = True
-            for ref in pending:
-                ray.cancel(ref, force=True)
+                            folder = os.path.join(work, "%d" % len(os.listdir(work)))
+                            try:
+                                _write_result(folder, res)
+                            except BakeRayError as e:
+                                shutil.rmtree(folder, ignore_errors=True)
+                                st.update(status=FAILED, reason=str(e))
+                                log("bake-ray: error: stage '%s': %s" % (sid, st["reason"]))
+                                continue
+                            batch.append((sid, folder))
+                    if batch:
+                        done = commit(bake, pipeline, results=[f for _, f in batch])
+                        for sid, folder in batch:
+                            r = done.get(sid, {"status": "failed", "reason": "not committed"})
+                            st = report[sid]
+                            if r["status"] == "failed":
+                                st.update(status=FAILED, reason=r["reason"])
+                                log("bake-ray: error: stage '%s': %s" % (sid, r["reason"]))
+                            else:
+                                st["status"] = RAN if r["status"] == "ran" else UP_TO_DATE
+                                log("bake-ray: ran %s on node %s (%.2f s)" % (sid, (st["node"] or "?")[:8], st["seconds"]))
+                            shutil.rmtree(folder, ignore_errors=True)
+            except KeyboardInterrupt:
+                stop.set = True
+            finally:
+                # A Ctrl-C after the last stage was committed interrupted nothing.
+                interrupted = stop.set and any(report[s["id"]]["status"] is None for s in to_run)
+                if interrupted:
+                    for ref in pending:
+                        ray.cancel(ref, force=True)
+                shutil.rmtree(work, ignore_errors=True)
+                if started_ray:
+                    ray.shutdown()
         finally:
-            shutil.rmtree(work, ignore_errors=True)
-            if started_ray:
-                ray.shutdown()
+            stop.restore()
+
     for st in report.values():
         if st["status"] is None:
             st["status"] = "interrupted" if interrupted else FAILED

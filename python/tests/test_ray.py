@@ -166,32 +166,57 @@ def test_a_stage_failing_on_a_damaged_input_fails_alone(cluster, work, bin_dir):
     assert tree(out) == tree(work / "out-plain" / "broken")
 
 
-def test_without_address_a_local_ray_runs_it_and_ctrl_c_keeps_completed_stages(work, bin_dir):
-    ref = bake(bin_dir, "run", str(work / "pipelines" / "probe.ron"), "--quiet")
-    assert ref.returncode == 0, ref.stderr
-    pipeline = redirected(work, "probe", "out-local")
-    env = dict(os.environ)
+def interrupt_at(work, bin_dir, out_name, prefix):
+    """Runs probe.ron on a local Ray, sends one SIGINT once a stderr line starts with PREFIX;
+    returns (pipeline, returncode, stderr)."""
+    pipeline = redirected(work, "probe", out_name)
     proc = subprocess.Popen(
         ["python3", "-m", "bake_ray.cli", "run", pipeline, "--bin-dir", bin_dir],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=dict(os.environ),
         cwd=os.path.join(os.path.dirname(__file__), ".."),
     )
-    # Interrupt once the first stage is committed.
     lines = []
     deadline = time.time() + 300
     for line in proc.stderr:
         lines.append(line)
-        if line.startswith("bake-ray: ran ") or time.time() > deadline:
+        if line.startswith(prefix) or time.time() > deadline:
             break
     proc.send_signal(signal.SIGINT)
-    out, err = proc.communicate(timeout=120)
-    err = "".join(lines) + err
-    if proc.returncode == 0:
-        pytest.skip("the run finished before the interrupt landed")
-    assert proc.returncode == 130, err
-    first = tree(work / "out-local" / "probe")
-    assert first, "the completed stage is kept"
+    _, err = proc.communicate(timeout=120)
+    return pipeline, proc.returncode, "".join(lines) + err
+
+
+def resumes_to_bake_runs_bytes(work, pipeline, out_name, bin_dir):
     r, report = run_json(["run", pipeline, "--bin-dir", bin_dir])
     assert r.returncode == 0, r.stderr
+    assert tree(work / out_name / "probe") == tree(work / "out" / "probe")
+    assert not os.path.exists(work / out_name / "probe" / ".bake" / "tmp"), "no staging left"
+    return report
+
+
+def test_without_address_a_local_ray_runs_it_and_ctrl_c_keeps_completed_stages(work, bin_dir):
+    ref = bake(bin_dir, "run", str(work / "pipelines" / "probe.ron"), "--quiet")
+    assert ref.returncode == 0, ref.stderr
+    # Interrupt once the first stage is committed.
+    pipeline, code, err = interrupt_at(work, bin_dir, "out-local", "bake-ray: ran ")
+    assert "Traceback" not in err, err
+    if code == 0:
+        pytest.skip("the run finished before the interrupt landed")
+    assert code == 130, err
+    assert "interrupted; completed stages are kept" in err
+    assert tree(work / "out-local" / "probe"), "the completed stage is kept"
+    report = resumes_to_bake_runs_bytes(work, pipeline, "out-local", bin_dir)
     assert "up-to-date" in statuses(report).values(), "the next run resumes"
-    assert tree(work / "out-local" / "probe") == tree(work / "out" / "probe")
+
+
+def test_ctrl_c_before_any_stage_ends_exits_130_without_a_traceback(work, bin_dir):
+    # A SIGINT while stages are submitted, or inside a commit, is taken between stages (an
+    # interrupt that landed inside a folder's removal once escaped as an OSError).
+    ref = bake(bin_dir, "run", str(work / "pipelines" / "probe.ron"), "--quiet")
+    assert ref.returncode == 0, ref.stderr
+    pipeline, code, err = interrupt_at(work, bin_dir, "out-early", "bake-ray: submitted ")
+    assert "Traceback" not in err, err
+    assert code in (0, 130), err
+    if code == 130:
+        assert "interrupted; completed stages are kept" in err
+    resumes_to_bake_runs_bytes(work, pipeline, "out-early", bin_dir)
