@@ -522,3 +522,223 @@ fn reads_quat_map_normals_and_tpr_map_tangents_from_the_real_bakes() {
         assert!(!never.exists());
     }
 }
+
+#[test]
+fn tpr_map_roughness_channels_give_each_pixel_its_lobe() {
+    let dir = tempfile::tempdir().unwrap();
+    let env = dir.path().join("sky.exr");
+    write_env(&env);
+    // The real tpr-map, constant:30 with roughness 0.5 along t and 0.25 along b: α_t = 0.25,
+    // α_b = 0.0625, i.e. r = √0.15625, η = 0.6; once as perceptual r, once as α.
+    let bake = |name: &str, extra: &[&str]| -> std::path::PathBuf {
+        let p = dir.path().join(name);
+        let mut args = vec![
+            "-o",
+            p.to_str().unwrap(),
+            "--size",
+            "32x16",
+            "--preset",
+            "constant:30",
+            "--roughness",
+            "0.5,0.25",
+        ];
+        args.extend(extra);
+        let o = std::process::Command::new(tool("tpr-map"))
+            .args(&args)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        p
+    };
+    let tpr_r = bake("r.exr", &[]);
+    let tpr_a = bake("a.exr", &["--store-alpha"]);
+    let r = (0.15625f32).sqrt().to_string();
+    let run = |name: &str, extra: &[&str]| -> serde_json::Value {
+        let out = dir.path().join(name);
+        let mut args = vec![
+            env.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--sphere-size",
+            "12",
+            "--views",
+            "30",
+            "--elevations",
+            "20",
+            "--truth-samples",
+            "512",
+            "--methods",
+            "iso,bent-lg18,fisb-16",
+            "--lookup",
+            "engine",
+        ];
+        args.extend(extra);
+        let o = BIN.run(&args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let meta = ibl_testkit::read_json(&out.join("case000_sky/case.json"));
+        let mut rep = ibl_testkit::read_json(&out.join("report.json"));
+        rep["pixels0"] = meta["pixels"][0].clone();
+        rep
+    };
+    let global = run(
+        "global",
+        &[
+            "--tangent",
+            "constant:30",
+            "--roughness",
+            &r,
+            "--eta",
+            "0.6",
+        ],
+    );
+    let from_r = run(
+        "from_r",
+        &[
+            "--tpr-map",
+            tpr_r.to_str().unwrap(),
+            "--tpr-roughness",
+            "r",
+            "--roughness",
+            "0.9",
+            "--eta",
+            "0,0.3",
+        ],
+    );
+    let from_a = run(
+        "from_a",
+        &[
+            "--tpr-map",
+            tpr_a.to_str().unwrap(),
+            "--tpr-roughness",
+            "alpha",
+        ],
+    );
+    let g = &global["cases"][0];
+    for rep in [&from_r, &from_a] {
+        // One case (the file's lobe replaces the --roughness × --eta grid), at the map's lobe.
+        let cases = rep["cases"].as_array().unwrap();
+        assert_eq!(cases.len(), 1);
+        let c = &cases[0];
+        for k in ["r", "eta"] {
+            let (a, b) = (c[k].as_f64().unwrap(), g[k].as_f64().unwrap());
+            assert!((a - b).abs() < 1e-5, "{k}: {a} vs {b}");
+        }
+        let m = &rep["pixels0"]["material"]["Ggx"];
+        assert!((m["alpha_t"].as_f64().unwrap() - 0.25).abs() < 1e-4, "{m}");
+        assert!(
+            (m["alpha_b"].as_f64().unwrap() - 0.0625).abs() < 1e-4,
+            "{m}"
+        );
+        // Every method and the truth as with the global material, up to the f32 rounding of
+        // α = r²(1 ± η) against the file's r² (and the 16-bit channels of tpr-map).
+        let (gs, cs) = (
+            g["scores"].as_array().unwrap(),
+            c["scores"].as_array().unwrap(),
+        );
+        assert_eq!(gs.len(), cs.len());
+        for (a, b) in gs.iter().zip(cs) {
+            assert_eq!((&a["method"], &a["f0"]), (&b["method"], &b["f0"]));
+            let (x, y) = (a["mse"].as_f64().unwrap(), b["mse"].as_f64().unwrap());
+            assert!((x - y).abs() <= 1e-3 * x.max(1e-12), "{a} vs {b}");
+        }
+        let (x, y) = (
+            g["truth_error_share"][0].as_f64().unwrap(),
+            c["truth_error_share"][0].as_f64().unwrap(),
+        );
+        assert!((x - y).abs() <= 1e-3 * x, "{x} vs {y}");
+    }
+    // A map whose roughness varies: the pixels carry different lobes.
+    let split = dir.path().join("split.exr");
+    let mut img = Image::new(32, 16, 4);
+    for j in 0..16 {
+        for i in 0..32 {
+            let rough = if i < 16 { 0.3 } else { 0.8 };
+            img.texel_mut(i, j)
+                .copy_from_slice(&[1.0, 0.5, rough, rough]);
+        }
+    }
+    write_image(&split, &img, &WriteOptions::default()).unwrap();
+    let out = dir.path().join("split");
+    let o = BIN.run(&[
+        env.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--sphere-size",
+        "12",
+        "--views",
+        "30",
+        "--elevations",
+        "20",
+        "--truth-samples",
+        "64",
+        "--methods",
+        "iso",
+        "--tpr-map",
+        split.to_str().unwrap(),
+        "--tpr-roughness",
+        "r",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let meta = ibl_testkit::read_json(&out.join("case000_sky/case.json"));
+    let alphas: Vec<f64> = meta["pixels"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p["material"]["Ggx"]["alpha_t"].as_f64().unwrap())
+        .collect();
+    assert!(alphas.iter().any(|a| (a - 0.09).abs() < 1e-4), "{alphas:?}");
+    assert!(alphas.iter().any(|a| (a - 0.64).abs() < 1e-4), "{alphas:?}");
+    // Malformed: one-line errors naming the problem (and the file), nothing written.
+    let never = dir.path().join("never");
+    let rgb = dir.path().join("rgb.exr");
+    write_image(
+        &rgb,
+        &Image::from_data(1, 1, 3, vec![1.0, 0.5, 0.5]).unwrap(),
+        &WriteOptions::default(),
+    )
+    .unwrap();
+    let over = dir.path().join("over.exr");
+    write_image(
+        &over,
+        &Image::from_data(1, 1, 4, vec![1.0, 0.5, 1.5, 0.5]).unwrap(),
+        &WriteOptions::default(),
+    )
+    .unwrap();
+    let e = env.to_str().unwrap();
+    let o = never.to_str().unwrap();
+    for (args, needle) in [
+        (vec![e, "--out", o, "--tpr-roughness", "r"], "--tpr-map"),
+        (
+            vec![
+                e,
+                "--out",
+                o,
+                "--tpr-map",
+                rgb.to_str().unwrap(),
+                "--tpr-roughness",
+                "r",
+            ],
+            "rgb.exr",
+        ),
+        (
+            vec![
+                e,
+                "--out",
+                o,
+                "--tpr-map",
+                over.to_str().unwrap(),
+                "--tpr-roughness",
+                "alpha",
+            ],
+            "over.exr",
+        ),
+    ] {
+        let r = BIN.run(&args);
+        let line = assert_one_line_error(&r, 2, needle);
+        assert!(
+            line.contains("roughness") || line.contains("--tpr-map"),
+            "{line}"
+        );
+        assert!(!never.exists());
+    }
+}

@@ -1,14 +1,16 @@
-//! Fits the shipped method's blend rule (issue 23 item 6, goal G2) and writes
-//! bench/aniso-blend.md: w(η) = clamp(|η|/η₁, 0, 1)^p mixes the isotropic split sum (w = 0,
-//! exactly the floor at η = 0) into VNDF filtered importance sampling (w = 1). (η₁, p) are
-//! chosen on the training environments only; the held-out environments are scored once with
-//! the chosen rule and with the constants `ibl_aniso::ship::SHIPPED` carries.
+//! Fits the shipped method's blend rule (issue 23 item 6, goals G1 and G2) and writes
+//! bench/aniso-blend.md: w = clamp(|η|/η₁, 0, 1)^p mixes the isotropic split sum (w = 0,
+//! exactly the floor at η = 0) into VNDF filtered importance sampling (w = 1). The rule is
+//! chosen on the training environments only: the family (η₁ constant, or η₁(r) = a + b·r) by
+//! leave-one-environment-out cross-validation, its constants by the score over every training
+//! case; the held-out environments are scored once, with `ibl_aniso::ship::fis_weight` (the
+//! function the emulation and the snippets carry). The run fails unless
+//! `ibl_aniso::ship::SHIPPED` is that training optimum.
 //!
-//! cargo run --release -p ibl-aniso --example fit-ibl-aniso-blend -- [--quick]
+//! cargo run --release -p ibl-aniso --example fit-ibl-aniso-blend -- [--quick] [--dump FILE]
 
 use ibl_aniso::eval::{self, Env, LookupChoice, Params};
-use ibl_aniso::methods::E01;
-use ibl_aniso::truth::TruthValue;
+use ibl_aniso::material::Material;
 use ibl_core::envmap::load_environment;
 use ibl_core::equirect::Filter;
 use ibl_core::progress::NoProgress;
@@ -16,68 +18,161 @@ use std::fmt::Write;
 use std::path::PathBuf;
 use std::time::Instant;
 
-/// One case's per-pixel data: the truth, the floor and fis-16.
+/// One case at one F0: the blend's MSE as a quadratic in w, MSE(w) = uu + 2·uv·w + vv·w²
+/// (per pixel and channel, f64), the LG18 bent normal's MSE and the truth's mean squared
+/// standard error.
+#[derive(Clone, Copy, Default)]
+struct Quad {
+    uu: f64,
+    uv: f64,
+    vv: f64,
+    bent: f64,
+    truth: f64,
+}
+
+/// One case: where it is and its two F0 (1, 0.04).
 struct Data {
     env: String,
     r: f32,
     eta: f32,
-    truth: Vec<TruthValue>,
-    iso: Vec<E01>,
-    fis: Vec<E01>,
-    bent: Vec<E01>,
+    azimuth: f32,
+    q: [Quad; 2],
 }
 
-/// MSE per pixel and channel of (1−w)·iso + w·fis against the truth at F0, and the truth's
-/// own mean squared standard error.
-fn mse(d: &Data, w: f32, f0: f64) -> (f64, f64) {
-    let (mut se, mut te) = (0.0f64, 0.0f64);
-    for ((t, a), b) in d.truth.iter().zip(&d.iso).zip(&d.fis) {
-        let c = t.radiance(f0);
-        let s = t.radiance_se(f0);
-        for k in 0..3 {
-            // The shipped blend's form: iso + (fis − iso)·w, per E0 and E1.
-            let e0 = a.0[k] + (b.0[k] - a.0[k]) * w;
-            let e1 = a.1[k] + (b.1[k] - a.1[k]) * w;
-            let m = f0 * e0 as f64 + (1.0 - f0) * e1 as f64;
-            se += (m - c[k]).powi(2);
-            te += s[k] * s[k];
+/// The F0 values, in `Data::q` order.
+const F0S: [f64; 2] = [1.0, 0.04];
+
+/// MSE of iso + (fis − iso)·w at F0 index `f` (the blend is linear in w, so exact).
+fn mse(d: &Data, w: f32, f: usize) -> f64 {
+    let (q, w) = (&d.q[f], w as f64);
+    q.uu + 2.0 * q.uv * w + q.vv * w * w
+}
+
+/// A candidate rule: η₁(r) = eta1 + slope·r (floored at 10⁻³), w = clamp(|η|/η₁, 0, 1)^p,
+/// w = 0 at η = 0.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Rule {
+    eta1: f32,
+    slope: f32,
+    p: f32,
+}
+
+impl Rule {
+    fn weight(&self, r: f32, eta: f32) -> f32 {
+        if eta == 0.0 {
+            return 0.0;
         }
+        let e1 = (self.eta1 + self.slope * r).max(1e-3);
+        (eta.abs() / e1).clamp(0.0, 1.0).powf(self.p)
     }
-    let n = (3 * d.truth.len()).max(1) as f64;
-    (se / n, te / n)
 }
 
-fn rule(eta: f32, eta1: f32, p: f32) -> f32 {
-    (eta.abs() / eta1).clamp(0.0, 1.0).powf(p)
+/// The shipped weight of the case's lobe: `ship::fis_weight` of its (α_t, α_b).
+fn shipped_weight(d: &Data) -> f32 {
+    let (at, ab) = Material::ggx_kc(d.r, d.eta)
+        .ggx_alphas()
+        .expect("a GGX lobe");
+    ibl_aniso::ship::fis_weight(at, ab)
 }
 
 /// Whether the truth's error is below 1% of the better of iso and fis at both F0 (the
 /// evaluator's gate).
 fn gated(d: &Data) -> bool {
-    [1.0, 0.04].iter().all(|&f0| {
-        let (a, t) = mse(d, 0.0, f0);
-        let (b, _) = mse(d, 1.0, f0);
-        t < 0.01 * a.min(b)
-    })
+    (0..2).all(|f| d.q[f].truth < 0.01 * mse(d, 0.0, f).min(mse(d, 1.0, f)))
 }
 
-/// Geometric mean over `cases` and both F0 of MSE(rule)/MSE(fis-16).
-fn score(cases: &[&Data], eta1: f32, p: f32) -> f64 {
+/// Geometric mean over `cases` and both F0 of MSE(weight)/MSE(fis-16).
+fn score(cases: &[&Data], weight: impl Fn(&Data) -> f32) -> f64 {
     let mut lg = 0.0;
     let mut n = 0;
     for d in cases {
-        for f0 in [1.0, 0.04] {
-            let (a, _) = mse(d, rule(d.eta, eta1, p), f0);
-            let (b, _) = mse(d, 1.0, f0);
-            lg += ((a + 1e-30) / (b + 1e-30)).ln();
+        let w = weight(d);
+        for f in 0..2 {
+            lg += ((mse(d, w, f) + 1e-30) / (mse(d, 1.0, f) + 1e-30)).ln();
             n += 1;
         }
     }
     (lg / n.max(1) as f64).exp()
 }
 
+/// The exponents and constant η₁ of the grid (also the table's rows and columns).
+const PS: [f32; 9] = [0.15, 0.2, 0.25, 0.3, 0.4, 0.5, 0.75, 1.0, 2.0];
+const ETA1S: [f32; 13] = [
+    0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.2, 1.5, 2.0,
+];
+
+/// Every rule of a family: η₁ constant (`linear` false) or η₁(r) = a + b·r, a ∈ 0.05…2,
+/// b ∈ −1.6…1.6 in steps of 0.05.
+fn family(linear: bool) -> Vec<Rule> {
+    let mut out = Vec::new();
+    for &p in &PS {
+        if linear {
+            for i in 1..=40 {
+                for j in -32..=32 {
+                    out.push(Rule {
+                        eta1: i as f32 * 0.05,
+                        slope: j as f32 * 0.05,
+                        p,
+                    });
+                }
+            }
+        } else {
+            for &eta1 in &ETA1S {
+                out.push(Rule {
+                    eta1,
+                    slope: 0.0,
+                    p,
+                });
+            }
+        }
+    }
+    out
+}
+
+/// The rule of `rules` with the lowest training score on `cases` (the first on ties).
+fn best(cases: &[&Data], rules: &[Rule]) -> (Rule, f64) {
+    rules
+        .iter()
+        .map(|r| (*r, score(cases, |d| r.weight(d.r, d.eta))))
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .expect("a family")
+}
+
+/// The per-pixel sums of one case at F0 `f0`.
+fn quad(im: &eval::CaseImages, f0: f64) -> Quad {
+    let get = |m: &str| &im.methods.iter().find(|x| x.0 == m).expect("method ran").2;
+    let (iso, fis, bent) = (get("iso"), get("fis-16"), get("bent-lg18"));
+    let mut q = Quad::default();
+    for (((t, a), b), g) in im.truth.iter().zip(iso).zip(fis).zip(bent) {
+        let c = t.radiance(f0);
+        let s = t.radiance_se(f0);
+        for k in 0..3 {
+            // The shipped blend iso + (fis − iso)·w, per E0 and E1, then Schlick at F0.
+            let ma = f0 * a.0[k] as f64 + (1.0 - f0) * a.1[k] as f64;
+            let mb = f0 * b.0[k] as f64 + (1.0 - f0) * b.1[k] as f64;
+            let mg = f0 * g.0[k] as f64 + (1.0 - f0) * g.1[k] as f64;
+            let (u, v) = (ma - c[k], mb - ma);
+            q.uu += u * u;
+            q.uv += u * v;
+            q.vv += v * v;
+            q.bent += (mg - c[k]).powi(2);
+            q.truth += s[k] * s[k];
+        }
+    }
+    let n = (3 * im.truth.len()).max(1) as f64;
+    for x in [&mut q.uu, &mut q.uv, &mut q.vv, &mut q.bent, &mut q.truth] {
+        *x /= n;
+    }
+    q
+}
+
 fn main() {
-    let quick = std::env::args().any(|a| a == "--quick");
+    let args: Vec<String> = std::env::args().collect();
+    let quick = args.iter().any(|a| a == "--quick");
+    let dump = args
+        .iter()
+        .position(|a| a == "--dump")
+        .map(|i| args.get(i + 1).expect("--dump FILE").clone());
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
     let (train, test): (&[&str], &[&str]) = if quick {
         (&["sunset_256"], &["interior_256"])
@@ -104,6 +199,23 @@ fn main() {
         no_pixels: true,
         ..Default::default()
     };
+    // Training sees each environment from three azimuths and with a 4× truth: at 32768 samples
+    // the truth's error kept every r ≥ 0.4, η ≤ 0.2 training case out of the gate, so the rule
+    // was unconstrained exactly where it lost held out (docs/notes/aniso-g1.md). The held-out
+    // grid stays the one the previous rule was scored on.
+    let train_params = Params {
+        views: if quick {
+            params.views.clone()
+        } else {
+            vec![30.0, 150.0, 270.0]
+        },
+        truth_samples: if quick {
+            params.truth_samples
+        } else {
+            4 * params.truth_samples
+        },
+        ..params.clone()
+    };
     let (parsed, preset) = params.validate().expect("fit parameters");
     let t_all = Instant::now();
     let mut data: Vec<Data> = Vec::new();
@@ -117,32 +229,51 @@ fn main() {
             ..Default::default()
         };
         let chain = ibl_prefilter::bake::bake_chain(&pp, &loaded.env, &NoProgress).expect("chain");
-        let env = Env::new(name.to_string(), cube, &chain.mips, String::new(), &params);
+        let ps = if train.contains(name) {
+            &train_params
+        } else {
+            &params
+        };
+        let env = Env::new(name.to_string(), cube, &chain.mips, String::new(), ps);
         let t0 = Instant::now();
-        let (cases, images) = eval::evaluate(&env, &params, &parsed, &preset);
+        let (cases, images) = eval::evaluate(&env, ps, &parsed, &preset);
         eprintln!(
             "{name}: {} cases in {:.1} s",
             cases.len(),
             t0.elapsed().as_secs_f64()
         );
         for (c, im) in cases.iter().zip(images) {
-            let get = |m: &str| {
-                im.methods
-                    .iter()
-                    .find(|x| x.0 == m)
-                    .map(|x| x.2.clone())
-                    .expect("method ran")
-            };
             data.push(Data {
                 env: c.env.clone(),
                 r: c.r,
                 eta: c.eta,
-                iso: get("iso"),
-                fis: get("fis-16"),
-                bent: get("bent-lg18"),
-                truth: im.truth,
+                azimuth: c.azimuth,
+                q: F0S.map(|f0| quad(&im, f0)),
             });
         }
+    }
+    if let Some(file) = &dump {
+        // Per case and F0 the quadratic's coefficients, to study other rules offline.
+        let mut out = String::from("env\tazimuth\tr\teta\tf0\tgated\tuu\tuv\tvv\tn\tbent\ttruth\n");
+        for d in &data {
+            for (q, f0) in d.q.iter().zip(F0S) {
+                let _ = writeln!(
+                    out,
+                    "{}\t{}\t{}\t{}\t{f0}\t{}\t{:e}\t{:e}\t{:e}\t1\t{:e}\t{:e}",
+                    d.env,
+                    d.azimuth,
+                    d.r,
+                    d.eta,
+                    u8::from(gated(d)),
+                    q.uu,
+                    q.uv,
+                    q.vv,
+                    q.bent,
+                    q.truth
+                );
+            }
+        }
+        std::fs::write(file, out).expect("dump");
     }
     let tr: Vec<&Data> = data
         .iter()
@@ -152,69 +283,128 @@ fn main() {
         .iter()
         .filter(|d| test.contains(&d.env.as_str()) && gated(d))
         .collect();
-    let eta1s = [0.02f32, 0.05, 0.1, 0.15, 0.2, 0.3, 0.4, 0.5, 0.6, 0.8, 1.0];
-    let ps = [0.5f32, 1.0, 2.0];
-    let mut grid: Vec<(f32, f32, f64)> = Vec::new();
-    for &e in &eta1s {
-        for &p in &ps {
-            grid.push((e, p, score(&tr, e, p)));
+    // The family, by leave-one-training-environment-out cross-validation (training only).
+    let (constant, linear) = (family(false), family(true));
+    let mut cv = [0.0f64; 2];
+    let mut cv_rows = String::new();
+    if train.len() > 1 {
+        for (k, rules) in [&constant, &linear].into_iter().enumerate() {
+            for out in train {
+                let fit: Vec<&Data> = tr.iter().copied().filter(|d| d.env != *out).collect();
+                let held: Vec<&Data> = tr.iter().copied().filter(|d| d.env == *out).collect();
+                let (r, s) = best(&fit, rules);
+                let h = score(&held, |d| r.weight(d.r, d.eta));
+                cv[k] += h.ln() / train.len() as f64;
+                let _ = writeln!(
+                    cv_rows,
+                    "| {} | {out} | η₁ = {} + {}·r, p = {} | {s:.4} | {h:.4} |",
+                    ["η₁ constant", "η₁ = a + b·r"][k],
+                    r.eta1,
+                    r.slope,
+                    r.p
+                );
+            }
         }
     }
-    let best = *grid
-        .iter()
-        .min_by(|a, b| a.2.total_cmp(&b.2))
-        .expect("a grid");
+    let cv = cv.map(f64::exp);
+    let use_linear = cv[1] < cv[0];
+    let (best_const, best_const_s) = best(&tr, &constant);
+    let (best_lin, best_lin_s) = best(&tr, &linear);
+    let chosen = if use_linear { best_lin } else { best_const };
     let shipped = ibl_aniso::ship::SHIPPED;
+    let shipped_rule = Rule {
+        eta1: shipped.blend_eta,
+        slope: 0.0,
+        p: shipped.blend_power,
+    };
     let mut md = String::new();
     let _ = writeln!(
         md,
-        "# Anisotropic IBL: the shipped blend rule (issue 23 G2)\n\n\
+        "# Anisotropic IBL: the shipped blend rule (issue 23 G1, G2)\n\n\
          Generated by `cargo run --release -p ibl-aniso --example fit-ibl-aniso-blend{}` in {:.0} s \
          ({} cores, shared with other jobs: timings are indicative only). Spheres of {}² px, r {:?}, \
-         η {:?}, azimuth 30°, elevation 15°, truth {} MC samples, gltf chain (engine lookup). \
-         Rule: specular = iso + (fis-16 − iso)·w, w = clamp(|η|/η₁, 0, 1)^p; w = 0 reads only \
-         the isotropic split sum (exactly the floor at η = 0). Fitted on {train:?} ({} gated \
-         cases), scored on {test:?} ({} gated cases). Score: geometric mean over cases and \
-         F0 ∈ {{1, 0.04}} of MSE(rule) / MSE(fis-16).\n",
+         η {:?}, elevation 15°, gltf chain (engine lookup). Rule: specular = iso + (fis-16 − iso)·w, \
+         w = clamp(|η|/η₁, 0, 1)^p; w = 0 reads only the isotropic split sum (exactly the floor at \
+         η = 0). Fitted on {train:?} (azimuths {:?}, truth {} MC samples: {} gated cases), scored \
+         on {test:?} (azimuth {:?}, truth {} samples: {} gated cases). Score: geometric mean over \
+         cases and F0 ∈ {{1, 0.04}} of MSE(rule) / MSE(fis-16); lower is better.\n",
         if quick { " -- --quick" } else { "" },
         t_all.elapsed().as_secs_f64(),
         std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
         params.sphere_size,
         params.roughness,
         params.eta,
-        params.truth_samples,
+        train_params.views,
+        train_params.truth_samples,
         tr.len(),
+        params.views,
+        params.truth_samples,
         te.len(),
     );
     let _ = writeln!(
         md,
-        "## Training score\n\n| η₁ \\ p | {} |",
-        ps.map(|p| p.to_string()).join(" | ")
+        "## Training score, η₁ constant\n\n| η₁ \\ p | {} |",
+        PS.map(|p| p.to_string()).join(" | ")
     );
-    let _ = writeln!(md, "|---|{}", "---|".repeat(ps.len()));
-    for &e in &eta1s {
-        let row: Vec<String> = ps
+    let _ = writeln!(md, "|---|{}", "---|".repeat(PS.len()));
+    for &e in &ETA1S {
+        let row: Vec<String> = PS
             .iter()
             .map(|&p| {
-                let s = grid.iter().find(|g| g.0 == e && g.1 == p).unwrap().2;
-                format!("{s:.4}")
+                let r = Rule {
+                    eta1: e,
+                    slope: 0.0,
+                    p,
+                };
+                format!("{:.4}", score(&tr, |d| r.weight(d.r, d.eta)))
             })
             .collect();
         let _ = writeln!(md, "| {e} | {} |", row.join(" | "));
     }
+    let _ = writeln!(
+        md,
+        "\nBest with η₁ constant: η₁ = {}, p = {} ({best_const_s:.4}); best with η₁(r) = a + b·r \
+         (a 0.05…2, b −1.6…1.6, steps 0.05, same p): a = {}, b = {}, p = {} ({best_lin_s:.4}).\n",
+        best_const.eta1, best_const.p, best_lin.eta1, best_lin.slope, best_lin.p
+    );
+    if train.len() > 1 {
+        let _ = writeln!(
+            md,
+            "## Which family: leave one training environment out\n\n\
+             | family | left out | fitted on the other | its score there | score on the left-out |\n\
+             |---|---|---|---|---|\n{cv_rows}\n\
+             Cross-validated score (geometric mean over the left-out environments): η₁ constant \
+             {:.4}, η₁ = a + b·r {:.4}: **{}**.\n",
+            cv[0],
+            cv[1],
+            if use_linear {
+                "η₁ = a + b·r generalises better"
+            } else {
+                "the roughness term does not generalise across the training environments; η₁ \
+                 stays constant"
+            }
+        );
+    }
     assert!(
-        best.0 == shipped.blend_eta && best.1 == shipped.blend_power || quick,
-        "SHIPPED ({}, {}) is not the training optimum ({}, {}): update ship.rs",
+        quick || (!use_linear && chosen == shipped_rule),
+        "SHIPPED (η₁ {}, p {}) is not the training optimum ({chosen:?}, linear: {use_linear}): \
+         update ship.rs",
         shipped.blend_eta,
         shipped.blend_power,
-        best.0,
-        best.1
     );
     let _ = writeln!(
         md,
-        "\nChosen on training: **η₁ = {}, p = {}** (score {:.4}). Shipped (`ibl_aniso::ship::SHIPPED`): \
-         η₁ = {}, p = {}.\n",
-        best.0, best.1, best.2, shipped.blend_eta, shipped.blend_power
+        "Chosen on training: **η₁ = {}{}, p = {}**. Shipped (`ibl_aniso::ship::SHIPPED`): η₁ = {}, \
+         p = {}.\n",
+        chosen.eta1,
+        if use_linear {
+            format!(" + {}·r", chosen.slope)
+        } else {
+            String::new()
+        },
+        chosen.p,
+        shipped.blend_eta,
+        shipped.blend_power
     );
     let _ = writeln!(
         md,
@@ -230,10 +420,8 @@ fn main() {
         }
         let (mut lf, mut li, mut wi, mut wf, mut wins) = (0.0, 0.0, 0.0f64, 0.0f64, 0);
         for d in &cs {
-            let w = rule(d.eta, shipped.blend_eta, shipped.blend_power);
-            let (s, _) = mse(d, w, 1.0);
-            let (i, _) = mse(d, 0.0, 1.0);
-            let (f, _) = mse(d, 1.0, 1.0);
+            let s = mse(d, shipped_weight(d), 0);
+            let (i, f) = (mse(d, 0.0, 0), mse(d, 1.0, 0));
             lf += (s / f).ln();
             li += (s / i).ln();
             wi = wi.max(s / i);
@@ -250,62 +438,69 @@ fn main() {
             cs.len()
         );
     }
-    // The goals on the held-out gated cases, F0 = 1: G1 wins vs the LG18 bent normal, G3 wins
-    // vs fis-16, and the floor.
-    let mse_of = |d: &Data, est: &[E01]| -> f64 {
-        let mut se = 0.0f64;
-        for (t, e) in d.truth.iter().zip(est) {
-            let c = t.radiance(1.0);
-            for (x, y) in e.0.iter().zip(c) {
-                se += (*x as f64 - y).powi(2);
-            }
+    // The goals on the held-out gated cases, F0 = 1. Against the LG18 bent normal a case is a
+    // tie when the two agree within 10⁻⁵ relative: at η = 0 the bent normal is the isotropic
+    // split sum (stretch |η|·… = 0), which the shipped rule returns untouched, and only f32
+    // rounding in their sums tells them apart.
+    let verdict = |s: f64, b: f64| -> usize {
+        if (s - b).abs() <= 1e-5 * b {
+            1
+        } else if s < b {
+            0
+        } else {
+            2
         }
-        se / (3 * d.truth.len()).max(1) as f64
     };
-    let (mut g1, mut g3, mut gi, mut n) = (0, 0, 0, 0);
+    let (mut g1, mut f1, mut g3, mut gi, mut fi) = ([0usize; 3], [0usize; 3], 0, 0, 0);
+    let _ = writeln!(
+        md,
+        "\n## Held-out, every case (F0 = 1): MSE per pixel and channel\n\n\
+         | env | r | η | w | shipped | fis-16 | bent-lg18 | iso | shipped vs bent |\n\
+         |---|---|---|---|---|---|---|---|---|"
+    );
     for d in &te {
-        let w = rule(d.eta, shipped.blend_eta, shipped.blend_power);
-        let s = mse(d, w, 1.0).0;
-        g1 += usize::from(s < mse_of(d, &d.bent));
-        g3 += usize::from(s < mse(d, 1.0, 1.0).0);
-        gi += usize::from(s <= mse(d, 0.0, 1.0).0);
-        n += 1;
+        let w = shipped_weight(d);
+        let s = mse(d, w, 0);
+        let (i, f, b) = (mse(d, 0.0, 0), mse(d, 1.0, 0), d.q[0].bent);
+        let v = verdict(s, b);
+        g1[v] += 1;
+        f1[verdict(f, b)] += 1;
+        g3 += usize::from(s < f);
+        gi += usize::from(s <= i);
+        fi += usize::from(f <= i);
+        let _ = writeln!(
+            md,
+            "| {} | {} | {} | {w:.3} | {s:.4e} | {f:.4e} | {b:.4e} | {i:.4e} | {} |",
+            d.env,
+            d.r,
+            d.eta,
+            ["win", "tie", "**loss**"][v]
+        );
     }
-    let (mut f1, mut fi) = (0, 0);
-    for d in &te {
-        f1 += usize::from(mse(d, 1.0, 1.0).0 < mse_of(d, &d.bent));
-        fi += usize::from(mse(d, 1.0, 1.0).0 <= mse(d, 0.0, 1.0).0);
-    }
+    let n = te.len();
     let _ = writeln!(
         md,
         "\nHeld-out, every η (F0 = 1, {n} gated cases): the shipped fisb-16 beats the LG18 bent \
-         normal in {g1}/{n} (fis-16: {f1}/{n}), is at or below the isotropic floor in {gi}/{n} \
-         (fis-16: {fi}/{n}), and beats fis-16 in {g3}/{n} (equal to it from |η| ≥ η₁)."
+         normal in {}/{n}, ties it in {} (η = 0, where both are the isotropic split sum), loses \
+         in {} (fis-16: {} wins, {} ties, {} losses); it is at or below the isotropic floor in {gi}/{n} (fis-16: \
+         {fi}/{n}) and beats fis-16 in {g3}/{n}.",
+        g1[0], g1[1], g1[2], f1[0], f1[1], f1[2]
     );
     let all: Vec<&Data> = data.iter().filter(|d| gated(d) && d.eta == 0.0).collect();
-    let worst = all
-        .iter()
-        .map(|d| {
-            let w = rule(d.eta, shipped.blend_eta, shipped.blend_power);
-            (
-                mse(d, w, 1.0).0 / mse(d, 0.0, 1.0).0,
-                mse(d, 1.0, 1.0).0 / mse(d, 0.0, 1.0).0,
-                d,
-            )
-        })
-        .fold((0.0f64, 0.0f64, String::new()), |acc, (s, f, d)| {
-            let tag = if f > acc.1 {
-                format!("{} r {}", d.env, d.r)
-            } else {
-                acc.2.clone()
-            };
-            (acc.0.max(s), acc.1.max(f), tag)
-        });
+    let (mut ws, mut wfis, mut tag) = (0.0f64, 0.0f64, String::new());
+    for d in &all {
+        let i = mse(d, 0.0, 0);
+        ws = ws.max(mse(d, shipped_weight(d), 0) / i);
+        let f = mse(d, 1.0, 0) / i;
+        if f > wfis {
+            wfis = f;
+            tag = format!("{} r {}", d.env, d.r);
+        }
+    }
     let _ = writeln!(
         md,
-        "\nEvery environment (training too), η = 0, gated cases: worst MSE / iso shipped {:.3}, \
-         fis-16 {:.3} ({}).",
-        worst.0, worst.1, worst.2
+        "\nEvery environment (training too), η = 0, gated cases: worst MSE / iso shipped {ws:.3}, \
+         fis-16 {wfis:.3} ({tag})."
     );
     let out = root.join("bench").join(if quick {
         "aniso-blend-quick.md"

@@ -9,7 +9,7 @@
 
 use crate::material::Material;
 use crate::methods::{evaluate as eval_method, AsTables, Inputs, Lookup, Method, E01};
-use crate::scene::{camera, plate_pixels, sphere_pixels, Field, Pixel, UvMap};
+use crate::scene::{camera, plate_pixels, sphere_pixels, Field, Pixel, TprRoughness, UvMap};
 use crate::truth::{mc_truth, TruthValue};
 use ibl_core::bordered::BorderedMips;
 use ibl_core::{luminance, CubeMips, Cubemap, Image};
@@ -89,6 +89,13 @@ pub struct Params {
     /// at the surface's UV, in place of the --tangent preset.
     #[arg(long, value_name = "FILE")]
     pub tpr_map: Option<std::path::PathBuf>,
+    /// Take each pixel's anisotropic GGX lobe from the --tpr-map file's B and A channels (the
+    /// roughness along t and along b, bilinearly at the surface's UV) instead of --roughness ×
+    /// --eta: `r` for perceptual roughness (α = r², what tpr-map writes), `alpha` for α (tpr-map
+    /// --store-alpha). One GGX case per view, reported at the map's mean lobe (r = √((ᾱ_t+ᾱ_b)/2),
+    /// η = (ᾱ_t−ᾱ_b)/(ᾱ_t+ᾱ_b)); --as-lobes are unaffected.
+    #[arg(long, value_enum, value_name = "UNITS")]
+    pub tpr_roughness: Option<TprRoughness>,
     /// A `quat-map` output whose RGB (q·½ + ½) rotates each pixel's whole frame at the
     /// surface's UV: normals perturbed as the thesis's shader perturbs them.
     #[arg(long, value_name = "FILE")]
@@ -222,13 +229,18 @@ impl Params {
             .map(|m| Method::parse(m.trim()))
             .collect::<Result<Vec<_>, _>>()
             .map_err(|e| crate::Error::Core(ibl_core::Error::param(format!("--methods: {e}"))))?;
+        if self.tpr_roughness.is_some() && self.tpr_map.is_none() {
+            return bad("--tpr-roughness reads the --tpr-map file: give --tpr-map FILE".into());
+        }
+        let tpr = match (&self.tpr_map, self.tpr_roughness) {
+            (Some(p), Some(_)) => Some(load_tpr_roughness_map(p)?),
+            (Some(p), None) => Some(load_uv_map(p, "--tpr-map", 2)?),
+            (None, _) => None,
+        };
         let field = Field {
             preset,
-            tpr: self
-                .tpr_map
-                .as_deref()
-                .map(|p| load_uv_map(p, "--tpr-map", 2))
-                .transpose()?,
+            tpr,
+            tpr_roughness: self.tpr_roughness,
             quat: self
                 .quat_map
                 .as_deref()
@@ -271,6 +283,34 @@ fn load_uv_map(path: &std::path::Path, flag: &str, channels: usize) -> crate::Re
         }
     }
     Ok(UvMap { image: img })
+}
+
+/// A `tpr-map` output whose B, A roughness channels are read (--tpr-roughness): four
+/// channels, and B, A within [0, 1] (what tpr-map writes, perceptual r or α); one-line errors
+/// naming the file.
+fn load_tpr_roughness_map(path: &std::path::Path) -> crate::Result<UvMap> {
+    let map = load_uv_map(path, "--tpr-map", 2)?;
+    let img = &map.image;
+    let err = |m: String| {
+        crate::Error::Core(ibl_core::Error::invalid(
+            path,
+            format!("--tpr-map with --tpr-roughness: {m}"),
+        ))
+    };
+    if img.channels < 4 {
+        return Err(err(format!(
+            "{} channel(s), the roughness channels B and A are missing (a tpr-map output has 4)",
+            img.channels
+        )));
+    }
+    for (i, t) in img.data.chunks(img.channels).enumerate() {
+        if let Some(x) = t[2..4].iter().find(|x| !(0.0..=1.0).contains(*x)) {
+            return Err(err(format!(
+                "texel {i} has roughness {x} outside [0, 1] in B or A"
+            )));
+        }
+    }
+    Ok(map)
 }
 
 /// What a method reads, per environment.
@@ -438,15 +478,22 @@ pub fn evaluate_with(
     let mut cases = Vec::new();
     let mut images = Vec::new();
     let mut materials: Vec<(f32, f32, Material)> = Vec::new();
-    for &r in &params.roughness {
-        for &eta in &params.eta {
-            materials.push((r, eta, Material::ggx_kc(r, eta)));
+    // With the lobe from the tpr-map file, one GGX case whose pixels carry their own lobe
+    // (`Pixel::material`); the case's r, η and material are set from the pixels' mean below.
+    let from_file = preset.tpr_roughness.is_some() && preset.tpr.is_some();
+    if from_file {
+        materials.push((0.0, 0.0, Material::ggx_kc(0.5, 0.0)));
+    } else {
+        for &r in &params.roughness {
+            for &eta in &params.eta {
+                materials.push((r, eta, Material::ggx_kc(r, eta)));
+            }
         }
     }
     for (nu, nv) in params.parse_as_lobes().unwrap_or_default() {
         materials.push((0.0, 0.0, Material::AshikhminShirley { nu, nv }));
     }
-    for &(r, eta, mat) in &materials {
+    for &(r0, eta0, mat) in &materials {
         {
             let as_tables = match mat {
                 Material::AshikhminShirley { nu, nv } => Some(AsTables::bake(nu, nv, 128)),
@@ -460,6 +507,16 @@ pub fn evaluate_with(
                         Scene::Sphere => sphere_pixels(params.sphere_size, cam, preset),
                         Scene::Plate => plate_pixels(params.sphere_size, az, el, preset),
                     };
+                    // The lobe each pixel is shaded with: its own (from the file) for a GGX
+                    // case, else the case's.
+                    let lobe = |p: &Pixel| match (mat, p.material) {
+                        (Material::Ggx { .. }, Some(m)) => m,
+                        _ => mat,
+                    };
+                    let (r, eta, case_mat) = match mat {
+                        Material::Ggx { .. } if from_file => mean_lobe(&pixels),
+                        _ => (r0, eta0, mat),
+                    };
                     let truth: Vec<TruthValue> = pixels
                         .par_iter()
                         .map(|p| {
@@ -467,7 +524,7 @@ pub fn evaluate_with(
                                 &env.cube,
                                 &p.frame,
                                 p.v,
-                                &mat,
+                                &lobe(p),
                                 params.truth_samples,
                                 p.idx as u64,
                             )
@@ -499,7 +556,7 @@ pub fn evaluate_with(
                             let est: Vec<E01> = pixels
                                 .par_iter()
                                 .map_init(TreeBuffers::default, |buf, p| {
-                                    eval_method(m, &inp, &p.frame, p.v, &mat, p.idx as u64, buf)
+                                    eval_method(m, &inp, &p.frame, p.v, &lobe(p), p.idx as u64, buf)
                                 })
                                 .collect();
                             let ln = if m.reads_chain() { lk.name() } else { "none" };
@@ -536,7 +593,7 @@ pub fn evaluate_with(
                         env: env.name.clone(),
                         r,
                         eta,
-                        material: mat,
+                        material: case_mat,
                         azimuth: az,
                         elevation: el,
                         v: v.to_array(),
@@ -555,6 +612,32 @@ pub fn evaluate_with(
         }
     }
     (cases, images)
+}
+
+/// The (r, η, lobe) a case whose pixels carry their own GGX lobe is reported at: the mean
+/// (ᾱ_t, ᾱ_b) over its pixels, r = √((ᾱ_t+ᾱ_b)/2), η = (ᾱ_t−ᾱ_b)/(ᾱ_t+ᾱ_b).
+fn mean_lobe(pixels: &[Pixel]) -> (f32, f32, Material) {
+    let (mut st, mut sb, mut n) = (0.0f64, 0.0f64, 0usize);
+    for (at, ab) in pixels
+        .iter()
+        .filter_map(|p| p.material.and_then(|m| m.ggx_alphas()))
+    {
+        st += at as f64;
+        sb += ab as f64;
+        n += 1;
+    }
+    if n == 0 {
+        return (0.0, 0.0, Material::ggx_kc(0.5, 0.0));
+    }
+    let (at, ab) = (st / n as f64, sb / n as f64);
+    (
+        ((at + ab) / 2.0).sqrt() as f32,
+        ((at - ab) / (at + ab)) as f32,
+        Material::Ggx {
+            alpha_t: at as f32,
+            alpha_b: ab as f32,
+        },
+    )
 }
 
 /// Aggregate of one method × lookup × F0 over the scored cases.

@@ -4,6 +4,7 @@
 //! a `quat-map` file (the whole tangent frame rotated by each texel's quaternion, Marcolongo
 //! 2020 §3.4), both read at the surface's UV.
 
+use crate::material::{Material, MIN_ALPHA};
 use glam::Vec3;
 use ibl_core::Image;
 use ibl_material::direction::Preset;
@@ -119,6 +120,18 @@ pub struct Field {
     /// A `quat-map` output: RGB = q·½ + ½, q = (a, b, c) the rotation of the tangent frame
     /// onto the texel's frame (identity = (1, ½, ½)).
     pub quat: Option<UvMap>,
+    /// Whether each pixel's GGX lobe comes from `tpr`'s B, A channels, and in which units.
+    pub tpr_roughness: Option<TprRoughness>,
+}
+
+/// What a `tpr-map` file's B and A channels hold: the roughness along t and along b
+/// (crates/ibl-material/src/tpr_map.rs).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize, serde::Deserialize)]
+pub enum TprRoughness {
+    /// Perceptual roughness r (α = r²): what `tpr-map` writes by default.
+    R,
+    /// The GGX α itself: what `tpr-map --store-alpha` writes (the thesis's convention).
+    Alpha,
 }
 
 impl From<Preset> for Field {
@@ -127,11 +140,30 @@ impl From<Preset> for Field {
             preset,
             tpr: None,
             quat: None,
+            tpr_roughness: None,
         }
     }
 }
 
 impl Field {
+    /// The GGX lobe at UV (u, v) when the field reads it from the `tpr-map` file (B, A
+    /// bilinearly, then squared for perceptual roughness, as a shader squares the texture's
+    /// value), each α floored at [`MIN_ALPHA`] as [`Material::ggx_kc`] floors it; `None`
+    /// otherwise.
+    pub fn material(&self, u: f64, v: f64) -> Option<Material> {
+        let (map, units) = (self.tpr.as_ref()?, self.tpr_roughness?);
+        let e: [f64; 4] = map.sample(u, v);
+        let (x, y) = (e[2].clamp(0.0, 1.0) as f32, e[3].clamp(0.0, 1.0) as f32);
+        let (at, ab) = match units {
+            TprRoughness::R => (x * x, y * y),
+            TprRoughness::Alpha => (x, y),
+        };
+        Some(Material::Ggx {
+            alpha_t: at.max(MIN_ALPHA),
+            alpha_b: ab.max(MIN_ALPHA),
+        })
+    }
+
     /// The frame at UV (u, v) of a surface whose base frame is (t₀, b₀, n) (orthonormal):
     /// first the quaternion rotates the whole base frame (t₀, b₀, n) → (t₁, b₁, n₁)
     /// (`ibl_material::quaternion::frame_from_quat`, the b' erratum fixed, q renormalised as
@@ -193,9 +225,15 @@ pub fn sphere_frame(n: Vec3, field: &Field) -> Option<Frame> {
     }
     let t0 = ring / len;
     let b0 = n.cross(t0);
+    let (u, v) = sphere_uv(n);
+    Some(field.frame(u, v, t0, b0, n))
+}
+
+/// The equirect UV of the sphere's normal n: u = ½ + atan2(n_x, n_z)/2π, v = acos(n_y)/π.
+fn sphere_uv(n: Vec3) -> (f64, f64) {
     let u = 0.5 + (n.x as f64).atan2(n.z as f64) / std::f64::consts::TAU;
     let v = (n.y as f64).clamp(-1.0, 1.0).acos() / std::f64::consts::PI;
-    Some(field.frame(u, v, t0, b0, n))
+    (u, v)
 }
 
 /// One shaded pixel of a view.
@@ -207,6 +245,10 @@ pub struct Pixel {
     pub frame: Frame,
     /// Unit direction towards the eye.
     pub v: Vec3,
+    /// The pixel's own lobe (from a `tpr-map` file's roughness channels), in place of the
+    /// case's.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub material: Option<Material>,
 }
 
 /// The shaded pixels of an s×s sphere image under `cam` with tangent field `preset`.
@@ -222,10 +264,12 @@ pub fn sphere_pixels(s: usize, cam: (Vec3, Vec3, Vec3), field: &Field) -> Vec<Pi
                 continue;
             }
             if let Some(frame) = sphere_frame(n, field) {
+                let (u, v) = sphere_uv(n);
                 out.push(Pixel {
                     idx: j * s + i,
                     frame,
                     v: cam.2,
+                    material: field.material(u, v),
                 });
             }
         }
@@ -269,6 +313,7 @@ pub fn plate_pixels(s: usize, azimuth_deg: f32, elevation_deg: f32, field: &Fiel
                 idx: j * s + i,
                 frame: field.frame(u, v, t0, b0, n),
                 v: (eye - p).normalize(),
+                material: field.material(u, v),
             });
         }
     }
@@ -422,5 +467,33 @@ mod tests {
         assert!((m.sample::<1>(0.0, 0.5)[0] - 0.5).abs() < 1e-12);
         assert!((m.sample::<1>(1.0, 0.0)[0] - 0.5).abs() < 1e-12);
         assert!((m.sample::<1>(0.5, 1.0)[0] - 0.5).abs() < 1e-12);
+    }
+
+    #[test]
+    fn tpr_map_roughness_channels_give_the_pixel_lobe() {
+        let field = |texel: &[f32], units| Field {
+            tpr: Some(constant_map(8, 4, texel)),
+            tpr_roughness: units,
+            ..Field::from("constant:0".parse::<Preset>().unwrap())
+        };
+        let lobe = |f: &Field| f.material(0.3, 0.6).and_then(|m| m.ggx_alphas());
+        // Perceptual r squared, α as stored, nothing without the flag.
+        let r = lobe(&field(&[1.0, 0.5, 0.5, 0.25], Some(TprRoughness::R))).unwrap();
+        assert_eq!(r, (0.25, 0.0625));
+        let a = lobe(&field(&[1.0, 0.5, 0.5, 0.25], Some(TprRoughness::Alpha))).unwrap();
+        assert_eq!(a, (0.5, 0.25));
+        assert_eq!(lobe(&field(&[1.0, 0.5, 0.5, 0.25], None)), None);
+        // r = 0 is floored as Material::ggx_kc floors it (a mirror axis has no D(m)).
+        let z = lobe(&field(&[1.0, 0.5, 0.0, 1.0], Some(TprRoughness::R))).unwrap();
+        assert_eq!(z, (MIN_ALPHA, 1.0));
+        // The pixels carry it; without the flag they carry none.
+        let px = sphere_pixels(
+            8,
+            camera(30.0, 20.0),
+            &field(&[1.0, 0.5, 0.5, 0.25], Some(TprRoughness::R)),
+        );
+        assert!(!px.is_empty() && px.iter().all(|p| p.material.is_some()));
+        let px = sphere_pixels(8, camera(30.0, 20.0), &field(&[1.0, 0.5, 0.5, 0.25], None));
+        assert!(px.iter().all(|p| p.material.is_none()));
     }
 }

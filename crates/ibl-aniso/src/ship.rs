@@ -65,9 +65,13 @@ pub const SHIPPED: Shipped = Shipped {
     lod_bias: 1.0,
     schlick_power: 5.0,
     alpha_min: 1e-3,
-    // bench/aniso-blend.md: the training optimum over η₁ ∈ {0.02 … 1} × p ∈ {0.5, 1, 2}.
-    blend_eta: 0.6,
-    blend_power: 1.0,
+    // bench/aniso-blend.md: the training optimum over η₁ ∈ {0.1 … 2} × p ∈ {0.15 … 2} (an
+    // η₁(r) = a + b·r family was tried and lost the leave-one-environment-out comparison).
+    // p < 1: even a slight anisotropy takes most of FIS (w = 0.59 at |η| = 0.1), which the
+    // training cases at r ≥ 0.6 ask for: there the isotropic split sum's mirror-direction read
+    // is the larger error (docs/notes/aniso-g1.md).
+    blend_eta: 0.8,
+    blend_power: 0.25,
 };
 
 /// The steps, in the order every snippet defines them (GLSL/HLSL name, WGSL name): the
@@ -871,13 +875,19 @@ mod tests {
                 let (at2, ab2) = Material::ggx_kc(r, -eta).ggx_alphas().unwrap();
                 assert!((w - fis_weight(at2, ab2)).abs() < 1e-6, "{r} {eta}");
                 assert!((0.0..=1.0).contains(&w));
-                if eta.abs() >= SHIPPED.blend_eta + 1e-4 {
+                // The lobe's own η: at r = 0.05 and |η| near 1 the α floor makes it smaller
+                // than the nominal one (α_t = 10⁻³, α_b = 0.005: η 0.67).
+                let lobe = ((at as f64 - ab as f64) / (at as f64 + ab as f64)).abs();
+                if lobe >= SHIPPED.blend_eta as f64 + 1e-4 {
                     assert_eq!(w, 1.0, "{r} {eta}");
                 }
-                let want = (eta.abs() / SHIPPED.blend_eta)
+                if eta == 0.0 {
+                    assert_eq!(w, 0.0, "{r}: exactly the floor at η = 0");
+                }
+                let want = (lobe / SHIPPED.blend_eta as f64)
                     .min(1.0)
-                    .powf(SHIPPED.blend_power);
-                assert!((w - want).abs() < 1e-4, "{r} {eta} {w} {want}");
+                    .powf(SHIPPED.blend_power as f64);
+                assert!((w as f64 - want).abs() < 1e-4, "{r} {eta} {w} {want}");
                 if eta >= 0.0 {
                     assert!(w >= last - 1e-6);
                     last = w;
