@@ -442,7 +442,7 @@ impl Opened {
     pub fn natural_face_size(&self) -> usize {
         match self {
             Opened::Loaded(l) => l.env.natural_face_size(),
-            Opened::Streamed(s) => equirect_natural_face_size(s.width()),
+            Opened::Streamed(s) => s.natural_face_size(),
         }
     }
 
@@ -506,6 +506,16 @@ fn input_warnings(
 }
 
 impl EquirectStream {
+    /// The file read.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// [`Environment::natural_face_size`] of the equirect.
+    pub fn natural_face_size(&self) -> usize {
+        equirect_natural_face_size(self.width())
+    }
+
     /// Width of the equirect.
     pub fn width(&self) -> usize {
         self.rows.width()
