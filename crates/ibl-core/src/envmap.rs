@@ -526,6 +526,12 @@ impl EquirectStream {
         self.rows.height()
     }
 
+    /// Reads the whole file instead ([`load_environment_with`] under the same policy), for a
+    /// use that needs the image itself.
+    pub fn load(self) -> Result<LoadedEnvironment> {
+        load_environment_with(&self.path, self.policy)
+    }
+
     /// The window a resample to n² faces will hold, before reading (for budgets).
     pub fn window(&self, n: usize) -> crate::stream::WindowStats {
         crate::stream::window_stats(
