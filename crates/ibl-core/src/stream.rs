@@ -369,6 +369,23 @@ mod tests {
     }
 
     #[test]
+    fn the_window_at_8k_is_a_few_megabytes() {
+        // The bound stated in bench/speed.md: at 8192×4096 (RGB) into the source cubes the
+        // prefilter bake makes (256² to 1024²), the window is the band plus the widest
+        // texel's rows, a few MB where the image is 402 MB.
+        for (n, most_rows) in [
+            (256usize, 32 + 4096 / 256 + 3),
+            (512, 32 + 11),
+            (1024, 32 + 7),
+        ] {
+            let s = window_stats(8192, 4096, 3, n, DEFAULT_BAND);
+            eprintln!("8192x4096 -> {n}²: {s:?}");
+            assert!(s.peak_rows <= most_rows, "{n}: {s:?}");
+            assert_eq!(s.peak_bytes, (s.peak_rows * 8192 * 12) as u64);
+        }
+    }
+
+    #[test]
     fn window_stats_agree_with_the_read() {
         let img = random(200, 100, 3, 7);
         let (_, stats) =
