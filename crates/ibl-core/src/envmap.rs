@@ -1152,11 +1152,141 @@ mod tests {
             open_environment_with(&small, EnvPolicy::default()).unwrap(),
             Opened::Loaded(_)
         ));
-        let exr = write_as(d.path(), "big2.exr", "exr", &img);
+        let png = write_as(d.path(), "big2.png", "png", &img);
         assert!(matches!(
-            open_environment_with(&exr, EnvPolicy::default()).unwrap(),
+            open_environment_with(&png, EnvPolicy::default()).unwrap(),
             Opened::Loaded(_)
         ));
+    }
+
+    #[test]
+    fn a_large_scan_line_exr_opened_as_a_stream_gives_the_loaded_cube_and_reports() {
+        // Every scan-line compression, half and float channels, NaN and negatives: a file
+        // whose blocks follow one another in increasing line order is streamed block by
+        // block, with the loaded read's cube (bit for bit), reports and warnings; decreasing
+        // line order and tiles are read whole. Corrupt or cut: one error naming the file.
+        use exr::prelude::{
+            f16, Blocks, Compression, Encoding, LineOrder, SpecificChannels, Vec2, WritableImage,
+        };
+        let d = tempfile::tempdir().unwrap();
+        let (w, h) = (600usize, 300usize);
+        let value = |x: usize, y: usize, c: usize| -> f32 {
+            // A hash (splitmix64's finaliser): noise no codec compresses much.
+            let mut k = ((y * w + x) * 4 + c) as u64 + 1;
+            k = (k ^ (k >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+            k = (k ^ (k >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+            match (k ^ (k >> 31)) % 1009 {
+                0 => f32::NAN,
+                1..=3 => -0.5,
+                4 => 2e4,
+                v => v as f32 * 0.013,
+            }
+        };
+        let policy = EnvPolicy {
+            sanitize: true,
+            negative: Negative::Clamp,
+        };
+        let cases = [
+            (Compression::Uncompressed, LineOrder::Increasing, None, true),
+            (Compression::RLE, LineOrder::Increasing, None, true),
+            (Compression::ZIP1, LineOrder::Increasing, None, true),
+            (Compression::ZIP16, LineOrder::Increasing, None, true),
+            (Compression::PIZ, LineOrder::Increasing, None, true),
+            (Compression::PXR24, LineOrder::Increasing, None, true),
+            (Compression::ZIP16, LineOrder::Decreasing, None, false),
+            (
+                Compression::ZIP1,
+                LineOrder::Increasing,
+                Some(64usize),
+                false,
+            ),
+        ];
+        for (k, (compression, line_order, tile, streams)) in cases.into_iter().enumerate() {
+            let blocks = match tile {
+                None => Blocks::ScanLines,
+                Some(t) => Blocks::Tiles(Vec2(t, t)),
+            };
+            let channels = SpecificChannels::rgba(|Vec2(x, y)| {
+                (
+                    f16::from_f32(value(x, y, 0)),
+                    f16::from_f32(value(x, y, 1)),
+                    value(x, y, 2),
+                    f16::from_f32(1.0),
+                )
+            });
+            let image = exr::prelude::Image::from_encoded_channels(
+                (w, h),
+                Encoding {
+                    compression,
+                    blocks,
+                    line_order,
+                },
+                channels,
+            );
+            let p = d.path().join(format!("case{k}.exr"));
+            image.write().to_file(&p).unwrap();
+            let at = format!("{compression:?} {line_order:?} {tile:?}");
+            let opened = open_environment_with(&p, policy).unwrap();
+            let Opened::Streamed(s) = opened else {
+                assert!(
+                    !streams,
+                    "{at}: read whole ({} bytes)",
+                    std::fs::metadata(&p).unwrap().len()
+                );
+                continue;
+            };
+            assert!(streams, "{at}: streamed");
+            let loaded = load_environment_with(&p, policy).unwrap();
+            let want = loaded.env.to_cube(48, Filter::Area, 10.0, &NoProgress);
+            let got = s.to_cube(48, 10.0, &NoProgress).unwrap();
+            assert!(same_bits(&got.cube, &want), "{at}");
+            assert_eq!(got.report, loaded.report, "{at}");
+            assert!(got.report.non_finite_zeroed > 0 && got.report.negative_clamped > 0);
+            assert_eq!(got.negative, loaded.negative, "{at}");
+            assert_eq!(got.warnings(&p), loaded.warnings(), "{at}");
+            if compression == Compression::ZIP1 {
+                // A damaged block in the middle: decompression fails there.
+                let mut bytes = std::fs::read(&p).unwrap();
+                let mid = bytes.len() / 2;
+                bytes[mid..mid + 200].iter_mut().for_each(|b| *b = !*b);
+                let q = d.path().join("damaged.exr");
+                std::fs::write(&q, &bytes).unwrap();
+                if let Ok(Opened::Streamed(s)) = open_environment_with(&q, policy) {
+                    let e = s.to_cube(48, 0.0, &NoProgress).unwrap_err().to_string();
+                    assert!(e.starts_with(&format!("{}: ", q.display())), "{e}");
+                }
+                // Cut short: refused before any row is read, as the whole read refuses it.
+                let cut = d.path().join("cut.exr");
+                std::fs::write(&cut, &bytes[..mid]).unwrap();
+                let e = open_environment_with(&cut, policy)
+                    .err()
+                    .unwrap()
+                    .to_string();
+                let whole = load_environment_with(&cut, policy).unwrap_err().to_string();
+                assert_eq!(e, whole);
+            }
+        }
+    }
+
+    #[test]
+    fn the_fixtures_streamed_give_their_loaded_cubes() {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/hdri");
+        let mut streamed = 0;
+        for entry in std::fs::read_dir(&root).unwrap() {
+            let p = entry.unwrap().path();
+            let policy = EnvPolicy::default();
+            let Opened::Streamed(s) = open_environment_with(&p, policy).unwrap() else {
+                continue;
+            };
+            let loaded = load_environment_with(&p, policy).unwrap();
+            let want = loaded.env.to_cube(64, Filter::Area, 0.0, &NoProgress);
+            let got = s.to_cube(64, 0.0, &NoProgress).unwrap();
+            assert!(same_bits(&got.cube, &want), "{}", p.display());
+            assert_eq!(got.warnings(&p), loaded.warnings());
+            streamed += 1;
+        }
+        // city_512.exr (441 kB) is above the streaming threshold; the others below it.
+        assert!(streamed >= 1, "{streamed} fixtures streamed");
     }
 
     /// An image owned as a row source, standing for a decoder that can yield NaN, Inf and

@@ -200,13 +200,22 @@ pub(crate) fn decode_file_streamed(
 }
 
 /// The rows of the image file at `path` (`file_len` bytes, whose first bytes are `head`) as a
-/// stream, when its format allows a row-by-row read (Radiance HDR); `None` for the others.
-/// The header's checks are done here, before any row is read.
+/// stream, when its format allows a row-by-row read (Radiance HDR; OpenEXR scan lines whose
+/// blocks follow one another in increasing line order); `None` for the others. The header's
+/// checks are done here, before any row is read.
 pub(crate) fn open_rows_streamed(
     path: &Path,
     head: &[u8],
     file_len: u64,
 ) -> Option<Result<Box<dyn crate::stream::RowSource>>> {
+    if image_signature(head) == Some("exr") {
+        let rows = guard(path, "OpenEXR", || exr_io::ExrRows::open(path, file_len));
+        return match rows {
+            Ok(Some(r)) => Some(Ok(Box::new(r))),
+            Ok(None) => None,
+            Err(e) => Some(Err(e)),
+        };
+    }
     if image_signature(head) != Some("hdr") {
         return None;
     }
