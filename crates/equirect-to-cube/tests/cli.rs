@@ -445,12 +445,12 @@ fn target_filament_refuses_an_rgb9e5_skybox() {
 
 #[test]
 fn a_large_hdr_streamed_gives_the_cube_of_the_same_texels_read_whole() {
-    // A 1024×512 Radiance file is resampled as its scan lines arrive, the same texels in an
+    // A 2048×1024 Radiance file is resampled as its scan lines arrive, the same texels in an
     // EXR as its blocks arrive (two readers; each against the whole read in ibl-core's
     // tests): the faces must be the same bytes. Cut short mid-stream, it fails in one line
     // naming the file and writes nothing.
     let dir = tempfile::tempdir().unwrap();
-    let mut img = direction_equirect(1024);
+    let mut img = direction_equirect(2048);
     for (k, v) in img.data.iter_mut().enumerate() {
         *v *= 1.0 + (k % 37) as f32 * 0.1 + if k % 4099 == 0 { 900.0 } else { 0.0 };
     }

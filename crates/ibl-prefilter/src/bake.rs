@@ -1506,11 +1506,12 @@ mod tests {
 
     #[test]
     fn a_streamed_input_bakes_the_chain_of_the_loaded_one() {
-        // A Radiance equirect above the streaming threshold: `run` from its opened stream and
-        // from the loaded image give the same files, bit for bit, and the same warnings.
+        // A Radiance equirect at the streaming threshold (2048×1024): `run` from its opened
+        // stream and from the loaded image give the same files, bit for bit, and the same
+        // warnings.
         use ibl_core::envmap::{load_environment, open_environment_with, EnvPolicy};
         let d = tempfile::tempdir().unwrap();
-        let (w, h) = (512, 256);
+        let (w, h) = (2048, 1024);
         let data: Vec<f32> = (0..w * h * 3)
             .map(|k| ((k * 7919) % 1009) as f32 * 0.01 + if k % 997 == 0 { 500.0 } else { 0.0 })
             .collect();
