@@ -116,6 +116,15 @@ pub(crate) struct Scratch {
     hint: [usize; 2],
 }
 
+impl Scratch {
+    /// Forgets the row-search starts: for a texel that is not its predecessor's right
+    /// neighbour (the searches then start from an arccos, not from a far row; the result does
+    /// not depend on where they start).
+    pub fn forget_rows(&mut self) {
+        self.hint = [usize::MAX; 2];
+    }
+}
+
 impl AreaPlan {
     /// The plan for n×n faces of a `w`×`h` source turned by `rotate_rad` about +Y.
     pub fn new(w: usize, h: usize, n: usize, rotate_rad: f64) -> Self {
@@ -295,7 +304,15 @@ impl AreaPlan {
     /// corners, and the pole when the square holds it), widened by one row each way for
     /// the rounding of the quadrature's own cosines. A streamed read keeps these rows until
     /// the texel is computed (the plan asserts every read falls inside the rows it is given).
-    pub fn texel_rows(&self, face: Face, i: usize, j: usize) -> (usize, usize) {
+    /// `hint` holds the two row searches' starts (as [`Scratch`]'s: any value gives the same
+    /// rows, a near one finds them in a step or two).
+    pub fn texel_rows(
+        &self,
+        face: Face,
+        i: usize,
+        j: usize,
+        hint: &mut [usize; 2],
+    ) -> (usize, usize) {
         let (s0, t0) = (i as f64 * self.step - 1.0, j as f64 * self.step - 1.0);
         let (s1, t1) = (s0 + self.step, t0 + self.step);
         let (c_max, c_min) = match face {
@@ -316,22 +333,20 @@ impl AreaPlan {
                 }
             }
             _ => {
-                // cos θ = −t / sqrt(1 + s² + t²): monotonic in t for any s, and in s² for any
-                // t, so the extremes are on the top or bottom edge at s0, s1 or s = 0.
-                let mut hi = f64::NEG_INFINITY;
-                let mut lo = f64::INFINITY;
-                for t in [t0, t1] {
-                    for s in [s0, s1, 0.0f64.clamp(s0, s1)] {
-                        let c = -t / (1.0 + s * s + t * t).sqrt();
-                        hi = hi.max(c);
-                        lo = lo.min(c);
-                    }
-                }
+                // cos θ = −t / sqrt(1 + s² + t²): decreasing in t for any s, so the largest
+                // is on the top edge t0 and the smallest on the bottom edge t1; along an edge
+                // it is monotonic in s², so at the smallest s² (s = 0 when the texel spans
+                // it) or the largest, whichever the sign of t favours.
+                let s_near = 0.0f64.clamp(s0, s1);
+                let (near, far) = (s_near * s_near, (s0 * s0).max(s1 * s1));
+                let c = |s2: f64, t: f64| -t / (1.0 + s2 + t * t).sqrt();
+                let hi = c(if t0 < 0.0 { near } else { far }, t0);
+                let lo = c(if t1 > 0.0 { near } else { far }, t1);
                 (hi, lo)
             }
         };
-        let a = self.row_of_cos(c_max, &mut usize::MAX.clone());
-        let b = self.row_of_cos(c_min, &mut usize::MAX.clone());
+        let a = self.row_of_cos(c_max, &mut hint[0]);
+        let b = self.row_of_cos(c_min, &mut hint[1]);
         (a.saturating_sub(1), (b + 1).min(self.h - 1))
     }
 

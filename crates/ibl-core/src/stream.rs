@@ -120,9 +120,10 @@ impl Schedule {
                 let (face, j) = (Face::from_index(fj / n), fj % n);
                 let mut lo = vec![usize::MAX; 0];
                 let mut span = 0;
+                let mut hint = [usize::MAX; 2];
                 let ks = (0..n)
                     .map(|i| {
-                        let (a, b) = plan.texel_rows(face, i, j);
+                        let (a, b) = plan.texel_rows(face, i, j, &mut hint);
                         span = span.max(b - a);
                         let k = b / band;
                         if lo.len() <= k {
@@ -250,11 +251,20 @@ pub fn equirect_to_cube_streamed(
         let texels = &sched.order[sched.start[k]..sched.start[k + 1]];
         texels
             .par_iter()
-            .map_init(Scratch::default, |sc, &t| {
-                let t = t as usize;
-                let (face, j, i) = (Face::from_index(t / (n * n)), (t / n) % n, t % n);
-                plan.footprint_mean(&rows, sc, face, i, j).0
-            })
+            .map_init(
+                || (Scratch::default(), usize::MAX),
+                |(sc, last), &t| {
+                    let t = t as usize;
+                    // The row searches start from the previous texel's rows only when it was
+                    // the left neighbour (a band's texels jump between faces and rows).
+                    if t != last.wrapping_add(1) {
+                        sc.forget_rows();
+                    }
+                    *last = t;
+                    let (face, j, i) = (Face::from_index(t / (n * n)), (t / n) % n, t % n);
+                    plan.footprint_mean(&rows, sc, face, i, j).0
+                },
+            )
             .collect_into_vec(&mut values);
         for (&t, v) in texels.iter().zip(&values) {
             let t = t as usize;
