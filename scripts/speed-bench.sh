@@ -147,12 +147,12 @@ for w, size in cases:
     print(lines[-1], flush=True)
     chart.append((w, size, c, m))
 
-lines.append("\nThe memory bound: the process (about 11 MiB); then the input. A Radiance (.hdr) equirect above "
-             "128 KiB (these sources) is streamed: only a window of rows is held, (32 + s) rows × width × 12 bytes, s the "
+lines.append("\nThe memory bound: the process (about 11 MiB); then the input. An equirect of 2048×1024 or more "
+             "in Radiance .hdr (these sources) or scan-line OpenEXR is streamed: only a window of rows is held, (32 + s) rows × width × 12 bytes, s the "
              "widest row span of one source-cube texel (about height / cube size + 2: 41 rows, 4.0 MB, at 8192×4096 into "
-             "a 512² source cube), with a 1 MiB read buffer and 4 bytes a source-cube texel for the texel order, never "
-             "the image (`read` is then inside `resample`); other inputs (EXR, PNG, JPEG) are decoded whole until the "
-             "resample ends (12 bytes a pixel: 402 MB at 8192×4096). Then about 80 bytes a source-cube texel (the cube "
+             "a 512² source cube), with a 1 MiB read buffer, one EXR block and 4 bytes a source-cube texel for the "
+             "texel order, never the file nor the image (`read` is then inside `resample`); smaller equirects and other "
+             "inputs (tiled EXR, PNG, JPEG, cubes) are decoded whole until the resample ends (12 bytes a pixel). Then about 80 bytes a source-cube texel (the cube "
              "and its cell tree; the source cube is the output size times at most 2, as the input allows) and up to "
              "160 bytes a level-0 texel (the levels, their fit, the report's copy, the encoded files): what `reserved` "
              "states and the bake reserves against `--max-memory` before it starts (the window is reserved by the "
