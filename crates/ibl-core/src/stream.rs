@@ -75,7 +75,8 @@ pub struct WindowStats {
     pub band: usize,
     /// The widest row range of one texel's footprint (b − a).
     pub max_span: usize,
-    /// Most rows held at once, computed before the read (the window's allocation).
+    /// Most rows held at once (computed before the read for the window's allocation and
+    /// [`window_stats`]; as measured during it in what [`equirect_to_cube_streamed`] returns).
     pub peak_rows: usize,
     /// Bytes of that window.
     pub peak_bytes: u64,
@@ -219,7 +220,7 @@ pub fn equirect_to_cube_streamed(
     let plan = AreaPlan::new(w, h, n, (rotate_deg as f64).to_radians());
     let band = band.clamp(1, h.max(1));
     let sched = Schedule::new(&plan, band, true);
-    let stats = sched.stats(stride);
+    let mut stats = sched.stats(stride);
     let path = src.path().to_path_buf();
     let _budget = crate::io::budget::reserve(
         &path,
@@ -236,12 +237,15 @@ pub fn equirect_to_cube_streamed(
     let mut cube = Cubemap::new(n);
     progress.start("texels", (6 * n * n) as u64);
     let mut lo = 0usize;
+    // Rows held at most, as measured (the tests hold it to the schedule's and to the bound).
+    let mut held = 0usize;
     let mut values: Vec<Rgb> = Vec::new();
     for k in 0..h.div_ceil(band) {
         let (_, r1) = sched.window(k);
         let r0 = k * band;
         src.read_rows(r1 - r0, &mut window)?;
         debug_assert_eq!(window.len(), (r1 - lo) * stride);
+        held = held.max(window.len() / stride.max(1));
         let rows = Rows {
             data: &window,
             first: lo,
@@ -278,6 +282,8 @@ pub fn equirect_to_cube_streamed(
         lo = keep;
     }
     progress.finish();
+    stats.peak_rows = held;
+    stats.peak_bytes = (held * stride * 4) as u64;
     Ok((cube, stats))
 }
 
@@ -342,6 +348,7 @@ mod tests {
                 // The stated bound, and the window is a fraction of the image where the
                 // texels are small against it.
                 let b = band.min(h);
+                assert_eq!(stats, window_stats(w, h, ch, n, band), "held = scheduled");
                 assert!(
                     stats.peak_rows <= b + stats.max_span,
                     "{w}x{h} -> {n} band {band}: {stats:?}"
