@@ -147,17 +147,23 @@ for w, size in cases:
     print(lines[-1], flush=True)
     chart.append((w, size, c, m))
 
-lines.append("\nThe memory bound: the process (about 11 MiB), the input's decoded image until the resample "
-             "ends (12 bytes a pixel: 402 MB at 8192×4096; it is freed before the tree, and a streamed read is "
-             "not done), then about 80 bytes a source-cube texel (the cube and its cell tree; the source cube is "
-             "the output size times at most 2, as the input allows) and up to 160 bytes a level-0 texel (the "
-             "levels, their fit, the report's copy, the encoded files): what `reserved` states and the bake "
-             "reserves against `--max-memory` before it starts. It grows with the output, not with the source, "
-             "once the image is freed.")
+lines.append("\nThe memory bound: the process (about 11 MiB); then the input. An equirect of 2048×1024 or more "
+             "in Radiance .hdr (these sources) or scan-line OpenEXR is streamed: only a window of rows is held, (32 + s) rows × width × 12 bytes, s the "
+             "widest row span of one source-cube texel (about height / cube size + 2: 41 rows, 4.0 MB, at 8192×4096 into "
+             "a 512² source cube), with a 1 MiB read buffer, one EXR block and 4 bytes a source-cube texel for the "
+             "texel order, never the file nor the image (`read` is then inside `resample`); smaller equirects and other "
+             "inputs (tiled EXR, PNG, JPEG, cubes) are decoded whole until the resample ends (12 bytes a pixel). Then about 80 bytes a source-cube texel (the cube "
+             "and its cell tree; the source cube is the output size times at most 2, as the input allows) and up to "
+             "160 bytes a level-0 texel (the levels, their fit, the report's copy, the encoded files): what `reserved` "
+             "states and the bake reserves against `--max-memory` before it starts (the window is reserved by the "
+             "resample). It grows with the output, not with the source once streamed.")
 # Exponents: cost against face size at a fixed source, and against source size at a fixed face.
 def expo(p, q, x0, x1):
     return math.log(q / p) / math.log(x1 / x0)
 byc = {(w, s): (c, m) for w, s, c, m in chart}
+same = [s for s in (256, 512) if (4096, s) in byc and (8192, s) in byc]
+if same:
+    lines[-1] += " Measured: " + "; ".join(f"{s}² faces peak at {byc[(4096, s)][1]:.0f} MiB from 4096×2048 and {byc[(8192, s)][1]:.0f} MiB from 8192×4096" for s in same) + "."
 lines.append("\n### Scale\n")
 for w in sorted({w for w, _, _, _ in chart}):
     ss = sorted(s for ww, s, _, _ in chart if ww == w)

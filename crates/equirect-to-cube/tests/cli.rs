@@ -442,3 +442,50 @@ fn target_filament_refuses_an_rgb9e5_skybox() {
         1
     );
 }
+
+#[test]
+fn a_large_hdr_streamed_gives_the_cube_of_the_same_texels_read_whole() {
+    // A 2048×1024 Radiance file is resampled as its scan lines arrive, the same texels in an
+    // EXR as its blocks arrive (two readers; each against the whole read in ibl-core's
+    // tests): the faces must be the same bytes. Cut short mid-stream, it fails in one line
+    // naming the file and writes nothing.
+    let dir = tempfile::tempdir().unwrap();
+    let mut img = direction_equirect(2048);
+    for (k, v) in img.data.iter_mut().enumerate() {
+        *v *= 1.0 + (k % 37) as f32 * 0.1 + if k % 4099 == 0 { 900.0 } else { 0.0 };
+    }
+    let hdr = dir.path().join("env.hdr");
+    io::write_image(&hdr, &img, &WriteOptions::default()).unwrap();
+    let same = io::read_image(&hdr, ColorSpace::Linear).unwrap();
+    let exr = dir.path().join("env.exr");
+    io::write_image(&exr, &same, &WriteOptions::default()).unwrap();
+    for flags in [&["--size", "128"][..], &["--size", "77", "--rotate", "33"]] {
+        let (a, b) = (dir.path().join("a"), dir.path().join("b"));
+        bake(&hdr, &a, flags);
+        bake(&exr, &b, flags);
+        let faces: Vec<String> = files_in(&a)
+            .into_iter()
+            .filter(|f| f.ends_with(".exr"))
+            .collect();
+        assert_eq!(faces.len(), 6, "{faces:?}");
+        for f in &faces {
+            let (x, y) = (
+                std::fs::read(a.join(f)).unwrap(),
+                std::fs::read(b.join(f)).unwrap(),
+            );
+            assert!(x == y, "{f} {flags:?}");
+        }
+        std::fs::remove_dir_all(&a).unwrap();
+        std::fs::remove_dir_all(&b).unwrap();
+    }
+    let bytes = std::fs::read(&hdr).unwrap();
+    let cut = dir.path().join("cut.hdr");
+    std::fs::write(&cut, &bytes[..bytes.len() * 3 / 4]).unwrap();
+    let out = dir.path().join("out");
+    assert_fails_cleanly(&cut, &out, "cut.hdr", 2);
+    let e = stderr(&run(&cut, &out, &["--size", "64"]));
+    assert!(
+        e.contains("scan line") && e.trim().lines().count() == 1,
+        "{e}"
+    );
+}

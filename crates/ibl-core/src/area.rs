@@ -53,10 +53,33 @@ struct SideColumns {
     pieces: Vec<SidePiece>,
 }
 
-/// Everything the texels of one n×n resample share: the source (read in place), cos θ at its
-/// row boundaries, and the column pieces of the four side faces.
-pub(crate) struct AreaPlan<'a> {
-    src: &'a Image,
+/// The source rows a resample reads: rows `first .. first + rows` of a W-wide equirect with
+/// `channels` channels, row-major from `data[0]` (the whole image, or the window of a streamed
+/// read: only where the rows live differs, never the arithmetic).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Rows<'a> {
+    pub data: &'a [f32],
+    pub first: usize,
+    pub rows: usize,
+    pub channels: usize,
+}
+
+impl<'a> Rows<'a> {
+    /// Every row of `img`.
+    pub fn whole(img: &'a Image) -> Self {
+        Rows {
+            data: &img.data,
+            first: 0,
+            rows: img.height,
+            channels: img.channels,
+        }
+    }
+}
+
+/// Everything the texels of one n×n resample share: cos θ at the source's row boundaries,
+/// its meridians and the column pieces of the four side faces (the source's rows are passed
+/// to [`AreaPlan::footprint_mean`], so one plan serves a streamed read's every window).
+pub(crate) struct AreaPlan {
     w: usize,
     h: usize,
     n: usize,
@@ -93,10 +116,18 @@ pub(crate) struct Scratch {
     hint: [usize; 2],
 }
 
-impl<'a> AreaPlan<'a> {
-    /// The plan for n×n faces of `src` turned by `rotate_rad` about +Y.
-    pub fn new(src: &'a Image, n: usize, rotate_rad: f64) -> Self {
-        let (w, h) = (src.width, src.height);
+impl Scratch {
+    /// Forgets the row-search starts: for a texel that is not its predecessor's right
+    /// neighbour (the searches then start from an arccos, not from a far row; the result does
+    /// not depend on where they start).
+    pub fn forget_rows(&mut self) {
+        self.hint = [usize::MAX; 2];
+    }
+}
+
+impl AreaPlan {
+    /// The plan for n×n faces of a `w`×`h` source turned by `rotate_rad` about +Y.
+    pub fn new(w: usize, h: usize, n: usize, rotate_rad: f64) -> Self {
         let step = 2.0 / n as f64;
         let mut side: [SideColumns; 6] = Default::default();
         let mut cuts = Vec::new();
@@ -119,7 +150,6 @@ impl<'a> AreaPlan<'a> {
             sc.start.push(sc.pieces.len());
         }
         AreaPlan {
-            src,
             w,
             h,
             n,
@@ -181,7 +211,13 @@ impl<'a> AreaPlan<'a> {
     /// row (the nodes share the column, so each source pixel is read once and the row
     /// search is done for the piece, not per node); returns the weight added.
     #[inline(always)]
-    fn accumulate_piece(&self, p: &Piece, acc: &mut [f64; 3], hint: &mut [usize; 2]) -> f64 {
+    fn accumulate_piece(
+        &self,
+        src: &Rows,
+        p: &Piece,
+        acc: &mut [f64; 3],
+        hint: &mut [usize; 2],
+    ) -> f64 {
         let top = p.c_top[0].max(p.c_top[1]).max(p.c_top[2]);
         let bot = p.c_bot[0].min(p.c_bot[1]).min(p.c_bot[2]);
         if top <= bot {
@@ -189,9 +225,17 @@ impl<'a> AreaPlan<'a> {
         }
         let j0 = self.row_of_cos(top, &mut hint[0]);
         let j1 = self.row_of_cos(bot, &mut hint[1]);
-        let ch = self.src.channels;
+        // A row outside the rows given is a bug of the caller's window (texel_rows below
+        // bounds what any texel reads), never a reason to read another row.
+        assert!(
+            j0 >= src.first && j1 < src.first + src.rows,
+            "area resample: rows {j0}..={j1} read outside the window {}..{}",
+            src.first,
+            src.first + src.rows
+        );
+        let ch = src.channels;
         let stride = self.w * ch;
-        let data = &self.src.data[p.col * ch..];
+        let data = &src.data[(j0 - src.first) * stride + p.col * ch..];
         let mut total = 0.0;
         for (k, bounds) in self.cos_row[j0..=j1 + 1].windows(2).enumerate() {
             let mut w = 0.0;
@@ -211,7 +255,7 @@ impl<'a> AreaPlan<'a> {
                 let d = hi - lo;
                 w += if d > 0.0 { d } else { 0.0 } * p.scale[g];
             }
-            let t = &data[(j0 + k) * stride..];
+            let t = &data[k * stride..];
             // Image::rgb's reading of 1, 2, 3 or 4 channels.
             let l = match ch {
                 1 => [t[0], t[0], t[0]],
@@ -229,7 +273,14 @@ impl<'a> AreaPlan<'a> {
     /// Mean radiance over cube texel (`face`, i, j) of the turned source, and the solid angle
     /// the integration covered (the exact solid angle of the texel up to quadrature error;
     /// the tests check it).
-    pub fn footprint_mean(&self, sc: &mut Scratch, face: Face, i: usize, j: usize) -> (Rgb, f64) {
+    pub fn footprint_mean(
+        &self,
+        src: &Rows,
+        sc: &mut Scratch,
+        face: Face,
+        i: usize,
+        j: usize,
+    ) -> (Rgb, f64) {
         let mut acc = [0.0f64; 3];
         let (s0, t0) = (i as f64 * self.step - 1.0, j as f64 * self.step - 1.0);
         let (s1, t1) = (s0 + self.step, t0 + self.step);
@@ -237,8 +288,8 @@ impl<'a> AreaPlan<'a> {
             sc.hint = [usize::MAX; 2];
         }
         let total = match face {
-            Face::Py | Face::Ny => self.polar_face(sc, face, s0, s1, t0, t1, &mut acc),
-            _ => self.side_face(sc, face, i, t0, t1, &mut acc),
+            Face::Py | Face::Ny => self.polar_face(src, sc, face, s0, s1, t0, t1, &mut acc),
+            _ => self.side_face(src, sc, face, i, t0, t1, &mut acc),
         };
         let mean = if total > 0.0 {
             acc.map(|a| (a / total) as f32)
@@ -248,8 +299,66 @@ impl<'a> AreaPlan<'a> {
         (mean, total)
     }
 
+    /// Source rows `[a, b]` that [`Self::footprint_mean`] may read for texel (`face`, i, j):
+    /// those of the polar-angle extremes of the texel's whole square (edges, not only
+    /// corners, and the pole when the square holds it), widened by one row each way for
+    /// the rounding of the quadrature's own cosines. A streamed read keeps these rows until
+    /// the texel is computed (the plan asserts every read falls inside the rows it is given).
+    /// `hint` holds the two row searches' starts (as [`Scratch`]'s: any value gives the same
+    /// rows, a near one finds them in a step or two).
+    pub fn texel_rows(
+        &self,
+        face: Face,
+        i: usize,
+        j: usize,
+        hint: &mut [usize; 2],
+    ) -> (usize, usize) {
+        let (s0, t0) = (i as f64 * self.step - 1.0, j as f64 * self.step - 1.0);
+        let (s1, t1) = (s0 + self.step, t0 + self.step);
+        let (c_max, c_min) = match face {
+            Face::Py | Face::Ny => {
+                // cos θ' = 1/sqrt(1 + ρ²) from the pole, ρ the distance in the face plane:
+                // nearest at the clamped origin (0 when the square holds the pole), farthest
+                // at a corner. Both faces' squares are symmetric in the sign of z.
+                let near = |lo: f64, hi: f64| 0.0f64.clamp(lo, hi);
+                let far = |lo: f64, hi: f64| lo.abs().max(hi.abs());
+                let (nx, nz) = (near(s0, s1), near(t0, t1));
+                let (fx, fz) = (far(s0, s1), far(t0, t1));
+                let c_near = 1.0 / (1.0 + nx * nx + nz * nz).sqrt();
+                let c_far = 1.0 / (1.0 + fx * fx + fz * fz).sqrt();
+                if face == Face::Py {
+                    (c_near, c_far)
+                } else {
+                    (-c_far, -c_near)
+                }
+            }
+            _ => {
+                // cos θ = −t / sqrt(1 + s² + t²): decreasing in t for any s, so the largest
+                // is on the top edge t0 and the smallest on the bottom edge t1; along an edge
+                // it is monotonic in s², so at the smallest s² (s = 0 when the texel spans
+                // it) or the largest, whichever the sign of t favours.
+                let s_near = 0.0f64.clamp(s0, s1);
+                let (near, far) = (s_near * s_near, (s0 * s0).max(s1 * s1));
+                let c = |s2: f64, t: f64| -t / (1.0 + s2 + t * t).sqrt();
+                let hi = c(if t0 < 0.0 { near } else { far }, t0);
+                let lo = c(if t1 > 0.0 { near } else { far }, t1);
+                (hi, lo)
+            }
+        };
+        let a = self.row_of_cos(c_max, &mut hint[0]);
+        let b = self.row_of_cos(c_min, &mut hint[1]);
+        (a.saturating_sub(1), (b + 1).min(self.h - 1))
+    }
+
+    /// The source's width and height, and the face size.
+    pub fn sizes(&self) -> (usize, usize, usize) {
+        (self.w, self.h, self.n)
+    }
+
+    #[allow(clippy::too_many_arguments)]
     fn side_face(
         &self,
+        src: &Rows,
         sc: &mut Scratch,
         face: Face,
         i: usize,
@@ -271,15 +380,15 @@ impl<'a> AreaPlan<'a> {
                 scale: p.scale,
             });
         }
-        self.accumulate_pieces(sc, acc)
+        self.accumulate_pieces(src, sc, acc)
     }
 
     /// Σ of [`Self::accumulate_piece`] over the scratch's pieces, in their order.
     #[inline(always)]
-    fn accumulate_pieces(&self, sc: &mut Scratch, acc: &mut [f64; 3]) -> f64 {
+    fn accumulate_pieces(&self, src: &Rows, sc: &mut Scratch, acc: &mut [f64; 3]) -> f64 {
         let mut total = 0.0;
         for p in &sc.pieces {
-            total += self.accumulate_piece(p, acc, &mut sc.hint);
+            total += self.accumulate_piece(src, p, acc, &mut sc.hint);
         }
         total
     }
@@ -290,6 +399,7 @@ impl<'a> AreaPlan<'a> {
     #[allow(clippy::too_many_arguments)]
     fn polar_face(
         &self,
+        src: &Rows,
         sc: &mut Scratch,
         face: Face,
         s0: f64,
@@ -438,7 +548,7 @@ impl<'a> AreaPlan<'a> {
             }
             sc.pieces.push(p);
         }
-        self.accumulate_pieces(sc, acc)
+        self.accumulate_pieces(src, sc, acc)
     }
 }
 
@@ -556,7 +666,7 @@ mod tests {
     #[test]
     fn row_of_cos_is_exact_at_and_between_boundaries_from_any_start() {
         let img = Image::new(8, 37, 3);
-        let plan = AreaPlan::new(&img, 4, 0.0);
+        let plan = AreaPlan::new(img.width, img.height, 4, 0.0);
         for start in [0, 5, 18, 36, 1000] {
             for j in 0..37 {
                 let mid = (PI * (j as f64 + 0.5) / 37.0).cos();
@@ -577,11 +687,17 @@ mod tests {
         let img = Image::new(64, 32, 3);
         for n in [1usize, 3, 8] {
             for rot in [0.0, 0.3] {
-                let plan = AreaPlan::new(&img, n, rot);
+                let plan = AreaPlan::new(img.width, img.height, n, rot);
                 for face in Face::ALL {
                     for j in 0..n {
                         for i in 0..n {
-                            let (_, got) = plan.footprint_mean(&mut Scratch::default(), face, i, j);
+                            let (_, got) = plan.footprint_mean(
+                                &Rows::whole(&img),
+                                &mut Scratch::default(),
+                                face,
+                                i,
+                                j,
+                            );
                             let want = texel_solid_angle(i, j, n);
                             assert!(
                                 ((got - want) / want).abs() < 1e-6,
@@ -638,7 +754,7 @@ mod tests {
         for (k, &(w, h, n, rot)) in cases.iter().enumerate() {
             let img = source(w, h, 1 + k % 4);
             let old = before::EquirectTables::new(&img);
-            let plan = AreaPlan::new(&img, n, rot);
+            let plan = AreaPlan::new(w, h, n, rot);
             let mut sc = Scratch::default();
             let step = 2.0 / n as f64;
             for face in Face::ALL {
@@ -655,7 +771,7 @@ mod tests {
                             rot,
                             &mut Vec::new(),
                         );
-                        let got = plan.footprint_mean(&mut sc, face, i, j);
+                        let got = plan.footprint_mean(&Rows::whole(&img), &mut sc, face, i, j);
                         let at = format!("{w}x{h} -> {n} rot {rot} {face:?} ({i},{j})");
                         let total = ((got.1 - want.1) / want.1).abs();
                         let mut mean = 0.0f64;

@@ -119,29 +119,8 @@ pub fn apply_negative_policy(
         policy,
         ..Default::default()
     };
-    // Colour channels are weighed (all of them, or the first three of RGBA); a negative alpha
-    // is clamped under `Clamp` as before, but carries no power.
     let mut visit = |data: &mut [f32], channels: usize, sa: &dyn Fn(usize) -> f64| {
-        for (k, px) in data.chunks_exact_mut(channels).enumerate() {
-            let w = sa(k);
-            let (colour, alpha) = px.split_at_mut(channels.min(3));
-            for v in alpha.iter_mut().filter(|v| **v < 0.0) {
-                if policy == Negative::Clamp {
-                    *v = 0.0;
-                }
-            }
-            for v in colour {
-                r.power += *v as f64 * w;
-                if *v < 0.0 {
-                    r.count += 1;
-                    r.most_negative = r.most_negative.min(*v);
-                    r.negative_power -= *v as f64 * w;
-                    if policy == Negative::Clamp {
-                        *v = 0.0;
-                    }
-                }
-            }
-        }
+        visit_negatives(&mut r, policy, data, channels, sa)
     };
     match env {
         Environment::Equirect(img) => {
@@ -159,7 +138,45 @@ pub fn apply_negative_policy(
             }
         }
     }
-    if policy == Negative::Refuse && r.count > 0 {
+    refuse_negatives(&r, path)?;
+    Ok(r)
+}
+
+/// Adds the negative texels of `data` (pixel k weighing `sa(k)`) to `r`, clamping them under
+/// `Clamp`. Colour channels are weighed (all of them, or the first three of RGBA); a negative
+/// alpha is clamped under `Clamp` as before, but carries no power.
+fn visit_negatives(
+    r: &mut NegativeReport,
+    policy: Negative,
+    data: &mut [f32],
+    channels: usize,
+    sa: &dyn Fn(usize) -> f64,
+) {
+    for (k, px) in data.chunks_exact_mut(channels).enumerate() {
+        let w = sa(k);
+        let (colour, alpha) = px.split_at_mut(channels.min(3));
+        for v in alpha.iter_mut().filter(|v| **v < 0.0) {
+            if policy == Negative::Clamp {
+                *v = 0.0;
+            }
+        }
+        for v in colour {
+            r.power += *v as f64 * w;
+            if *v < 0.0 {
+                r.count += 1;
+                r.most_negative = r.most_negative.min(*v);
+                r.negative_power -= *v as f64 * w;
+                if policy == Negative::Clamp {
+                    *v = 0.0;
+                }
+            }
+        }
+    }
+}
+
+/// The refusal of `--negative refuse` when `r` found negatives.
+fn refuse_negatives(r: &NegativeReport, path: &Path) -> Result<()> {
+    if r.policy == Negative::Refuse && r.count > 0 {
         return Err(Error::invalid(
             path,
             r.message(path)
@@ -168,7 +185,7 @@ pub fn apply_negative_policy(
                 .to_string(),
         ));
     }
-    Ok(r)
+    Ok(())
 }
 
 /// An environment plus what the input checks found.
@@ -207,10 +224,7 @@ impl Environment {
     /// the cube's own size otherwise.
     pub fn natural_face_size(&self) -> usize {
         match self {
-            Environment::Equirect(img) => {
-                let q = (img.width / 4).max(1);
-                1usize << (usize::BITS - 1 - q.leading_zeros())
-            }
+            Environment::Equirect(img) => equirect_natural_face_size(img.width),
             Environment::Cube(c) => c.size,
         }
     }
@@ -232,6 +246,13 @@ impl Environment {
             Environment::Cube(c) => cube_to_cube(c, n, filter, rotate_deg, progress),
         }
     }
+}
+
+/// The largest power of two not above width/4: the natural face size of a `width`-wide
+/// equirect.
+fn equirect_natural_face_size(width: usize) -> usize {
+    let q = (width / 4).max(1);
+    1usize << (usize::BITS - 1 - q.leading_zeros())
 }
 
 /// Resamples a cube to another size: exact box reduction for power-of-two down-sizing,
@@ -389,6 +410,286 @@ pub fn load_environment_with(path: &Path, policy: EnvPolicy) -> Result<LoadedEnv
     }
     loaded.negative = r;
     Ok(loaded)
+}
+
+/// An environment opened for a bake: read whole, or (a large equirect whose format reads row
+/// by row) left open to be resampled as its rows stream in, never held whole.
+// One per run, moved once: boxing the loaded variant would buy nothing.
+#[allow(clippy::large_enum_variant)]
+pub enum Opened {
+    /// Read and checked.
+    Loaded(LoadedEnvironment),
+    /// An equirect to resample with [`EquirectStream::to_cube`].
+    Streamed(EquirectStream),
+}
+
+impl From<LoadedEnvironment> for Opened {
+    fn from(l: LoadedEnvironment) -> Self {
+        Opened::Loaded(l)
+    }
+}
+
+impl Opened {
+    /// The file or folder it comes from.
+    pub fn path(&self) -> &Path {
+        match self {
+            Opened::Loaded(l) => &l.path,
+            Opened::Streamed(s) => &s.path,
+        }
+    }
+
+    /// [`Environment::natural_face_size`] of the environment.
+    pub fn natural_face_size(&self) -> usize {
+        match self {
+            Opened::Loaded(l) => l.env.natural_face_size(),
+            Opened::Streamed(s) => s.natural_face_size(),
+        }
+    }
+
+    /// The warnings known when opened (a streamed input's come with its cube).
+    pub fn warnings(&self) -> Vec<String> {
+        match self {
+            Opened::Loaded(l) => l.warnings(),
+            Opened::Streamed(_) => Vec::new(),
+        }
+    }
+}
+
+/// A large equirect read as a stream of rows (Radiance HDR): the checks of
+/// [`load_environment_with`] (NaN/Inf, negatives, the name against the content) are made row
+/// by row as the rows arrive, with the same reports.
+pub struct EquirectStream {
+    path: PathBuf,
+    rows: Box<dyn crate::stream::RowSource>,
+    policy: EnvPolicy,
+    read_as: Option<String>,
+}
+
+/// A cube resampled from an [`EquirectStream`] and what the input checks found.
+#[derive(Clone, Debug)]
+pub struct StreamedCube {
+    /// The cube, bit-identical to the whole-image resample of the checked input.
+    pub cube: Cubemap,
+    /// What the texel checks found (as [`LoadedEnvironment::report`]).
+    pub report: TexelReport,
+    /// How a file whose content and name disagree was read.
+    pub read_as: Vec<String>,
+    /// The negative texels, their power and what was done with them.
+    pub negative: NegativeReport,
+    /// What the streamed read held.
+    pub window: crate::stream::WindowStats,
+}
+
+impl StreamedCube {
+    /// The warnings [`LoadedEnvironment::warnings`] gives for the same input.
+    pub fn warnings(&self, path: &Path) -> Vec<String> {
+        input_warnings(path, &self.read_as, &self.negative, &self.report)
+    }
+}
+
+/// Warnings of an input: files read by content against their name, then negative texels and
+/// NaN/Inf zeroed.
+fn input_warnings(
+    path: &Path,
+    read_as: &[String],
+    negative: &NegativeReport,
+    report: &TexelReport,
+) -> Vec<String> {
+    let mut w = read_as.to_vec();
+    w.extend(negative.message(path));
+    let zeroed = TexelReport {
+        negative_clamped: 0,
+        ..report.clone()
+    };
+    w.extend(zeroed.warnings(path));
+    w
+}
+
+impl EquirectStream {
+    /// The file read.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// [`Environment::natural_face_size`] of the equirect.
+    pub fn natural_face_size(&self) -> usize {
+        equirect_natural_face_size(self.width())
+    }
+
+    /// Width of the equirect.
+    pub fn width(&self) -> usize {
+        self.rows.width()
+    }
+
+    /// Height of the equirect.
+    pub fn height(&self) -> usize {
+        self.rows.height()
+    }
+
+    /// Reads the whole file instead ([`load_environment_with`] under the same policy), for a
+    /// use that needs the image itself.
+    pub fn load(self) -> Result<LoadedEnvironment> {
+        load_environment_with(&self.path, self.policy)
+    }
+
+    /// The window a resample to n² faces will hold, before reading (for budgets).
+    pub fn window(&self, n: usize) -> crate::stream::WindowStats {
+        crate::stream::window_stats(
+            self.width(),
+            self.height(),
+            self.rows.channels(),
+            n,
+            crate::stream::DEFAULT_BAND,
+        )
+    }
+
+    /// Reads the rows, checking them, into a cube with n×n faces turned by `rotate_deg`
+    /// (the area filter): the cube [`Environment::to_cube`] makes from the loaded image. A
+    /// NaN/Inf refused or negatives refused is the error of [`load_environment_with`], after
+    /// the whole file is read (the counts are the file's).
+    pub fn to_cube(
+        self,
+        n: usize,
+        rotate_deg: f32,
+        progress: &dyn Progress,
+    ) -> Result<StreamedCube> {
+        let EquirectStream {
+            path,
+            rows,
+            policy,
+            read_as,
+        } = self;
+        let (w, h) = (rows.width(), rows.height());
+        let mut checked = CheckedRows {
+            inner: rows,
+            policy,
+            non_finite: 0,
+            negative: NegativeReport {
+                policy: policy.negative,
+                ..Default::default()
+            },
+            row: 0,
+            w,
+            h,
+        };
+        let (cube, window) = crate::stream::equirect_to_cube_streamed(
+            &mut checked,
+            n,
+            rotate_deg,
+            crate::stream::DEFAULT_BAND,
+            progress,
+        )?;
+        let mut report = TexelReport::default();
+        if checked.non_finite > 0 {
+            if !policy.sanitize {
+                return Err(Error::NonFinite {
+                    path,
+                    count: checked.non_finite,
+                });
+            }
+            report.non_finite_zeroed = checked.non_finite;
+        }
+        let negative = checked.negative;
+        refuse_negatives(&negative, &path)?;
+        if policy.negative == Negative::Clamp {
+            report.negative_clamped = negative.count;
+            report.most_negative = negative.most_negative;
+        }
+        Ok(StreamedCube {
+            cube,
+            report,
+            read_as: read_as.into_iter().collect(),
+            negative,
+            window,
+        })
+    }
+}
+
+/// Rows with the input checks of [`check_finite`] and [`apply_negative_policy`] applied to
+/// each as it arrives (the same values, the same sums in the same order).
+struct CheckedRows {
+    inner: Box<dyn crate::stream::RowSource>,
+    policy: EnvPolicy,
+    non_finite: usize,
+    negative: NegativeReport,
+    row: usize,
+    w: usize,
+    h: usize,
+}
+
+impl crate::stream::RowSource for CheckedRows {
+    fn path(&self) -> &Path {
+        self.inner.path()
+    }
+    fn width(&self) -> usize {
+        self.w
+    }
+    fn height(&self) -> usize {
+        self.h
+    }
+    fn channels(&self) -> usize {
+        self.inner.channels()
+    }
+    fn read_rows(&mut self, count: usize, out: &mut Vec<f32>) -> Result<()> {
+        let start = out.len();
+        self.inner.read_rows(count, out)?;
+        let ch = self.inner.channels();
+        for row in out[start..].chunks_exact_mut(self.w * ch) {
+            for v in row.iter_mut().filter(|v| !v.is_finite()) {
+                self.non_finite += 1;
+                if self.policy.sanitize {
+                    *v = 0.0;
+                }
+            }
+            let sa = crate::equirect::row_solid_angle(self.row, self.w, self.h);
+            visit_negatives(&mut self.negative, self.policy.negative, row, ch, &|_| sa);
+            self.row += 1;
+        }
+        Ok(())
+    }
+}
+
+/// Equirects whose decoded image (12 bytes a pixel) reaches this size are streamed by
+/// [`open_environment_with`] (2048×1024 and up): below it the image is small against the bake
+/// (a 1024×512 one is 6 MB, a tenth of a 256² bake), and the whole read is cheaper than the
+/// streamed resample's texel order (8 bytes a cube texel, and ~50 ns a texel to make it).
+pub const STREAM_IMAGE_BYTES: u64 = 16 << 20;
+
+/// Opens an environment for a bake that resamples it to a cube: an equirect of at least
+/// [`STREAM_IMAGE_BYTES`] decoded, in a format read row by row (Radiance HDR, scan-line
+/// OpenEXR in increasing line order), is left open as an [`EquirectStream`] (its rows read as
+/// the resample needs them, neither the file nor the image ever held whole); anything else is
+/// [`load_environment_with`].
+pub fn open_environment_with(path: &Path, policy: EnvPolicy) -> Result<Opened> {
+    open_streaming_from(path, policy, STREAM_IMAGE_BYTES)
+}
+
+/// [`open_environment_with`], streaming equirects of at least `min_image_bytes` decoded.
+pub(crate) fn open_streaming_from(
+    path: &Path,
+    policy: EnvPolicy,
+    min_image_bytes: u64,
+) -> Result<Opened> {
+    let streamable = path.is_file() && io::container::Container::from_extension(path).is_none();
+    if streamable {
+        let file_len = std::fs::metadata(path)
+            .map_err(|e| Error::io(path, e))?
+            .len();
+        let head = read_head(path, 64 << 10)?;
+        let equirect = matches!(io::declared_size(&head),
+            Some((w, h)) if w == 2 * h && w.saturating_mul(h).saturating_mul(12) >= min_image_bytes);
+        if equirect && io::container::Container::sniff(&head).is_none() {
+            if let Some(rows) = io::open_rows_streamed(path, &head, file_len) {
+                return Ok(Opened::Streamed(EquirectStream {
+                    path: path.to_path_buf(),
+                    rows: rows?,
+                    policy,
+                    read_as: io::content_mismatch(path, &head),
+                }));
+            }
+        }
+    }
+    load_environment_with(path, policy).map(Opened::Loaded)
 }
 
 /// Reads an environment, NaN/Inf handled, negatives as read.
@@ -742,6 +1043,7 @@ pub fn read_cube_chain(path: &Path) -> Result<CubeMips> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::progress::NoProgress;
     use glam::Vec3;
 
     /// Writes `img` encoded as `as_ext` under the name `name` (a name that may disagree).
@@ -785,6 +1087,297 @@ mod tests {
         std::fs::write(&cut, &bytes[..bytes.len() * 2 / 3]).unwrap();
         let err = read_hdr_image(&cut, false).unwrap_err().to_string();
         assert!(err.contains("cut.hdr"), "{err}");
+    }
+
+    fn same_bits(a: &Cubemap, b: &Cubemap) -> bool {
+        a.faces.iter().zip(&b.faces).all(|(x, y)| {
+            x.data.len() == y.data.len()
+                && x.data
+                    .iter()
+                    .zip(&y.data)
+                    .all(|(p, q)| p.to_bits() == q.to_bits())
+        })
+    }
+
+    #[test]
+    fn a_large_hdr_opened_as_a_stream_gives_the_loaded_cube_and_reports() {
+        // Above 128 KiB a Radiance equirect is resampled as its rows arrive: the cube, the
+        // reports and the warnings of loading it whole and resampling that.
+        let d = tempfile::tempdir().unwrap();
+        let (w, h) = (600, 300);
+        let data: Vec<f32> = (0..w * h * 3)
+            .map(|k| match k % 101 {
+                0 => 3e4,
+                1..=7 => 0.0,
+                _ => ((k * 7919) % 1009) as f32 * 0.37 + (k % 3) as f32,
+            })
+            .collect();
+        let img = Image::from_data(w, h, 3, data).unwrap();
+        for name in ["big.hdr", "big_named.exr"] {
+            let p = write_as(d.path(), name, "hdr", &img);
+            let policy = EnvPolicy::default();
+            let Opened::Streamed(s) = open_streaming_from(&p, policy, 0).unwrap() else {
+                panic!("{name} is streamed")
+            };
+            let loaded = load_environment_with(&p, policy).unwrap();
+            for (n, rot) in [(64, 0.0), (37, 30.0)] {
+                let want = loaded.env.to_cube(n, Filter::Area, rot, &NoProgress);
+                let Opened::Streamed(s) = open_streaming_from(&p, policy, 0).unwrap() else {
+                    unreachable!()
+                };
+                let got = s.to_cube(n, rot, &NoProgress).unwrap();
+                assert!(same_bits(&got.cube, &want), "{name} -> {n}");
+                assert_eq!(got.report, loaded.report);
+                assert_eq!(got.negative, loaded.negative);
+                assert_eq!(got.warnings(&p), loaded.warnings());
+                assert!(got.window.peak_rows < h / 4, "{:?}", got.window);
+            }
+            drop(s);
+            // Cut short: opened (the header is whole), then an error naming the file and
+            // the scan line, never a cube.
+            let bytes = std::fs::read(&p).unwrap();
+            let cut = d.path().join(format!("cut_{name}"));
+            std::fs::write(&cut, &bytes[..bytes.len() * 2 / 3]).unwrap();
+            let Opened::Streamed(s) = open_streaming_from(&cut, policy, 0).unwrap() else {
+                panic!("streamed")
+            };
+            let e = s.to_cube(32, 0.0, &NoProgress).unwrap_err().to_string();
+            assert!(
+                e.starts_with(&format!("{}: ", cut.display()))
+                    && e.contains("scan line")
+                    && !e.contains('\n'),
+                "{e}"
+            );
+            // Corrupt mid-stream: a run overrunning its line.
+            let mut bad = bytes.clone();
+            let at = bytes.len() / 2;
+            bad[at..at + 64].fill(200);
+            let q = d.path().join(format!("bad_{name}"));
+            std::fs::write(&q, &bad).unwrap();
+            if let Ok(Opened::Streamed(s)) = open_streaming_from(&q, policy, 0) {
+                let e = s.to_cube(32, 0.0, &NoProgress).unwrap_err().to_string();
+                assert!(e.contains("bad_") && e.contains("scan line"), "{e}");
+            }
+        }
+        // Small files and other formats are loaded whole.
+        let small = write_as(d.path(), "small.hdr", "hdr", &Image::new(64, 32, 3));
+        assert!(matches!(
+            open_environment_with(&small, EnvPolicy::default()).unwrap(),
+            Opened::Loaded(_)
+        ));
+        let png = write_as(d.path(), "big2.png", "png", &img);
+        assert!(matches!(
+            open_streaming_from(&png, EnvPolicy::default(), 0).unwrap(),
+            Opened::Loaded(_)
+        ));
+    }
+
+    #[test]
+    fn a_large_scan_line_exr_opened_as_a_stream_gives_the_loaded_cube_and_reports() {
+        // Every scan-line compression, half and float channels, NaN and negatives: a file
+        // whose blocks follow one another in increasing line order is streamed block by
+        // block, with the loaded read's cube (bit for bit), reports and warnings; decreasing
+        // line order and tiles are read whole. Corrupt or cut: one error naming the file.
+        use exr::prelude::{
+            f16, Blocks, Compression, Encoding, LineOrder, SpecificChannels, Vec2, WritableImage,
+        };
+        let d = tempfile::tempdir().unwrap();
+        let (w, h) = (600usize, 300usize);
+        let value = |x: usize, y: usize, c: usize| -> f32 {
+            // A hash (splitmix64's finaliser): noise no codec compresses much.
+            let mut k = ((y * w + x) * 4 + c) as u64 + 1;
+            k = (k ^ (k >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+            k = (k ^ (k >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+            match (k ^ (k >> 31)) % 1009 {
+                0 => f32::NAN,
+                1..=3 => -0.5,
+                4 => 2e4,
+                v => v as f32 * 0.013,
+            }
+        };
+        let policy = EnvPolicy {
+            sanitize: true,
+            negative: Negative::Clamp,
+        };
+        let cases = [
+            (Compression::Uncompressed, LineOrder::Increasing, None, true),
+            (Compression::RLE, LineOrder::Increasing, None, true),
+            (Compression::ZIP1, LineOrder::Increasing, None, true),
+            (Compression::ZIP16, LineOrder::Increasing, None, true),
+            (Compression::PIZ, LineOrder::Increasing, None, true),
+            (Compression::PXR24, LineOrder::Increasing, None, true),
+            (Compression::ZIP16, LineOrder::Decreasing, None, false),
+            (
+                Compression::ZIP1,
+                LineOrder::Increasing,
+                Some(64usize),
+                false,
+            ),
+        ];
+        for (k, (compression, line_order, tile, streams)) in cases.into_iter().enumerate() {
+            let blocks = match tile {
+                None => Blocks::ScanLines,
+                Some(t) => Blocks::Tiles(Vec2(t, t)),
+            };
+            let channels = SpecificChannels::rgba(|Vec2(x, y)| {
+                (
+                    f16::from_f32(value(x, y, 0)),
+                    f16::from_f32(value(x, y, 1)),
+                    value(x, y, 2),
+                    f16::from_f32(1.0),
+                )
+            });
+            let image = exr::prelude::Image::from_encoded_channels(
+                (w, h),
+                Encoding {
+                    compression,
+                    blocks,
+                    line_order,
+                },
+                channels,
+            );
+            let p = d.path().join(format!("case{k}.exr"));
+            image.write().to_file(&p).unwrap();
+            let at = format!("{compression:?} {line_order:?} {tile:?}");
+            let opened = open_streaming_from(&p, policy, 0).unwrap();
+            let Opened::Streamed(s) = opened else {
+                assert!(
+                    !streams,
+                    "{at}: read whole ({} bytes)",
+                    std::fs::metadata(&p).unwrap().len()
+                );
+                continue;
+            };
+            assert!(streams, "{at}: streamed");
+            let loaded = load_environment_with(&p, policy).unwrap();
+            let want = loaded.env.to_cube(48, Filter::Area, 10.0, &NoProgress);
+            let got = s.to_cube(48, 10.0, &NoProgress).unwrap();
+            assert!(same_bits(&got.cube, &want), "{at}");
+            assert_eq!(got.report, loaded.report, "{at}");
+            assert!(got.report.non_finite_zeroed > 0 && got.report.negative_clamped > 0);
+            assert_eq!(got.negative, loaded.negative, "{at}");
+            assert_eq!(got.warnings(&p), loaded.warnings(), "{at}");
+            if compression == Compression::ZIP1 {
+                // A damaged block in the middle: decompression fails there.
+                let mut bytes = std::fs::read(&p).unwrap();
+                let mid = bytes.len() / 2;
+                bytes[mid..mid + 200].iter_mut().for_each(|b| *b = !*b);
+                let q = d.path().join("damaged.exr");
+                std::fs::write(&q, &bytes).unwrap();
+                if let Ok(Opened::Streamed(s)) = open_streaming_from(&q, policy, 0) {
+                    let e = s.to_cube(48, 0.0, &NoProgress).unwrap_err().to_string();
+                    assert!(e.starts_with(&format!("{}: ", q.display())), "{e}");
+                }
+                // Cut short: refused before any row is read, as the whole read refuses it.
+                let cut = d.path().join("cut.exr");
+                std::fs::write(&cut, &bytes[..mid]).unwrap();
+                let e = open_streaming_from(&cut, policy, 0)
+                    .err()
+                    .unwrap()
+                    .to_string();
+                let whole = load_environment_with(&cut, policy).unwrap_err().to_string();
+                assert_eq!(e, whole);
+            }
+        }
+    }
+
+    #[test]
+    fn the_fixtures_streamed_give_their_loaded_cubes() {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/hdri");
+        let mut streamed = 0;
+        for entry in std::fs::read_dir(&root).unwrap() {
+            let p = entry.unwrap().path();
+            let policy = EnvPolicy::default();
+            let Opened::Streamed(s) = open_streaming_from(&p, policy, 0).unwrap() else {
+                continue;
+            };
+            let loaded = load_environment_with(&p, policy).unwrap();
+            let want = loaded.env.to_cube(64, Filter::Area, 0.0, &NoProgress);
+            let got = s.to_cube(64, 0.0, &NoProgress).unwrap();
+            assert!(same_bits(&got.cube, &want), "{}", p.display());
+            assert_eq!(got.warnings(&p), loaded.warnings());
+            streamed += 1;
+        }
+        // Every fixture is an equirect in a format read row by row.
+        assert!(streamed >= 4, "{streamed} fixtures streamed");
+    }
+
+    /// An image owned as a row source, standing for a decoder that can yield NaN, Inf and
+    /// negatives (RGBE cannot).
+    struct OwnedRows(Image, usize);
+
+    impl crate::stream::RowSource for OwnedRows {
+        fn path(&self) -> &Path {
+            Path::new("rows.exr")
+        }
+        fn width(&self) -> usize {
+            self.0.width
+        }
+        fn height(&self) -> usize {
+            self.0.height
+        }
+        fn channels(&self) -> usize {
+            self.0.channels
+        }
+        fn read_rows(&mut self, count: usize, out: &mut Vec<f32>) -> Result<()> {
+            let stride = self.0.width * self.0.channels;
+            out.extend_from_slice(&self.0.data[self.1 * stride..(self.1 + count) * stride]);
+            self.1 += count;
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn streamed_checks_give_the_reports_of_the_whole_read() {
+        // NaN, Inf and negatives (and a negative alpha) under every policy: the same cube,
+        // reports, warnings and refusals as checking the whole image.
+        let (w, h) = (90, 45);
+        for ch in [1, 3, 4] {
+            let mut img = Image::new(w, h, ch);
+            for (k, v) in img.data.iter_mut().enumerate() {
+                *v = match k % 53 {
+                    0 => f32::NAN,
+                    1 if k % 2 == 0 => f32::INFINITY,
+                    2..=4 => -0.25 * (k % 7) as f32,
+                    _ => (k % 13) as f32 * 0.5,
+                };
+            }
+            let path = Path::new("rows.exr");
+            for sanitize in [false, true] {
+                for negative in [Negative::Clamp, Negative::Keep, Negative::Refuse] {
+                    let policy = EnvPolicy { sanitize, negative };
+                    // The whole read: check_finite, then the negative policy.
+                    let whole = (|| {
+                        let mut im = img.clone();
+                        let mut report = check_finite(&mut im, path, sanitize)?;
+                        let mut env = Environment::Equirect(im);
+                        let neg = apply_negative_policy(&mut env, path, negative)?;
+                        if negative == Negative::Clamp {
+                            report.negative_clamped = neg.count;
+                            report.most_negative = neg.most_negative;
+                        }
+                        Ok::<_, Error>((env, report, neg))
+                    })();
+                    let stream = EquirectStream {
+                        path: path.to_path_buf(),
+                        rows: Box::new(OwnedRows(img.clone(), 0)),
+                        policy,
+                        read_as: None,
+                    };
+                    let got = stream.to_cube(11, 15.0, &NoProgress);
+                    match (whole, got) {
+                        (Ok((env, report, neg)), Ok(got)) => {
+                            let want = env.to_cube(11, Filter::Area, 15.0, &NoProgress);
+                            assert!(same_bits(&got.cube, &want), "{ch} {policy:?}");
+                            assert_eq!(got.report, report, "{ch} {policy:?}");
+                            assert_eq!(got.negative, neg, "{ch} {policy:?}");
+                        }
+                        (Err(a), Err(b)) => assert_eq!(a.to_string(), b.to_string()),
+                        (a, b) => panic!("{ch} {policy:?}: {:?} vs {:?}", a.err(), b.err()),
+                    }
+                }
+            }
+        }
     }
 
     #[test]

@@ -155,15 +155,17 @@ pub fn equirect_to_cube(
 ) -> Cubemap {
     let plan = match filter {
         Filter::Area => Some(crate::area::AreaPlan::new(
-            src,
+            src.width,
+            src.height,
             n,
             (rotate_deg as f64).to_radians(),
         )),
         Filter::Bilinear => None,
     };
     let scratch = crate::area::Scratch::default;
+    let rows = crate::area::Rows::whole(src);
     crate::traverse::map_cube_texels_with(n, progress, scratch, |sc, face, i, j| match &plan {
-        Some(plan) => plan.footprint_mean(sc, face, i, j).0,
+        Some(plan) => plan.footprint_mean(&rows, sc, face, i, j).0,
         None => {
             let d = face.direction(texel_coord(i, n), texel_coord(j, n));
             sample_bilinear(src, rotate_y(d, -rotate_deg))

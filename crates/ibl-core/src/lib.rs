@@ -24,6 +24,7 @@ pub mod params;
 pub mod progress;
 pub mod sampling;
 pub mod sh;
+pub mod stream;
 pub mod traverse;
 pub mod walk;
 

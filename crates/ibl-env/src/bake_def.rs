@@ -78,12 +78,16 @@ impl Bake for EquirectToCube {
         out: &Path,
         progress: &dyn Progress,
     ) -> Result<Baked, BakeError> {
-        let env = ibl_core::envmap::load_environment_with(
-            ibl_bake::one_input(Self::NAME, inputs)?,
-            p.env_policy(),
-        )?;
-        let baked = e2c::run(p, &env, out, progress)?;
+        // A large equirect whose format reads row by row is resampled as its rows arrive
+        // (the area filter's cube; --to-equirect and --filter bilinear read it whole).
+        let input = ibl_bake::one_input(Self::NAME, inputs)?;
+        let env = if !p.to_equirect && p.filter == ibl_core::equirect::Filter::Area {
+            ibl_core::envmap::open_environment_with(input, p.env_policy())?
+        } else {
+            ibl_core::envmap::load_environment_with(input, p.env_policy())?.into()
+        };
         let mut warnings = env.warnings();
+        let baked = e2c::run(p, env, out, progress)?;
         warnings.extend(baked.warnings);
         Ok(Baked {
             files: baked.files,

@@ -3,7 +3,7 @@
 
 #[cfg(test)]
 use ibl_core::envmap::Layout;
-use ibl_core::envmap::{Environment, LoadedEnvironment};
+use ibl_core::envmap::{Environment, LoadedEnvironment, Opened};
 use ibl_core::equirect::{self, Filter};
 use ibl_core::io::format::PixelFormat;
 use ibl_core::io::texture::LevelEncoding;
@@ -124,16 +124,20 @@ fn source_face_texels(env: &Environment) -> f64 {
 /// A warning when face size `n` upsamples the source: the bake then costs n² per face and adds
 /// no detail (`prefilter` warns the same way).
 pub(crate) fn upsampling_warning(input: &LoadedEnvironment, n: usize) -> Option<String> {
-    let have = source_face_texels(&input.env);
+    let what = match &input.env {
+        Environment::Equirect(img) => format!("a {}×{} equirect", img.width, img.height),
+        Environment::Cube(c) => format!("a cube of {0}×{0} faces", c.size),
+    };
+    upsampling(&input.path, source_face_texels(&input.env), &what, n)
+}
+
+/// [`upsampling_warning`] for a source of `have` texels per face described as `what`.
+fn upsampling(path: &Path, have: f64, what: &str, n: usize) -> Option<String> {
     (n as f64 > have * 1.001).then(|| {
-        let what = match &input.env {
-            Environment::Equirect(img) => format!("a {}×{} equirect", img.width, img.height),
-            Environment::Cube(c) => format!("a cube of {0}×{0} faces", c.size),
-        };
         format!(
             "{}: face size {n} upsamples {what} (about {:.0} texels per face) {:.1}×: no detail \
              is added; omit --size for the source's own size",
-            input.path.display(),
+            path.display(),
             have,
             n as f64 / have
         )
@@ -156,16 +160,34 @@ pub fn output_paths(params: &Params, out: &Path) -> Result<Vec<PathBuf>> {
     Ok(p)
 }
 
-/// Resamples a loaded environment to a cube (or an equirect with `to_equirect`) and encodes
-/// the outputs for `out_dir` (or the output file for equirect).
+/// Resamples an environment to a cube (or an equirect with `to_equirect`) and encodes the
+/// outputs for `out_dir` (or the output file for equirect). A streamed equirect
+/// ([`ibl_core::envmap::open_environment_with`]) is resampled by the area filter as its rows
+/// arrive (the same texels; its input warnings lead the bake's); for another filter or
+/// `to_equirect` it is read whole.
 pub fn run(
     params: &Params,
-    input: &LoadedEnvironment,
+    input: impl Into<Opened>,
     out: &Path,
     progress: &dyn Progress,
 ) -> Result<Baked> {
     params.validate()?;
     let enc = params.encoding()?;
+    let input = match input.into() {
+        Opened::Streamed(s) if !params.to_equirect && params.filter == Filter::Area => {
+            let n = params.size.unwrap_or_else(|| s.natural_face_size());
+            let path = s.path().to_path_buf();
+            let what = format!("a {}×{} equirect", s.width(), s.height());
+            let have = s.width() as f64 / 4.0;
+            let streamed = s.to_cube(n, params.rotate, progress)?;
+            let mut warnings = streamed.warnings(&path);
+            warnings.extend(upsampling(&path, have, &what, n));
+            return encode_cube(params, enc, out, streamed.cube, n, warnings);
+        }
+        Opened::Streamed(s) => s.load()?,
+        Opened::Loaded(l) => l,
+    };
+    let input = &input;
     let depth = if enc.format == PixelFormat::Rgba16f {
         FloatDepth::F16
     } else {
@@ -207,6 +229,19 @@ pub fn run(
     }
     let n = params.size.unwrap_or_else(|| input.env.natural_face_size());
     let cube = input.env.to_cube(n, params.filter, params.rotate, progress);
+    let warnings = upsampling_warning(input, n).into_iter().collect();
+    encode_cube(params, enc, out, cube, n, warnings)
+}
+
+/// The files of a resampled cube of n² faces for `out`, `warnings` first among the bake's.
+fn encode_cube(
+    params: &Params,
+    enc: Encoding,
+    out: &Path,
+    cube: ibl_core::cube::Cubemap,
+    n: usize,
+    warnings: Vec<String>,
+) -> Result<Baked> {
     let orientation = params.target.spec().orientation;
     let cube = orientation.apply(&cube);
     let name = params.cube_name();
@@ -233,10 +268,7 @@ pub fn run(
         files,
         face_size: n,
         encoding: encoded.levels,
-        warnings: upsampling_warning(input, n)
-            .into_iter()
-            .chain(encoded.warnings)
-            .collect(),
+        warnings: warnings.into_iter().chain(encoded.warnings).collect(),
     })
 }
 
@@ -303,7 +335,7 @@ mod tests {
                 ..Default::default()
             };
             let out = tmp.path().join(dir);
-            let baked = run(&params, &input, &out, &NoProgress).unwrap();
+            let baked = run(&params, input.clone(), &out, &NoProgress).unwrap();
             io::write_many_atomic(&baked.files).unwrap();
             let path = match layout.container_path(&out, params.cube_name()) {
                 Some(p) => p,

@@ -12,7 +12,7 @@ use crate::spatial;
 use crate::tree::{tree_level, tree_levels, CellTree, TreeParams};
 use ibl_core::bordered::BorderedMips;
 use ibl_core::cube::{mip_sizes, texel_direction, Cubemap, Face};
-use ibl_core::envmap::{Environment, LoadedEnvironment};
+use ibl_core::envmap::{Environment, Opened};
 use ibl_core::equirect::Filter;
 use ibl_core::io;
 use ibl_core::io::texture::LevelEncoding;
@@ -482,8 +482,9 @@ const SOURCE_TEXEL_BYTES: u64 = 80;
 const CHAIN_TEXEL_BYTES: u64 = 160;
 
 /// The memory the bake of `size`² faces from a `src`² source cube holds at its peak, besides
-/// the process itself and the input's image (freed after the resample): what `run` reserves
-/// against the memory budget before it starts.
+/// the process itself and the input's image (freed after the resample; a streamed input is
+/// never held whole, and the window of rows its resample holds is reserved by the resample):
+/// what `run` reserves against the memory budget before it starts.
 pub fn working_set_bytes(size: usize, src: usize) -> u64 {
     let (size, src) = (size as u64, src as u64);
     6 * src * src * SOURCE_TEXEL_BYTES + 6 * size * size * CHAIN_TEXEL_BYTES
@@ -664,32 +665,42 @@ pub(crate) const BABYLON_ENV_NAME: &str = "environment.env";
 /// Name of the sidecar report.
 pub(crate) const REPORT_NAME: &str = "prefilter.json";
 
-/// Bakes the chain and encodes the outputs for `out_dir` (nothing is written).
+/// Bakes the chain and encodes the outputs for `out_dir` (nothing is written). A streamed
+/// input ([`ibl_core::envmap::open_environment_with`]) is resampled as its rows arrive: its
+/// warnings (the input checks') come first in the chain's.
 pub fn run(
     params: &Params,
-    input: LoadedEnvironment,
+    input: impl Into<Opened>,
     out_dir: &Path,
     progress: &dyn Progress,
 ) -> Result<Baked> {
+    let input: Opened = input.into();
     let enc = params.encoding()?;
     params.validate()?;
     // What the bake will hold, against the run's memory budget before any of it is
     // allocated: refused in a line rather than swapped (the input is already read, under
-    // its own reservation).
-    let natural = input.env.natural_face_size();
+    // its own reservation, or streamed through a window the resample reserves).
+    let natural = input.natural_face_size();
     let src = source_face_size(natural, params.size);
     let _working_set = ibl_core::io::budget::reserve(
-        &input.path,
+        input.path(),
         &format!(
             "baking {}² faces from a {src}² source cube (its cell tree, the levels and their fit)",
             params.size
         ),
         working_set_bytes(params.size, src),
     )?;
-    let resampled = Resampled::new(params, &input.env, progress);
-    // The input's image is not read again: freed before the tree and the levels.
-    drop(input);
+    let (resampled, input_warnings) = match input {
+        Opened::Loaded(input) => {
+            let resampled = Resampled::new(params, &input.env, progress);
+            // The input's image is not read again: freed before the tree and the levels.
+            drop(input);
+            (resampled, Vec::new())
+        }
+        Opened::Streamed(stream) => Resampled::streamed(params, stream, progress)?,
+    };
     let mut chain = bake_resampled(params, resampled, progress)?;
+    chain.warnings.splice(0..0, input_warnings);
     let te = Instant::now();
     let ce = process_cpu_seconds();
     // The engine's orientation: an exact texel permutation of every level.
@@ -846,6 +857,33 @@ impl Resampled {
             seconds,
             cpu,
         }
+    }
+
+    /// The source cube of a streamed equirect, resampled as its rows arrive (the same texels
+    /// as [`Resampled::new`] from the loaded image), and the input's warnings.
+    fn streamed(
+        params: &Params,
+        stream: ibl_core::envmap::EquirectStream,
+        progress: &dyn Progress,
+    ) -> Result<(Self, Vec<String>)> {
+        let t0 = Instant::now();
+        let mut cpu = CpuStages::start();
+        let path = stream.path().to_path_buf();
+        let natural = stream.natural_face_size();
+        let src_size = source_face_size(natural, params.size);
+        let streamed = stream.to_cube(src_size, params.rotate, progress)?;
+        let seconds = t0.elapsed().as_secs_f64();
+        cpu.stage("resample".into());
+        let warnings = streamed.warnings(&path);
+        Ok((
+            Resampled {
+                cube: streamed.cube,
+                natural,
+                seconds,
+                cpu,
+            },
+            warnings,
+        ))
     }
 }
 
@@ -1465,6 +1503,52 @@ pub(crate) fn estimate_error(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_streamed_input_bakes_the_chain_of_the_loaded_one() {
+        // A Radiance equirect at the streaming threshold (2048×1024): `run` from its opened
+        // stream and from the loaded image give the same files, bit for bit, and the same
+        // warnings.
+        use ibl_core::envmap::{load_environment, open_environment_with, EnvPolicy};
+        let d = tempfile::tempdir().unwrap();
+        let (w, h) = (2048, 1024);
+        let data: Vec<f32> = (0..w * h * 3)
+            .map(|k| ((k * 7919) % 1009) as f32 * 0.01 + if k % 997 == 0 { 500.0 } else { 0.0 })
+            .collect();
+        let img = ibl_core::image::Image::from_data(w, h, 3, data).unwrap();
+        let p = d.path().join("env.hdr");
+        let bytes = io::encode_image(&p, &img, &io::WriteOptions::default()).unwrap();
+        std::fs::write(&p, bytes).unwrap();
+        let params = Params {
+            size: 32,
+            levels: Some(4),
+            rotate: 20.0,
+            ..Default::default()
+        };
+        let opened = open_environment_with(&p, EnvPolicy::default()).unwrap();
+        assert!(matches!(opened, Opened::Streamed(_)));
+        let np = &ibl_core::progress::NoProgress;
+        let a = run(&params, opened, d.path(), np).unwrap();
+        let b = run(&params, load_environment(&p, false).unwrap(), d.path(), np).unwrap();
+        for (x, y) in a.chain.mips.levels.iter().zip(&b.chain.mips.levels) {
+            for (f, g) in x.faces.iter().zip(&y.faces) {
+                assert!(f
+                    .data
+                    .iter()
+                    .zip(&g.data)
+                    .all(|(u, v)| u.to_bits() == v.to_bits()));
+            }
+        }
+        assert_eq!(a.chain.warnings, b.chain.warnings);
+        let names = |b: &Baked| b.files.iter().map(|f| f.0.clone()).collect::<Vec<_>>();
+        assert_eq!(names(&a), names(&b));
+        // The chain's files (not the sidecar, which records times).
+        for (f, g) in a.files.iter().zip(&b.files) {
+            if f.0.extension().is_some_and(|e| e == "exr") {
+                assert!(f.1 == g.1, "{}", f.0.display());
+            }
+        }
+    }
 
     #[test]
     fn defaults_agree_between_clap_serde_and_default() {

@@ -106,6 +106,278 @@ fn check_chunks<R: std::io::Read>(
     Ok(())
 }
 
+/// The channels read, by index into the file's (name-sorted) list: R, G, B (and A) by role,
+/// R and G for two-channel tables, else one grey channel (Y, or R, G, B, or the only one).
+fn pick_channels(path: &Path, names: &[String]) -> Result<Vec<usize>> {
+    let find = |r: &str| names.iter().position(|c| role(c) == r);
+    let (ri, gi, bi, ai) = (find("R"), find("G"), find("B"), find("A"));
+    Ok(match (ri, gi, bi) {
+        (Some(r), Some(g), Some(b)) => {
+            let mut v = vec![r, g, b];
+            v.extend(ai);
+            v
+        }
+        // Two-channel data (DFG-style tables) keeps both channels.
+        (Some(r), Some(g), None) => vec![r, g],
+        _ => {
+            let grey = find("Y").or(ri).or(gi).or(bi);
+            match grey.or(if names.len() == 1 { Some(0) } else { None }) {
+                Some(c) => vec![c],
+                None => {
+                    return Err(Error::unsupported(
+                        path,
+                        format!("EXR channels {names:?}: need R,G,B(,A) or a single channel"),
+                    ))
+                }
+            }
+        }
+    })
+}
+
+/// A scan-line EXR file's rows as f32, block by block in file order (each block read and
+/// decompressed when its rows are asked for): the rows of a streamed resample, never the
+/// file's bytes nor its image. Only for files whose blocks [`ExrRows::open`] has checked to
+/// follow one another in increasing line order.
+pub(crate) struct ExrRows {
+    path: std::path::PathBuf,
+    reader: std::io::BufReader<std::fs::File>,
+    meta: exr::meta::MetaData,
+    width: usize,
+    height: usize,
+    /// Per picked channel: its byte offset in a block line, and its sample type.
+    picked: Vec<(usize, exr::meta::attribute::SampleType)>,
+    /// Bytes of one line of a block (every channel).
+    line_bytes: usize,
+    /// Rows decoded from the current block and not yet delivered (interleaved f32).
+    pending: Vec<f32>,
+    /// The row the next block must start at.
+    next_block_row: usize,
+    /// The block buffers, held against the memory budget.
+    _budget: super::budget::Reservation,
+}
+
+impl ExrRows {
+    /// Opens `path` (`file_len` bytes) for a streamed read, with the checks of [`decode`]
+    /// done first (a readable header, a size [`Image::check_size`] takes, every chunk in the
+    /// file, whole, once, at its line): `Ok(None)` when the file is not one this reads (tiled,
+    /// deep, several layers, subsampled channels, blocks not following one another in
+    /// increasing line order): read it whole then.
+    pub fn open(path: &Path, file_len: u64) -> Result<Option<Self>> {
+        use exr::meta::attribute::SampleType;
+        use std::io::{Read, Seek, SeekFrom};
+        let bad =
+            |e: exr::error::Error| Error::invalid(path, format!("not a readable EXR file: {e}"));
+        let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+        let mut read = exr::io::PeekRead::new(std::io::BufReader::new(file));
+        let meta = exr::meta::MetaData::read_from_buffered(&mut read, false).map_err(bad)?;
+        let [header] = meta.headers.as_slice() else {
+            return Ok(None);
+        };
+        let scan_lines = matches!(header.blocks, exr::meta::BlockDescription::ScanLines);
+        if header.deep
+            || !scan_lines
+            || header
+                .channels
+                .list
+                .iter()
+                .any(|c| c.sampling != exr::math::Vec2(1, 1))
+        {
+            return Ok(None);
+        }
+        let size = header.layer_size;
+        Image::check_size(path, size.0 as u64, size.1 as u64)?;
+        let names: Vec<String> = header
+            .channels
+            .list
+            .iter()
+            .map(|c| c.name.to_string())
+            .collect();
+        let picked = pick_channels(path, &names)?;
+        let count = header.chunk_count;
+        if (count as u64).saturating_mul(8) > file_len {
+            return Err(Error::invalid(
+                path,
+                format!(
+                    "truncated EXR: {file_len} bytes cannot hold the offsets of the {count} chunks its header declares"
+                ),
+            ));
+        }
+        let tables =
+            exr::meta::MetaData::read_offset_tables(&mut read, &meta.headers).map_err(bad)?;
+        let table = &tables[0];
+        // Every chunk whole, once, at its line (as [`check_chunks`]), read from the file at
+        // its offset (4 + 4 bytes each), and each following the previous one.
+        let lines = header.compression.scan_lines_per_block();
+        let y0 = header.own_attributes.layer_position.1 as i64;
+        let mut f = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+        let mut in_order = true;
+        let mut prev_end: Option<u64> = None;
+        let mut seen = std::collections::HashSet::with_capacity(count);
+        for (k, &off) in table.iter().enumerate() {
+            let missing = || {
+                Error::invalid(
+                    path,
+                    format!(
+                        "truncated or damaged EXR: chunk {k} of {} is missing (offset {off} of a {file_len}-byte file)",
+                        table.len()
+                    ),
+                )
+            };
+            if off.checked_add(8).is_none_or(|e| e > file_len) || !seen.insert(off) {
+                return Err(missing());
+            }
+            let mut b = [0u8; 8];
+            f.seek(SeekFrom::Start(off))
+                .map_err(|e| Error::io(path, e))?;
+            f.read_exact(&mut b).map_err(|_| missing())?;
+            let y = i32::from_le_bytes(b[..4].try_into().expect("4 bytes")) as i64;
+            let len = i32::from_le_bytes(b[4..].try_into().expect("4 bytes")) as i64;
+            let end = off as i64 + 8 + len;
+            if len < 0 || end > file_len as i64 {
+                return Err(missing());
+            }
+            if y != y0 + k as i64 * lines as i64 {
+                return Err(Error::invalid(
+                    path,
+                    format!(
+                        "damaged EXR: chunk {k} holds line {y}, expected {}",
+                        y0 + k as i64 * lines as i64
+                    ),
+                ));
+            }
+            if prev_end.is_some_and(|e| e != off) {
+                in_order = false;
+            }
+            prev_end = Some(end as u64);
+        }
+        if !in_order || table.is_empty() {
+            return Ok(None);
+        }
+        // The block buffers: one block's compressed and decompressed bytes at a time.
+        let plane_bytes: usize = header
+            .channels
+            .list
+            .iter()
+            .map(|c| c.sample_type.bytes_per_sample())
+            .sum();
+        let (w, h) = (size.0, size.1);
+        let line_bytes = w * plane_bytes;
+        let mut offsets = Vec::new();
+        let mut at = 0;
+        for c in &header.channels.list {
+            offsets.push((at, c.sample_type));
+            at += w * c.sample_type.bytes_per_sample();
+        }
+        let picked: Vec<(usize, SampleType)> = picked.iter().map(|&c| offsets[c]).collect();
+        // One block decompressed, its rows converted, and the compressed chunk (at most as
+        // large as the block, or the crate refuses it).
+        let block = (lines * line_bytes) as u64;
+        let _budget = super::budget::reserve(
+            path,
+            &format!("decoding {lines}-line blocks of a {w}x{h} EXR image"),
+            block.saturating_mul(3) + (lines * w * picked.len() * 4) as u64,
+        )?;
+        let mut file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+        file.seek(SeekFrom::Start(table[0]))
+            .map_err(|e| Error::io(path, e))?;
+        Ok(Some(ExrRows {
+            path: path.to_path_buf(),
+            reader: std::io::BufReader::with_capacity(1 << 20, file),
+            meta,
+            width: w,
+            height: h,
+            picked,
+            line_bytes,
+            pending: Vec::new(),
+            next_block_row: 0,
+            _budget,
+        }))
+    }
+
+    /// Reads and decompresses the next block, appending its rows to `pending`.
+    fn next_block(&mut self) -> Result<()> {
+        use exr::meta::attribute::SampleType;
+        let path = self.path.clone();
+        let bad =
+            |e: exr::error::Error| Error::invalid(&path, format!("not a readable EXR file: {e}"));
+        let chunk = exr::block::chunk::Chunk::read(&mut self.reader, &self.meta).map_err(bad)?;
+        // On this thread, under the guard: a decoder panic is an error naming the file.
+        let meta = &self.meta;
+        let block = super::guard(&path, "OpenEXR", || {
+            exr::block::UncompressedBlock::decompress_chunk(chunk, meta, false).map_err(bad)
+        })?;
+        let (y, rows) = (block.index.pixel_position.1, block.index.pixel_size.1);
+        if y != self.next_block_row
+            || block.index.pixel_size.0 != self.width
+            || block.data.len() != rows * self.line_bytes
+        {
+            return Err(Error::invalid(
+                &path,
+                format!(
+                    "damaged EXR: a block of lines {y}..{} where line {} was expected",
+                    y + rows,
+                    self.next_block_row
+                ),
+            ));
+        }
+        let ch = self.picked.len();
+        let w = self.width;
+        let start = self.pending.len();
+        self.pending.resize(start + rows * w * ch, 0.0);
+        for r in 0..rows {
+            let line = &block.data[r * self.line_bytes..(r + 1) * self.line_bytes];
+            let out = &mut self.pending[start + r * w * ch..start + (r + 1) * w * ch];
+            for (k, &(at, ty)) in self.picked.iter().enumerate() {
+                let dst = out[k..].iter_mut().step_by(ch);
+                // As [`interleave`] converts the whole decode's samples (native endian here).
+                match ty {
+                    SampleType::F16 => {
+                        dst.zip(line[at..at + 2 * w].chunks_exact(2))
+                            .for_each(|(d, b)| {
+                                *d = exr::prelude::f16::from_ne_bytes([b[0], b[1]]).to_f32()
+                            })
+                    }
+                    SampleType::F32 => dst
+                        .zip(line[at..at + 4 * w].chunks_exact(4))
+                        .for_each(|(d, b)| *d = f32::from_ne_bytes([b[0], b[1], b[2], b[3]])),
+                    SampleType::U32 => {
+                        dst.zip(line[at..at + 4 * w].chunks_exact(4))
+                            .for_each(|(d, b)| {
+                                *d = u32::from_ne_bytes([b[0], b[1], b[2], b[3]]) as f32
+                            })
+                    }
+                }
+            }
+        }
+        self.next_block_row = y + rows;
+        Ok(())
+    }
+}
+
+impl crate::stream::RowSource for ExrRows {
+    fn path(&self) -> &Path {
+        &self.path
+    }
+    fn width(&self) -> usize {
+        self.width
+    }
+    fn height(&self) -> usize {
+        self.height
+    }
+    fn channels(&self) -> usize {
+        self.picked.len()
+    }
+    fn read_rows(&mut self, count: usize, out: &mut Vec<f32>) -> Result<()> {
+        let stride = self.width * self.picked.len();
+        while self.pending.len() < count * stride {
+            self.next_block()?;
+        }
+        out.extend_from_slice(&self.pending[..count * stride]);
+        self.pending.drain(..count * stride);
+        Ok(())
+    }
+}
+
 pub fn decode(path: &Path, bytes: &[u8]) -> Result<Image> {
     let bad = |e: exr::error::Error| Error::invalid(path, format!("not a readable EXR file: {e}"));
     // Header first: refuse absurd sizes before the decoder allocates.
@@ -149,45 +421,13 @@ pub fn decode(path: &Path, bytes: &[u8]) -> Result<Image> {
         .map_err(bad)?;
     let layer = image.layer_data;
     let (w, h) = (layer.size.0, layer.size.1);
-    let find = |r: &str| {
-        layer
-            .channel_data
-            .list
-            .iter()
-            .position(|c| role(&c.name.to_string()) == r)
-    };
-    let (ri, gi, bi, ai) = (find("R"), find("G"), find("B"), find("A"));
-    let picked: Vec<usize> = match (ri, gi, bi) {
-        (Some(r), Some(g), Some(b)) => {
-            let mut v = vec![r, g, b];
-            v.extend(ai);
-            v
-        }
-        // Two-channel data (DFG-style tables) keeps both channels.
-        (Some(r), Some(g), None) => vec![r, g],
-        _ => {
-            let grey = find("Y").or(ri).or(gi).or(bi);
-            match grey.or(if layer.channel_data.list.len() == 1 {
-                Some(0)
-            } else {
-                None
-            }) {
-                Some(c) => vec![c],
-                None => {
-                    let names: Vec<String> = layer
-                        .channel_data
-                        .list
-                        .iter()
-                        .map(|c| c.name.to_string())
-                        .collect();
-                    return Err(Error::unsupported(
-                        path,
-                        format!("EXR channels {names:?}: need R,G,B(,A) or a single channel"),
-                    ));
-                }
-            }
-        }
-    };
+    let names: Vec<String> = layer
+        .channel_data
+        .list
+        .iter()
+        .map(|c| c.name.to_string())
+        .collect();
+    let picked = pick_channels(path, &names)?;
     let n = w * h;
     let list = &layer.channel_data.list;
     if picked

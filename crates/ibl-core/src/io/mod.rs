@@ -199,6 +199,33 @@ pub(crate) fn decode_file_streamed(
     }))
 }
 
+/// The rows of the image file at `path` (`file_len` bytes, whose first bytes are `head`) as a
+/// stream, when its format allows a row-by-row read (Radiance HDR; OpenEXR scan lines whose
+/// blocks follow one another in increasing line order); `None` for the others. The header's
+/// checks are done here, before any row is read.
+pub(crate) fn open_rows_streamed(
+    path: &Path,
+    head: &[u8],
+    file_len: u64,
+) -> Option<Result<Box<dyn crate::stream::RowSource>>> {
+    if image_signature(head) == Some("exr") {
+        let rows = guard(path, "OpenEXR", || exr_io::ExrRows::open(path, file_len));
+        return match rows {
+            Ok(Some(r)) => Some(Ok(Box::new(r))),
+            Ok(None) => None,
+            Err(e) => Some(Err(e)),
+        };
+    }
+    if image_signature(head) != Some("hdr") {
+        return None;
+    }
+    let header = rgbe::header_len(head)?;
+    Some(guard(path, "Radiance HDR", || {
+        rgbe::HdrRows::open(path, header, file_len)
+            .map(|r| Box::new(r) as Box<dyn crate::stream::RowSource>)
+    }))
+}
+
 /// The format an extension names, in the terms of [`image_signature`] and
 /// [`container::Container`].
 fn format_of_extension(ext: &str) -> Option<&'static str> {
