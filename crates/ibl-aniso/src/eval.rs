@@ -100,7 +100,8 @@ pub struct Params {
     /// surface's UV: normals perturbed as the thesis's shader perturbs them.
     #[arg(long, value_name = "FILE")]
     pub quat_map: Option<std::path::PathBuf>,
-    /// Methods: iso, bent-lg18, bent-filament, bent-khr, major-N[-bBETA][-kK][-cC], fis-N,
+    /// Methods: iso, bent-lg18, bent-filament, bent-khr, major-N[-bBETA][-kK][-cC], fis-N[-bB]
+    /// (Křivánek & Colbert's lod bias +1, or B),
     /// fisb-N (the shipped blend), cv-N; for --as-lobes as-thesis-N, as-weighted-N,
     /// as-fis-N[-bB], as-strat-N.
     #[arg(

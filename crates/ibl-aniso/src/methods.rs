@@ -14,6 +14,17 @@ use ibl_core::{Cubemap, Rgb};
 use ibl_prefilter::runtime::Reference;
 use ibl_prefilter::tree::{CellTree, TreeBuffers, TreeParams};
 use ibl_shexp::dfg::Dfg;
+
+/// Křivánek & Colbert 2008's lod bias (GPU Gems 3 ch. 20, eq. 13's +1): the published FIS
+/// that `fis-N` runs as the baseline the shipped rule is scored against.
+pub const KC_LOD_BIAS: f32 = 1.0;
+
+/// A `-bB` lod bias of a method name: finite, |B| ≤ 8.
+fn lod_bias(b: &str) -> Option<f32> {
+    b.parse::<f32>()
+        .ok()
+        .filter(|b| b.is_finite() && b.abs() <= 8.0)
+}
 use ibl_target::LodMapping;
 
 /// How a method reads prefiltered radiance at (direction, perceptual roughness).
@@ -87,6 +98,8 @@ pub enum Method {
     Fis {
         /// Taps.
         taps: usize,
+        /// Added to every tap's lod: Křivánek & Colbert's +1 (`fis-N`), or B (`fis-N-bB`).
+        lod_bias: f32,
     },
     /// M3c: the shipped method (`crate::ship::shade`): the isotropic split sum at r_iso
     /// mixed into `fis-N` by the fitted weight w(|η|) (w = 0 at η = 0: exactly the floor).
@@ -207,7 +220,8 @@ impl Method {
                 }
                 s
             }
-            Method::Fis { taps } => format!("fis-{taps}"),
+            Method::Fis { taps, lod_bias } if *lod_bias == KC_LOD_BIAS => format!("fis-{taps}"),
+            Method::Fis { taps, lod_bias } => format!("fis-{taps}-b{lod_bias}"),
             Method::Cv { taps } => format!("cv-{taps}"),
             Method::FisBlend { taps } => format!("fisb-{taps}"),
             Method::AsThesis { taps } => format!("as-thesis-{taps}"),
@@ -220,10 +234,11 @@ impl Method {
         }
     }
 
-    /// Parses `iso`, `bent-lg18`, `bent-filament`, `bent-khr`, `major-N[-bBETA][-kK][-cC]`, `fis-N`.
+    /// Parses `iso`, `bent-lg18`, `bent-filament`, `bent-khr`, `major-N[-bBETA][-kK][-cC]`,
+    /// `fis-N[-bB]`, `fisb-N`, `cv-N`, `as-thesis-N`, `as-weighted-N`, `as-fis-N[-bB]`, `as-strat-N`.
     pub fn parse(s: &str) -> Result<Method, String> {
         let bad = || {
-            format!("unknown method '{s}' (iso, bent-lg18, bent-filament, bent-khr, major-N[-bBETA][-kK][-cC], fis-N, fisb-N, cv-N, as-thesis-N, as-weighted-N, as-fis-N)")
+            format!("unknown method '{s}' (iso, bent-lg18, bent-filament, bent-khr, major-N[-bBETA][-kK][-cC], fis-N[-bB], fisb-N, cv-N, as-thesis-N, as-weighted-N, as-fis-N[-bB], as-strat-N)")
         };
         let taps = |t: &str| -> Result<usize, String> {
             let n: usize = t.parse().map_err(|_| bad())?;
@@ -240,7 +255,14 @@ impl Method {
             "bent-khr" => Ok(Method::BentKhr),
             _ => {
                 if let Some(rest) = s.strip_prefix("fis-") {
-                    return Ok(Method::Fis { taps: taps(rest)? });
+                    let (n, lod_bias) = match rest.split_once("-b") {
+                        Some((n, b)) => (n, lod_bias(b).ok_or_else(bad)?),
+                        None => (rest, KC_LOD_BIAS),
+                    };
+                    return Ok(Method::Fis {
+                        taps: taps(n)?,
+                        lod_bias,
+                    });
                 }
                 if let Some(rest) = s.strip_prefix("fisb-") {
                     return Ok(Method::FisBlend { taps: taps(rest)? });
@@ -253,14 +275,8 @@ impl Method {
                 }
                 if let Some(rest) = s.strip_prefix("as-fis-") {
                     let (n, bias) = match rest.split_once("-b") {
-                        Some((n, b)) => (
-                            n,
-                            b.parse::<f32>()
-                                .ok()
-                                .filter(|b| b.is_finite() && b.abs() <= 8.0)
-                                .ok_or_else(bad)?,
-                        ),
-                        None => (rest, 1.0),
+                        Some((n, b)) => (n, lod_bias(b).ok_or_else(bad)?),
+                        None => (rest, KC_LOD_BIAS),
                     };
                     return Ok(Method::AsFis {
                         taps: taps(n)?,
@@ -309,7 +325,7 @@ impl Method {
         match self {
             Method::Iso | Method::BentLg18 | Method::BentFilament | Method::BentKhr => (1, 1),
             Method::MajorAxis(p) => (p.taps, 1),
-            Method::Fis { taps } => (*taps, 0),
+            Method::Fis { taps, .. } => (*taps, 0),
             Method::Cv { taps } => (2 * *taps + 1, 1),
             Method::FisBlend { taps } => (*taps + 1, 1),
             Method::AsThesis { taps } => (*taps, *taps + 1),
@@ -472,7 +488,9 @@ pub fn evaluate(
             let inv = 1.0 / dirs.len() as f32;
             split(acc.map(|c| c * inv), inp.dfg, nv, r_iso)
         }
-        Method::Fis { taps } => fis(inp.pyramid, frame, v, at, ab, *taps, seed),
+        Method::Fis { taps, lod_bias } => {
+            fis(inp.pyramid, frame, v, at, ab, *taps, *lod_bias, seed)
+        }
         Method::FisBlend { taps } => {
             let l = inp.lookup.radiance(reflect_view(v, n), r_iso, buf);
             let iso = split(l, inp.dfg, nv, r_iso);
@@ -483,8 +501,17 @@ pub fn evaluate(
             let l = inp.lookup.radiance(reflect_view(v, n), r_iso, buf);
             let base = split(l, inp.dfg, nv, r_iso);
             let a_iso = r_iso * r_iso;
-            let an = fis(inp.pyramid, frame, v, at, ab, *taps, seed);
-            let is = fis(inp.pyramid, frame, v, a_iso, a_iso, *taps, seed);
+            let an = fis(inp.pyramid, frame, v, at, ab, *taps, KC_LOD_BIAS, seed);
+            let is = fis(
+                inp.pyramid,
+                frame,
+                v,
+                a_iso,
+                a_iso,
+                *taps,
+                KC_LOD_BIAS,
+                seed,
+            );
             let cv = |b: [f32; 3], x: [f32; 3], y: [f32; 3]| -> [f32; 3] {
                 std::array::from_fn(|k| (b[k] + (x[k] - y[k])).max(0.0))
             };
@@ -593,6 +620,7 @@ fn as_fis(
 
 /// VNDF filtered importance sampling (`fis-N`): the shipped method's emulation
 /// ([`crate::ship`]) at N taps, with a per-pixel Cranley–Patterson rotation drawn from `seed`.
+#[allow(clippy::too_many_arguments)]
 fn fis(
     pyr: &BorderedMips,
     frame: &Frame,
@@ -600,9 +628,11 @@ fn fis(
     at: f32,
     ab: f32,
     taps: usize,
+    lod_bias: f32,
     seed: u64,
 ) -> E01 {
-    crate::ship::shade_n(pyr, frame, v, at, ab, taps as u32, fis_rotation(seed))
+    let rot = fis_rotation(seed);
+    crate::ship::shade_n(pyr, frame, v, at, ab, taps as u32, rot, lod_bias)
 }
 
 /// The per-pixel rotation of `fis-N` at `seed`.
@@ -811,7 +841,13 @@ mod tests {
             Method::parse("major-16-c1.4").unwrap().name(),
             "major-16-c1.4"
         );
-        assert_eq!(Method::parse("fis-32").unwrap(), Method::Fis { taps: 32 });
+        assert_eq!(
+            Method::parse("fis-32").unwrap(),
+            Method::Fis {
+                taps: 32,
+                lod_bias: KC_LOD_BIAS
+            }
+        );
         assert_eq!(Method::parse("cv-8").unwrap(), Method::Cv { taps: 8 });
         for n in [
             "as-fis-32",
@@ -819,10 +855,16 @@ mod tests {
             "as-fis-16-b-1",
             "as-strat-32",
             "fisb-16",
+            "fis-16-b0",
+            "fis-16-b0.25",
+            "fis-8-b-0.5",
         ] {
             assert_eq!(Method::parse(n).unwrap().name(), n);
         }
         assert!(Method::parse("as-fis-32-bx").is_err() && Method::parse("as-fis-32-b99").is_err());
+        assert!(Method::parse("fis-16-bx").is_err() && Method::parse("fis-16-bNaN").is_err());
+        // `fis-N-b1` is Křivánek & Colbert's own bias: the published `fis-N`.
+        assert_eq!(Method::parse("fis-16-b1").unwrap().name(), "fis-16");
         assert_eq!(Method::Cv { taps: 8 }.taps(), (17, 1));
         for bad in ["major-0", "major-x", "fis-", "bent", "major-4-q1"] {
             assert!(Method::parse(bad).is_err(), "{bad}");
