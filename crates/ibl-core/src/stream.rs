@@ -17,21 +17,9 @@ use crate::Rgb;
 use rayon::prelude::*;
 use std::path::Path;
 
-/// Rows of an equirect image delivered top to bottom.
-pub trait RowSource: Send {
-    /// The file the rows come from (for errors and the memory budget).
-    fn path(&self) -> &Path;
-    /// Width in pixels.
-    fn width(&self) -> usize;
-    /// Height in rows.
-    fn height(&self) -> usize;
-    /// Channels per pixel (1 to 4, read as [`Image::rgb`] reads them).
-    fn channels(&self) -> usize;
-    /// Appends the next `count` rows (row-major, channels interleaved) to `out`; `count` never
-    /// runs past the last row. A source that cannot deliver them (a truncated or corrupt
-    /// file) returns the error naming its file.
-    fn read_rows(&mut self, count: usize, out: &mut Vec<f32>) -> Result<()>;
-}
+/// The row reader the streamed resample consumes; defined beside the readers that implement it
+/// (`io` names no part of this module).
+pub use crate::io::rows::RowSource;
 
 /// An image in memory as a [`RowSource`] (tests, and the reference of the streamed path).
 pub struct ImageRows<'a> {

@@ -354,7 +354,7 @@ impl ExrRows {
     }
 }
 
-impl crate::stream::RowSource for ExrRows {
+impl crate::io::rows::RowSource for ExrRows {
     fn path(&self) -> &Path {
         &self.path
     }

@@ -17,6 +17,7 @@ pub mod layout;
 mod ldr;
 pub mod packed;
 mod rgbe;
+pub mod rows;
 pub mod texture;
 
 pub use atomic::{check_output, write_atomic, write_many_atomic, OutputKind};
@@ -207,7 +208,7 @@ pub(crate) fn open_rows_streamed(
     path: &Path,
     head: &[u8],
     file_len: u64,
-) -> Option<Result<Box<dyn crate::stream::RowSource>>> {
+) -> Option<Result<Box<dyn rows::RowSource>>> {
     if image_signature(head) == Some("exr") {
         let rows = guard(path, "OpenEXR", || exr_io::ExrRows::open(path, file_len));
         return match rows {
@@ -221,8 +222,7 @@ pub(crate) fn open_rows_streamed(
     }
     let header = rgbe::header_len(head)?;
     Some(guard(path, "Radiance HDR", || {
-        rgbe::HdrRows::open(path, header, file_len)
-            .map(|r| Box::new(r) as Box<dyn crate::stream::RowSource>)
+        rgbe::HdrRows::open(path, header, file_len).map(|r| Box::new(r) as Box<dyn rows::RowSource>)
     }))
 }
 

@@ -101,7 +101,7 @@ impl HdrRows {
     }
 }
 
-impl crate::stream::RowSource for HdrRows {
+impl crate::io::rows::RowSource for HdrRows {
     fn path(&self) -> &Path {
         &self.path
     }
@@ -259,7 +259,7 @@ pub fn encode(path: &Path, img: &Image) -> Result<Vec<u8>> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::stream::RowSource;
+    use crate::io::rows::RowSource;
 
     /// The rows [`HdrRows`] reads from `bytes` written to a file, and the whole decode's.
     fn both(bytes: &[u8]) -> (Result<Vec<f32>>, Result<Image>) {
