@@ -61,8 +61,13 @@ t1=$(date +%s)
 #   cases hold a tap at the rim of Heitz's VNDF disk (u.x within 1e-3 of 1), where
 #   pz = sqrt(1 - p1^2 - p2^2) is ill-conditioned and float rounding decides whether the tap
 #   is above the horizon (up to 84% in that pixel, under the p99).
+#   With the lod bias 0 (was Křivánek & Colbert's +1, docs/notes/fis-bias.md) the taps read one
+#   level finer, where the same direction error moves more texels' worth of contrast: measured
+#   mean 4.7e-4, p99 4.7e-3 off the corners (gate unchanged) and mean 1.0e-3, p99 1.8e-2 on reads
+#   touching a corner texel (GL leaves the corner texel implementation-defined); the corner p99
+#   gate is 3e-2 (the +0.25-level mutation still fails both groups: p99 5.4e-2 and 1.9e-1).
 custom_gates=(--max-mean 1e-6 --max-p99 1e-5 --corner-max-mean 2e-5 --corner-max-p99 1e-4)
-aniso_gates=(--max-mean 2e-3 --max-p99 1.5e-2 --corner-max-mean 2e-3 --corner-max-p99 1.5e-2)
+aniso_gates=(--max-mean 2e-3 --max-p99 1.5e-2 --corner-max-mean 2e-3 --corner-max-p99 3e-2)
 
 fail=0
 check() { # kind glsl cube label gates...
@@ -80,9 +85,9 @@ check custom "$W/custom/lookup.glsl" "$W/custom/prefilter.ktx2" custom "${custom
 check aniso "$W/aniso-shader/aniso_fis.glsl" "$W/aniso-env/cube.ktx2" aniso "${aniso_gates[@]}" --json "$W/aniso-stats.json" || fail=1
 
 # Negative control: a wrong constant must fail. The custom lookup's scale +2% (lod off by at
-# most 0.08 of a level), the aniso method's lod bias 1.0 → 1.25.
+# most 0.08 of a level), the aniso method's lod bias + 0.25 of a level (whatever it is).
 sed -E 's/^(const float IBL_LOOKUP_SCALE = )([0-9.e+-]+);/\1(1.02 * \2);/' "$W/custom/lookup.glsl" > "$W/custom-mutated.glsl"
-sed -E 's/^(const float ANISO_FIS_LOD_BIAS = )1\.0;/\11.25;/' "$W/aniso-shader/aniso_fis.glsl" > "$W/aniso-mutated.glsl"
+sed -E 's/^(const float ANISO_FIS_LOD_BIAS = )([0-9.e+-]+);/\1(\2 + 0.25);/' "$W/aniso-shader/aniso_fis.glsl" > "$W/aniso-mutated.glsl"
 for k in custom aniso; do
 	if cmp -s "$W/$k-mutated.glsl" "$( [ $k = custom ] && echo "$W/custom/lookup.glsl" || echo "$W/aniso-shader/aniso_fis.glsl")"; then
 		echo "shader-check: the $k mutation did not apply (the emitted text changed?)" >&2
