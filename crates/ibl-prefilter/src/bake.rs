@@ -1530,15 +1530,7 @@ mod tests {
         let np = &ibl_core::progress::NoProgress;
         let a = run(&params, opened, d.path(), np).unwrap();
         let b = run(&params, load_environment(&p, false).unwrap(), d.path(), np).unwrap();
-        for (x, y) in a.chain.mips.levels.iter().zip(&b.chain.mips.levels) {
-            for (f, g) in x.faces.iter().zip(&y.faces) {
-                assert!(f
-                    .data
-                    .iter()
-                    .zip(&g.data)
-                    .all(|(u, v)| u.to_bits() == v.to_bits()));
-            }
-        }
+        crate::test_util::assert_same_bits(&a.chain.mips, &b.chain.mips);
         assert_eq!(a.chain.warnings, b.chain.warnings);
         let names = |b: &Baked| b.files.iter().map(|f| f.0.clone()).collect::<Vec<_>>();
         assert_eq!(names(&a), names(&b));

@@ -433,15 +433,7 @@ mod tests {
                 .install(|| bake_chain(&p, &env, &NoProgress).unwrap())
         };
         let (a, b) = (run(1), run(3));
-        for (x, y) in a.mips.levels.iter().zip(&b.mips.levels) {
-            for (f, g) in x.faces.iter().zip(&y.faces) {
-                assert!(f
-                    .data
-                    .iter()
-                    .zip(&g.data)
-                    .all(|(u, v)| u.to_bits() == v.to_bits()));
-            }
-        }
+        crate::test_util::assert_same_bits(&a.mips, &b.mips);
         let ja = serde_json::to_string(&a.report).unwrap();
         let jb = serde_json::to_string(&b.report).unwrap();
         assert_eq!(ja, jb);

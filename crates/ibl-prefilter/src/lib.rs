@@ -30,3 +30,31 @@ pub mod tree;
 pub use bake::{run, Method, Params, Quality};
 pub use bake_def::{Prefilter, PREFILTER};
 pub use error::Error;
+
+/// What the unit tests of several modules share.
+#[cfg(test)]
+pub(crate) mod test_util {
+    use ibl_core::CubeMips;
+
+    /// Asserts that two chains have the same levels, faces and texel bits (a zip alone would
+    /// pass chains of different lengths).
+    pub(crate) fn assert_same_bits(a: &CubeMips, b: &CubeMips) {
+        assert_eq!(a.levels.len(), b.levels.len(), "level count");
+        for (l, (x, y)) in a.levels.iter().zip(&b.levels).enumerate() {
+            for (f, (p, q)) in x.faces.iter().zip(&y.faces).enumerate() {
+                assert_eq!(
+                    p.data.len(),
+                    q.data.len(),
+                    "level {l} face {f}: texel count"
+                );
+                assert!(
+                    p.data
+                        .iter()
+                        .zip(&q.data)
+                        .all(|(u, v)| u.to_bits() == v.to_bits()),
+                    "level {l} face {f}: texels differ"
+                );
+            }
+        }
+    }
+}
