@@ -328,16 +328,20 @@ pub fn one_input<'a>(kind: &str, inputs: &'a [PathBuf]) -> Result<&'a Path, Bake
     }
 }
 
-/// The environment of a bake that reads exactly one, loaded under its `--sanitize` policy (the
-/// policy's report is in `warnings()`).
-pub fn environment(
+/// The environment of a bake that reads exactly one, opened under its `--sanitize` policy
+/// (negative texels clamped, reported in the warnings): a large equirect whose format reads row
+/// by row is left open as a stream (`ibl_core::envmap::open_environment_with`).
+pub fn open_environment(
     kind: &str,
     inputs: &[PathBuf],
     sanitize: bool,
-) -> Result<ibl_core::envmap::LoadedEnvironment, BakeError> {
-    Ok(ibl_core::envmap::load_environment(
+) -> Result<ibl_core::envmap::Opened, BakeError> {
+    Ok(ibl_core::envmap::open_environment_with(
         one_input(kind, inputs)?,
-        sanitize,
+        ibl_core::envmap::EnvPolicy {
+            sanitize,
+            negative: ibl_core::envmap::Negative::Clamp,
+        },
     )?)
 }
 

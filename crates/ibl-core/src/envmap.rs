@@ -208,14 +208,16 @@ impl LoadedEnvironment {
     /// Warnings to print: files read by content against their name, then negative texels
     /// (with the power clamping added or keeping took away) and NaN/Inf zeroed.
     pub fn warnings(&self) -> Vec<String> {
-        let mut w = self.read_as.clone();
-        w.extend(self.negative.message(&self.path));
-        let zeroed = TexelReport {
-            negative_clamped: 0,
-            ..self.report.clone()
-        };
-        w.extend(zeroed.warnings(&self.path));
-        w
+        input_warnings(&self.path, &self.read_as, &self.negative, &self.report)
+    }
+
+    /// What the input checks found, as a streamed read of the same file reports it.
+    pub fn checks(&self) -> InputChecks {
+        InputChecks {
+            report: self.report.clone(),
+            read_as: self.read_as.clone(),
+            negative: self.negative.clone(),
+        }
     }
 }
 
@@ -487,6 +489,25 @@ impl StreamedCube {
     }
 }
 
+/// What the input checks of a streamed read found: the reports of [`LoadedEnvironment`]
+/// without its image.
+#[derive(Clone, Debug)]
+pub struct InputChecks {
+    /// What the texel checks found (as [`LoadedEnvironment::report`]).
+    pub report: TexelReport,
+    /// How a file whose content and name disagree was read.
+    pub read_as: Vec<String>,
+    /// The negative texels, their power and what was done with them.
+    pub negative: NegativeReport,
+}
+
+impl InputChecks {
+    /// The warnings [`LoadedEnvironment::warnings`] gives for the same input.
+    pub fn warnings(&self, path: &Path) -> Vec<String> {
+        input_warnings(path, &self.read_as, &self.negative, &self.report)
+    }
+}
+
 /// Warnings of an input: files read by content against their name, then negative texels and
 /// NaN/Inf zeroed.
 fn input_warnings(
@@ -553,6 +574,63 @@ impl EquirectStream {
         rotate_deg: f32,
         progress: &dyn Progress,
     ) -> Result<StreamedCube> {
+        let (mut checked, path, read_as) = self.checked();
+        let (cube, window) = crate::stream::equirect_to_cube_streamed(
+            &mut checked,
+            n,
+            rotate_deg,
+            crate::stream::DEFAULT_BAND,
+            progress,
+        )?;
+        let checks = checked.finish(&path, read_as)?;
+        Ok(StreamedCube {
+            cube,
+            report: checks.report,
+            read_as: checks.read_as,
+            negative: checks.negative,
+            window,
+        })
+    }
+
+    /// Reads the rows, checking them, and hands them to `visit` in order, `band` rows at a
+    /// time (the last band may be shorter) as an image of that many rows, with the first
+    /// row's index: for a use that reduces the equirect row by row (a projection, a box
+    /// reduction) and never needs it whole. The values are the loaded image's (the same
+    /// checks); a NaN/Inf refused or negatives refused is the error of
+    /// [`load_environment_with`], after the whole file is read.
+    pub fn read_bands(
+        self,
+        band: usize,
+        mut visit: impl FnMut(usize, &crate::image::Image) -> Result<()>,
+    ) -> Result<InputChecks> {
+        use crate::stream::RowSource;
+        let (mut checked, path, read_as) = self.checked();
+        let (w, h, ch) = (checked.w, checked.h, checked.channels());
+        let band = band.clamp(1, h.max(1));
+        let bytes = (band * w * ch * 4) as u64;
+        let _budget = io::budget::reserve(
+            &path,
+            &format!("a streamed read of a {w}x{h} image ({band} rows at a time)"),
+            bytes,
+        )?;
+        let mut data = Vec::new();
+        data.try_reserve_exact(band * w * ch)
+            .map_err(|_| io::budget::out_of_memory(&path, bytes))?;
+        let mut first = 0;
+        while first < h {
+            let count = band.min(h - first);
+            data.clear();
+            checked.read_rows(count, &mut data)?;
+            let img = crate::image::Image::from_data(w, count, ch, std::mem::take(&mut data))?;
+            visit(first, &img)?;
+            data = img.data;
+            first += count;
+        }
+        checked.finish(&path, read_as)
+    }
+
+    /// The rows behind the input checks, the file, and how it was read.
+    fn checked(self) -> (CheckedRows, PathBuf, Option<String>) {
         let EquirectStream {
             path,
             rows,
@@ -560,7 +638,7 @@ impl EquirectStream {
             read_as,
         } = self;
         let (w, h) = (rows.width(), rows.height());
-        let mut checked = CheckedRows {
+        let checked = CheckedRows {
             inner: rows,
             policy,
             non_finite: 0,
@@ -572,36 +650,7 @@ impl EquirectStream {
             w,
             h,
         };
-        let (cube, window) = crate::stream::equirect_to_cube_streamed(
-            &mut checked,
-            n,
-            rotate_deg,
-            crate::stream::DEFAULT_BAND,
-            progress,
-        )?;
-        let mut report = TexelReport::default();
-        if checked.non_finite > 0 {
-            if !policy.sanitize {
-                return Err(Error::NonFinite {
-                    path,
-                    count: checked.non_finite,
-                });
-            }
-            report.non_finite_zeroed = checked.non_finite;
-        }
-        let negative = checked.negative;
-        refuse_negatives(&negative, &path)?;
-        if policy.negative == Negative::Clamp {
-            report.negative_clamped = negative.count;
-            report.most_negative = negative.most_negative;
-        }
-        Ok(StreamedCube {
-            cube,
-            report,
-            read_as: read_as.into_iter().collect(),
-            negative,
-            window,
-        })
+        (checked, path, read_as)
     }
 }
 
@@ -615,6 +664,34 @@ struct CheckedRows {
     row: usize,
     w: usize,
     h: usize,
+}
+
+impl CheckedRows {
+    /// What the checks found once every row is read, or the refusal of
+    /// [`load_environment_with`] under the same policy.
+    fn finish(self, path: &Path, read_as: Option<String>) -> Result<InputChecks> {
+        let mut report = TexelReport::default();
+        if self.non_finite > 0 {
+            if !self.policy.sanitize {
+                return Err(Error::NonFinite {
+                    path: path.to_path_buf(),
+                    count: self.non_finite,
+                });
+            }
+            report.non_finite_zeroed = self.non_finite;
+        }
+        let negative = self.negative;
+        refuse_negatives(&negative, path)?;
+        if self.policy.negative == Negative::Clamp {
+            report.negative_clamped = negative.count;
+            report.most_negative = negative.most_negative;
+        }
+        Ok(InputChecks {
+            report,
+            read_as: read_as.into_iter().collect(),
+            negative,
+        })
+    }
 }
 
 impl crate::stream::RowSource for CheckedRows {
@@ -1365,15 +1442,45 @@ mod tests {
                         read_as: None,
                     };
                     let got = stream.to_cube(11, 15.0, &NoProgress);
-                    match (whole, got) {
-                        (Ok((env, report, neg)), Ok(got)) => {
+                    // The same rows handed out in bands of 7 (the last one 3).
+                    let mut rows = Vec::new();
+                    let banded = EquirectStream {
+                        path: path.to_path_buf(),
+                        rows: Box::new(OwnedRows(img.clone(), 0)),
+                        policy,
+                        read_as: None,
+                    }
+                    .read_bands(7, |first, band| {
+                        assert_eq!((first % 7, band.width, band.channels), (0, w, ch));
+                        assert_eq!(band.height, 7.min(h - first));
+                        rows.extend_from_slice(&band.data);
+                        Ok(())
+                    });
+                    match (whole, got, banded) {
+                        (Ok((env, report, neg)), Ok(got), Ok(banded)) => {
                             let want = env.to_cube(11, Filter::Area, 15.0, &NoProgress);
                             assert!(same_bits(&got.cube, &want), "{ch} {policy:?}");
                             assert_eq!(got.report, report, "{ch} {policy:?}");
                             assert_eq!(got.negative, neg, "{ch} {policy:?}");
+                            let Environment::Equirect(im) = &env else {
+                                unreachable!()
+                            };
+                            let bits =
+                                |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                            assert_eq!(bits(&rows), bits(&im.data), "{ch} {policy:?}");
+                            assert_eq!(banded.report, report, "{ch} {policy:?}");
+                            assert_eq!(banded.negative, neg, "{ch} {policy:?}");
                         }
-                        (Err(a), Err(b)) => assert_eq!(a.to_string(), b.to_string()),
-                        (a, b) => panic!("{ch} {policy:?}: {:?} vs {:?}", a.err(), b.err()),
+                        (Err(a), Err(b), Err(c)) => {
+                            assert_eq!(a.to_string(), b.to_string());
+                            assert_eq!(a.to_string(), c.to_string());
+                        }
+                        (a, b, c) => panic!(
+                            "{ch} {policy:?}: {:?} vs {:?} vs {:?}",
+                            a.err(),
+                            b.err(),
+                            c.err()
+                        ),
                     }
                 }
             }

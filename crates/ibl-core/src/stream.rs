@@ -275,6 +275,24 @@ pub fn equirect_to_cube_streamed(
     Ok((cube, stats))
 }
 
+/// A Radiance equirect at the streaming threshold (2048×1024, what
+/// [`crate::envmap::open_environment_with`] streams), written to `dir/name`: a repeating ramp
+/// with a bright texel every 997 values, for the bakes' tests that a streamed input gives the
+/// loaded one's bits.
+#[doc(hidden)]
+pub fn write_streamable_equirect(dir: &std::path::Path, name: &str) -> std::path::PathBuf {
+    let (w, h) = (2048, 1024);
+    let data: Vec<f32> = (0..w * h * 3)
+        .map(|k| ((k * 7919) % 1009) as f32 * 0.01 + if k % 997 == 0 { 500.0 } else { 0.0 })
+        .collect();
+    let img = Image::from_data(w, h, 3, data).expect("2048x1024x3");
+    let p = dir.join(name);
+    let bytes = crate::io::encode_image(&p, &img, &crate::io::WriteOptions::default())
+        .expect("a Radiance HDR encodes");
+    std::fs::write(&p, bytes).expect("the test's folder is writable");
+    p
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -49,7 +49,7 @@ fn main() {
     };
     // The irradiance cube as the bake encodes it by default: float EXR faces, decoded exactly.
     let baked =
-        ibl_env::irradiance::run(&irr, &env, Path::new("."), &NoProgress).expect("irradiance");
+        ibl_env::irradiance::run(&irr, env, Path::new("."), &NoProgress).expect("irradiance");
     let faces: Vec<ibl_core::Image> = baked
         .files
         .iter()

@@ -143,12 +143,15 @@ impl Bake for Irradiance {
         out: &Path,
         progress: &dyn Progress,
     ) -> Result<Baked, BakeError> {
-        let env = ibl_core::envmap::load_environment_with(
+        // A large equirect whose format reads row by row is opened, not read: its rows are
+        // projected and reduced as they arrive.
+        let input = ibl_core::envmap::open_environment_with(
             ibl_bake::one_input(Self::NAME, inputs)?,
             p.env_policy(),
         )?;
-        let baked = irr::run(p, &env, out, progress)?;
-        let mut warnings = env.warnings();
+        let path = input.path().to_path_buf();
+        let baked = irr::run(p, input, out, progress)?;
+        let mut warnings = baked.input.warnings(&path);
         if baked.negative_clamped > 0 {
             warnings.push(format!(
                 "SH ringing: clamped {} negative irradiance values to 0 (try --window or --exact)",
@@ -164,8 +167,8 @@ impl Bake for Irradiance {
             // policy's warning) and the output's negative irradiance (SH ringing).
             details: serde_json::json!({
                 "coefficients": baked.coefficients,
-                "input_negative_clamped": env.report.negative_clamped,
-                "input_negative": env.negative,
+                "input_negative_clamped": baked.input.report.negative_clamped,
+                "input_negative": baked.input.negative,
                 "ringing_negative_clamped": baked.negative_clamped,
                 "encoding": ibl_bake::encoding_details(&baked.encoding),
             }),

@@ -4,7 +4,7 @@
 
 use glam::Vec3;
 use ibl_core::cube::{solid_angle_table, texel_direction, CubeMips, Cubemap, Face};
-use ibl_core::envmap::{Environment, LoadedEnvironment};
+use ibl_core::envmap::{Environment, EquirectStream, InputChecks, Opened};
 use ibl_core::equirect::{pixel_direction, rotate_y, row_solid_angle};
 use ibl_core::io;
 use ibl_core::io::texture::LevelEncoding;
@@ -14,6 +14,7 @@ use ibl_core::sh::{self, cosine_lobe_zonal, num_coeffs};
 use ibl_core::traverse::{map_cube_texels, ordered_row_reduce};
 use ibl_core::{Error, Image, Result};
 use ibl_target::{DiffuseForm, Target};
+use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 
 /// Largest band count accepted (l ≤ 15).
@@ -255,32 +256,44 @@ pub(crate) fn lanczos_window(l: usize, bands: usize) -> f64 {
 /// `rotate_deg`) with the exact row solid angle. Ordered row sums: thread-count independent.
 pub(crate) fn project_equirect(img: &Image, bands: usize, rotate_deg: f32) -> Vec<[f64; 3]> {
     let n = num_coeffs(bands);
-    let (w, h) = (img.width, img.height);
-    let row = |j: usize| {
-        let sa = row_solid_angle(j, w, h);
-        let mut acc = vec![[0.0f64; 3]; n];
-        let mut y = vec![0.0f32; n];
-        for i in 0..w {
-            let c = img.rgb(i, j);
-            if c == [0.0; 3] {
-                continue;
-            }
-            sh::eval_basis(
-                rotate_y(pixel_direction(i, j, w, h), rotate_deg),
-                bands,
-                &mut y,
-            );
-            for (a, yi) in acc.iter_mut().zip(&y) {
-                for k in 0..3 {
-                    a[k] += c[k] as f64 * *yi as f64;
-                }
+    let row = |j: usize| project_row(img, j, j, img.height, bands, rotate_deg);
+    ordered_row_reduce(img.height, row, vec![[0.0f64; 3]; n], add_coeffs)
+}
+
+/// Row `local` of `rows` (row `j` of an equirect `height` rows high) projected as
+/// [`project_equirect`] projects each of its rows.
+fn project_row(
+    rows: &Image,
+    local: usize,
+    j: usize,
+    height: usize,
+    bands: usize,
+    rotate_deg: f32,
+) -> Vec<[f64; 3]> {
+    let n = num_coeffs(bands);
+    let w = rows.width;
+    let sa = row_solid_angle(j, w, height);
+    let mut acc = vec![[0.0f64; 3]; n];
+    let mut y = vec![0.0f32; n];
+    for i in 0..w {
+        let c = rows.rgb(i, local);
+        if c == [0.0; 3] {
+            continue;
+        }
+        sh::eval_basis(
+            rotate_y(pixel_direction(i, j, w, height), rotate_deg),
+            bands,
+            &mut y,
+        );
+        for (a, yi) in acc.iter_mut().zip(&y) {
+            for k in 0..3 {
+                a[k] += c[k] as f64 * *yi as f64;
             }
         }
-        acc.iter_mut()
-            .for_each(|a| a.iter_mut().for_each(|v| *v *= sa));
-        acc
-    };
-    ordered_row_reduce(h, row, vec![[0.0f64; 3]; n], add_coeffs)
+    }
+    acc.iter_mut()
+        .for_each(|a| a.iter_mut().for_each(|v| *v *= sa));
+    acc
 }
 
 /// ∫ L Y_lm dω over a cube's texels with their exact solid angles (turned by `rotate_deg`).
@@ -367,16 +380,24 @@ fn reduce_equirect(img: &Image, factor: usize) -> Image {
     if factor <= 1 {
         return img.clone();
     }
-    let (w, h) = (img.width / factor, img.height / factor);
-    let mut out = Image::new(w, h, 3);
-    for y in 0..h {
-        for x in 0..w {
+    let mut out = Image::new(img.width / factor, img.height / factor, 3);
+    reduce_band(img, 0, img.height, factor, &mut out);
+    out
+}
+
+/// Rows `first` … of an equirect `height` rows high (`band`, a whole number of `factor` rows)
+/// reduced by `factor` into their rows of `out` ([`reduce_equirect`]'s arithmetic).
+fn reduce_band(band: &Image, first: usize, height: usize, factor: usize, out: &mut Image) {
+    let width = band.width;
+    for yb in 0..band.height / factor {
+        let y = first / factor + yb;
+        for x in 0..out.width {
             let mut acc = [0.0f64; 3];
             let mut ws = 0.0f64;
             for b in 0..factor {
-                let sa = row_solid_angle(y * factor + b, img.width, img.height);
+                let sa = row_solid_angle(y * factor + b, width, height);
                 for a in 0..factor {
-                    let c = img.rgb(x * factor + a, y * factor + b);
+                    let c = band.rgb(x * factor + a, yb * factor + b);
                     for k in 0..3 {
                         acc[k] += c[k] as f64 * sa;
                     }
@@ -387,7 +408,17 @@ fn reduce_equirect(img: &Image, factor: usize) -> Image {
                 .copy_from_slice(&acc.map(|v| (v / ws) as f32));
         }
     }
-    out
+}
+
+/// The factor a `w`×`h` equirect is box-reduced by for the exact convolution (`w` brought to
+/// about `exact_source_width`; 0 keeps the source): only exact divisors keep the reduction
+/// energy-exact.
+fn reduce_factor(w: usize, h: usize, exact_source_width: usize) -> usize {
+    let factor = w.checked_div(exact_source_width).unwrap_or(1).max(1);
+    (1..=factor)
+        .rev()
+        .find(|&f| w.is_multiple_of(f) && h.is_multiple_of(f))
+        .unwrap_or(1)
 }
 
 fn weighted_texels(
@@ -408,16 +439,7 @@ fn weighted_texels(
     };
     match env {
         Environment::Equirect(img) => {
-            let factor = img
-                .width
-                .checked_div(exact_source_width)
-                .unwrap_or(1)
-                .max(1);
-            // Only exact divisors keep the reduction energy-exact.
-            let factor = (1..=factor)
-                .rev()
-                .find(|f| img.width % f == 0 && img.height % f == 0)
-                .unwrap_or(1);
+            let factor = reduce_factor(img.width, img.height, exact_source_width);
             let src = reduce_equirect(img, factor);
             for j in 0..src.height {
                 let sa = row_solid_angle(j, src.width, src.height);
@@ -543,17 +565,82 @@ pub struct Baked {
     pub encoding: Vec<LevelEncoding>,
     /// Things the user should know (values clamped by the output format).
     pub warnings: Vec<String>,
+    /// What the input's checks found (its warnings come first, from [`InputChecks::warnings`]).
+    pub input: InputChecks,
 }
 
-/// Projects, convolves and encodes `DIR/<sh_file>` and the irradiance cube.
+/// Rows of a streamed equirect held at a time (rounded up to whole reduction blocks).
+const STREAM_BAND: usize = 32;
+
+/// The radiance projection of a streamed equirect and, when the exact cube is wanted, the
+/// equirect box-reduced for it ([`reduce_factor`]), as the rows arrive: the same bits as
+/// [`project_equirect`] and [`weighted_texels`]' reduction of the loaded image (rows projected
+/// in parallel, folded in row order), holding a band of rows and the reduced image, never the
+/// source (at 8192×4096, 3 MB instead of 400 MB).
+fn project_streamed(
+    params: &Params,
+    stream: EquirectStream,
+) -> Result<(Vec<[f64; 3]>, Option<Image>, InputChecks)> {
+    let (w, h) = (stream.width(), stream.height());
+    let factor = reduce_factor(w, h, params.exact_source_width);
+    let mut reduced = params
+        .exact_cube()
+        .then(|| Image::new(w / factor, h / factor, 3));
+    let mut radiance = vec![[0.0f64; 3]; num_coeffs(params.bands)];
+    let band = factor * STREAM_BAND.div_ceil(factor);
+    let checks = stream.read_bands(band, |first, rows| {
+        let partials: Vec<_> = (0..rows.height)
+            .into_par_iter()
+            .map(|k| project_row(rows, k, first + k, h, params.bands, params.rotate))
+            .collect();
+        radiance = partials
+            .into_iter()
+            .fold(std::mem::take(&mut radiance), add_coeffs);
+        match &mut reduced {
+            // Unreduced, the texels as read (reduce_equirect's clone).
+            Some(out) if factor == 1 => {
+                for k in 0..rows.height {
+                    for i in 0..w {
+                        out.texel_mut(i, first + k).copy_from_slice(&rows.rgb(i, k));
+                    }
+                }
+            }
+            Some(out) => reduce_band(rows, first, h, factor, out),
+            None => {}
+        }
+        Ok(())
+    })?;
+    Ok((radiance, reduced, checks))
+}
+
+/// Projects, convolves and encodes `DIR/<sh_file>` and the irradiance cube from an
+/// environment, loaded or opened as a stream (`ibl_core::envmap::open_environment_with`).
 pub fn run(
     params: &Params,
-    input: &LoadedEnvironment,
+    input: impl Into<Opened>,
     out_dir: &Path,
     progress: &dyn Progress,
 ) -> Result<Baked> {
     params.validate()?;
-    let radiance = project(&input.env, params.bands, params.rotate);
+    let input = input.into();
+    let path = input.path().to_path_buf();
+    // The source the exact cube convolves, with the width it is reduced to there (a streamed
+    // one comes reduced).
+    let (radiance, exact_source, checks) = match input {
+        Opened::Loaded(l) => {
+            let radiance = project(&l.env, params.bands, params.rotate);
+            let checks = l.checks();
+            let source = params
+                .exact_cube()
+                .then_some((l.env, params.exact_source_width));
+            (radiance, source, checks)
+        }
+        Opened::Streamed(s) => {
+            let (radiance, reduced, checks) = project_streamed(params, s)?;
+            let source = reduced.map(|img| (Environment::Equirect(img), 0));
+            (radiance, source, checks)
+        }
+    };
     let irr = irradiance_coefficients(&radiance, params.bands, params.window);
     // The coefficients file holds 32-bit floats, as every engine reading SH takes them: a
     // coefficient beyond their range (a constant 10³⁸ sky has L00 = 3.5·10³⁸) is refused
@@ -562,7 +649,7 @@ pub fn run(
         let big = v.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
         if big.is_nan() || big > f32::MAX as f64 {
             return Err(Error::invalid(
-                &input.path,
+                &path,
                 format!(
                     "the {what} SH coefficients reach {big:.3e}, beyond the largest 32-bit float \
                      ({:.3e}) that {} and engines store: scale the environment down",
@@ -579,20 +666,14 @@ pub fn run(
         irradiance: to_f32(&irr, "irradiance")?,
         windowed: params.window,
     };
-    let (cube, negative_clamped) = if params.exact_cube() {
-        (
-            convolve_cosine_exact(
-                &input.env,
-                params.size,
-                params.exact_source_width,
-                params.rotate,
-                progress,
-            ),
+    let (cube, negative_clamped) = match &exact_source {
+        Some((env, width)) => (
+            convolve_cosine_exact(env, params.size, *width, params.rotate, progress),
             0,
-        )
-    } else {
-        cube_from_sh(&irr, params.size, progress)
+        ),
+        None => cube_from_sh(&irr, params.size, progress),
     };
+    drop(exact_source);
     // Finite input, finite output: E/π is at most the largest radiance, so only input within
     // a factor of the f32 limit can get here; no pixel format holds more than rgba32f.
     if let Some(v) = cube
@@ -602,7 +683,7 @@ pub fn run(
         .find(|v| !v.is_finite())
     {
         return Err(Error::invalid(
-            &input.path,
+            &path,
             format!(
                 "the irradiance reaches {v}, beyond the largest 32-bit float ({:.3e}) that any \
                  output format holds: scale the environment down",
@@ -662,6 +743,7 @@ pub fn run(
         negative_clamped,
         encoding: encoded.levels,
         warnings: encoded.warnings,
+        input: checks,
     })
 }
 
@@ -676,6 +758,39 @@ mod tests {
             .join("../../fixtures/hdri")
             .join(name);
         ibl_core::envmap::load_environment(&p, false).unwrap().env
+    }
+
+    #[test]
+    fn a_streamed_input_gives_the_loaded_files() {
+        // At the streaming threshold the equirect is projected and reduced as its rows
+        // arrive: the same files, bit for bit, and the same reports, for the SH cube, the
+        // exact cube from a reduced source and from the source's own texels, turned or not.
+        use ibl_core::envmap::{load_environment_with, open_environment_with, EnvPolicy};
+        let d = tempfile::tempdir().unwrap();
+        let p = ibl_core::stream::write_streamable_equirect(d.path(), "env.hdr");
+        let policy = EnvPolicy::default();
+        for (exact, exact_source_width, rotate) in [
+            (false, 256, 0.0),
+            (true, 256, 30.0),
+            (true, 512, 0.0),
+            (true, 0, 0.0),
+        ] {
+            let params = Params {
+                size: 8,
+                exact,
+                exact_source_width,
+                rotate,
+                ..Default::default()
+            };
+            let opened = open_environment_with(&p, policy).unwrap();
+            assert!(matches!(opened, Opened::Streamed(_)));
+            let a = run(&params, opened, d.path(), &NoProgress).unwrap();
+            let loaded = load_environment_with(&p, policy).unwrap();
+            let b = run(&params, loaded, d.path(), &NoProgress).unwrap();
+            assert!(a.files == b.files, "{exact} {exact_source_width} {rotate}");
+            assert_eq!(a.input.report, b.input.report);
+            assert_eq!(a.input.warnings(&p), b.input.warnings(&p));
+        }
     }
 
     #[test]

@@ -1511,14 +1511,7 @@ mod tests {
         // warnings.
         use ibl_core::envmap::{load_environment, open_environment_with, EnvPolicy};
         let d = tempfile::tempdir().unwrap();
-        let (w, h) = (2048, 1024);
-        let data: Vec<f32> = (0..w * h * 3)
-            .map(|k| ((k * 7919) % 1009) as f32 * 0.01 + if k % 997 == 0 { 500.0 } else { 0.0 })
-            .collect();
-        let img = ibl_core::image::Image::from_data(w, h, 3, data).unwrap();
-        let p = d.path().join("env.hdr");
-        let bytes = io::encode_image(&p, &img, &io::WriteOptions::default()).unwrap();
-        std::fs::write(&p, bytes).unwrap();
+        let p = ibl_core::stream::write_streamable_equirect(d.path(), "env.hdr");
         let params = Params {
             size: 32,
             levels: Some(4),

@@ -50,13 +50,7 @@ impl Bake for Prefilter {
         let (tr, cr) = (std::time::Instant::now(), pf::process_cpu_seconds());
         // A large equirect whose format reads row by row is opened, not read: its rows
         // stream into the resample (its read time is then inside the resample's).
-        let env = ibl_core::envmap::open_environment_with(
-            ibl_bake::one_input(Self::NAME, inputs)?,
-            ibl_core::envmap::EnvPolicy {
-                sanitize: p.sanitize,
-                negative: ibl_core::envmap::Negative::Clamp,
-            },
-        )?;
+        let env = ibl_bake::open_environment(Self::NAME, inputs, p.sanitize)?;
         let read_seconds = tr.elapsed().as_secs_f64();
         let read_cpu = pf::process_cpu_seconds() - cr;
         // The input's warnings first (run consumes the input to free its image early),

@@ -49,8 +49,10 @@ impl Bake for ShexpFit {
         out: &Path,
         progress: &dyn Progress,
     ) -> Result<Baked, BakeError> {
-        let env = ibl_bake::environment(Self::NAME, inputs, p.sanitize)?;
-        let baked = fit::run(p, &env, out, progress)?;
+        // A large equirect whose format reads row by row is opened, not read: its rows
+        // stream into the working cube.
+        let input = ibl_bake::open_environment(Self::NAME, inputs, p.sanitize)?;
+        let baked = fit::run(p, input, out, progress)?;
         let c = &baked.fitted.coeffs;
         let t = &baked.fitted.timings;
         let mut info = vec![format!(
@@ -86,7 +88,7 @@ impl Bake for ShexpFit {
                 "timings": t,
             }),
             files: baked.files,
-            warnings: env.warnings(),
+            warnings: baked.warnings,
             info,
         })
     }

@@ -22,11 +22,12 @@ use crate::truth::TexelSet;
 use crate::{Error, Result};
 use glam::Vec3;
 use ibl_core::bordered::BorderedMips;
-use ibl_core::envmap::{Environment, LoadedEnvironment};
+use ibl_core::envmap::{Environment, Opened};
 use ibl_core::equirect::Filter;
 use ibl_core::progress::{NoProgress, Progress};
 use ibl_core::{traverse, CubeMips, Cubemap};
 use rayon::prelude::*;
+use std::borrow::Cow;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -363,6 +364,17 @@ pub fn estimate_rows(
     timings: &mut Timings,
     progress: &dyn Progress,
 ) -> Rows {
+    estimate_rows_of(params, Cow::Borrowed(cube), timings, progress)
+}
+
+/// [`estimate_rows`] of a cube lent or given: a given one becomes the estimator's mip chain
+/// without a copy (at an 8k source's natural 2048² faces the copy is 300 MB).
+fn estimate_rows_of(
+    params: &Params,
+    cube: Cow<Cubemap>,
+    timings: &mut Timings,
+    progress: &dyn Progress,
+) -> Rows {
     let views: Vec<Vec3> = (0..params.views)
         .map(|k| basis::fibonacci_hemisphere(k, params.views))
         .collect();
@@ -372,7 +384,7 @@ pub fn estimate_rows(
     match params.estimator {
         EstimatorKind::Mc => {
             let t0 = Instant::now();
-            let sampler = BorderedMips::new(&CubeMips::build(cube.clone(), 1));
+            let sampler = BorderedMips::new(&CubeMips::build(cube.into_owned(), 1));
             timings.prepare = t0.elapsed().as_secs_f64();
             let t0 = Instant::now();
             let est = Estimator::new(&views, &params.alphas, params.samples, params.lod_bias);
@@ -385,12 +397,9 @@ pub fn estimate_rows(
         }
         EstimatorKind::Exact => {
             let t0 = Instant::now();
-            let small = Environment::Cube(cube.clone()).to_cube(
-                params.exact_size.min(cube.size),
-                Filter::Area,
-                0.0,
-                &NoProgress,
-            );
+            let size = params.exact_size.min(cube.size);
+            let small =
+                Environment::Cube(cube.into_owned()).to_cube(size, Filter::Area, 0.0, &NoProgress);
             let set = TexelSet::from_cube(&small);
             timings.prepare = t0.elapsed().as_secs_f64();
             let t0 = Instant::now();
@@ -638,17 +647,23 @@ pub fn floor_for(cube: &Cubemap, rel: f32) -> Result<[f64; 3]> {
 
 /// Fits a cube (already at the working size).
 pub fn fit_cube(params: &Params, cube: &Cubemap, progress: &dyn Progress) -> Result<Fitted> {
+    fit_cube_of(params, Cow::Borrowed(cube), progress)
+}
+
+/// [`fit_cube`] of a cube lent or given (see [`estimate_rows_of`]).
+fn fit_cube_of(params: &Params, cube: Cow<Cubemap>, progress: &dyn Progress) -> Result<Fitted> {
     params.validate()?;
-    let floor = floor_for(cube, params.floor)?;
+    let floor = floor_for(&cube, params.floor)?;
+    let face_size = cube.size;
     let mut timings = Timings::default();
-    let rows = estimate_rows(params, cube, &mut timings, progress);
+    let rows = estimate_rows_of(params, cube, &mut timings, progress);
     let t0 = Instant::now();
     let coeffs = coeffs_from_rows(params, &rows, floor)?;
     timings.solve = t0.elapsed().as_secs_f64();
     Ok(Fitted {
         coeffs,
         timings,
-        face_size: cube.size,
+        face_size,
     })
 }
 
@@ -713,19 +728,42 @@ pub struct Baked {
     pub files: Vec<(PathBuf, Vec<u8>)>,
     /// The fit and its diagnostics.
     pub fitted: Fitted,
+    /// What the input's checks found (negative texels clamped, NaN/Inf zeroed).
+    pub warnings: Vec<String>,
 }
 
-/// Fits a loaded environment and encodes the coefficient file `out` (JSON, or RON by
-/// extension) and, with `emit_shader`, `out` with `.glsl` / `.hlsl` extensions.
+/// The working cube of an opened input and its warnings: a large equirect opened as a stream
+/// (`ibl_core::envmap::open_environment_with`) is resampled as its rows arrive, never held
+/// whole (at 8192×4096 the image alone is 400 MB), into the same bits as [`working_cube`].
+fn working_cube_of(
+    input: Opened,
+    size: Option<usize>,
+    progress: &dyn Progress,
+) -> Result<(Cubemap, Vec<String>)> {
+    match input {
+        Opened::Loaded(l) => Ok((working_cube(&l.env, size, progress), l.warnings())),
+        Opened::Streamed(s) => {
+            let n = size.unwrap_or_else(|| s.natural_face_size());
+            let path = s.path().to_path_buf();
+            let streamed = s.to_cube(n, 0.0, progress)?;
+            let warnings = streamed.warnings(&path);
+            Ok((streamed.cube, warnings))
+        }
+    }
+}
+
+/// Fits an environment (loaded, or opened as a stream) and encodes the coefficient file `out`
+/// (JSON, or RON by extension) and, with `emit_shader`, `out` with `.glsl` / `.hlsl`
+/// extensions.
 pub fn run(
     params: &Params,
-    input: &LoadedEnvironment,
+    input: impl Into<Opened>,
     out: &Path,
     progress: &dyn Progress,
 ) -> Result<Baked> {
     params.validate()?;
-    let cube = working_cube(&input.env, params.size, progress);
-    let fitted = fit_cube(params, &cube, progress)?;
+    let (cube, warnings) = working_cube_of(input.into(), params.size, progress)?;
+    let fitted = fit_cube_of(params, Cow::Owned(cube), progress)?;
     let mut files = vec![(
         out.to_path_buf(),
         ibl_core::io::data::encode(out, &fitted.coeffs)?,
@@ -740,7 +778,11 @@ pub fn run(
             crate::shader::hlsl(&fitted.coeffs).into_bytes(),
         ));
     }
-    Ok(Baked { files, fitted })
+    Ok(Baked {
+        files,
+        fitted,
+        warnings,
+    })
 }
 
 #[cfg(test)]
@@ -755,6 +797,32 @@ mod tests {
             alphas: vec![0.2, 0.6, 1.0],
             ..Default::default()
         }
+    }
+
+    #[test]
+    fn a_streamed_input_fits_the_loaded_one() {
+        // At the streaming threshold the working cube is resampled as the rows arrive: the
+        // same coefficient file, bit for bit, and the same warnings.
+        use ibl_core::envmap::{load_environment, open_environment_with, EnvPolicy};
+        let d = tempfile::tempdir().unwrap();
+        let p = ibl_core::stream::write_streamable_equirect(d.path(), "env.hdr");
+        let params = Params {
+            size: Some(16),
+            ..small_params()
+        };
+        let out = d.path().join("shexp.json");
+        let opened = open_environment_with(&p, EnvPolicy::default()).unwrap();
+        assert!(matches!(opened, Opened::Streamed(_)));
+        let a = run(&params, opened, &out, &NoProgress).unwrap();
+        let b = run(
+            &params,
+            load_environment(&p, false).unwrap(),
+            &out,
+            &NoProgress,
+        )
+        .unwrap();
+        assert!(a.files == b.files);
+        assert_eq!(a.warnings, b.warnings);
     }
 
     #[test]

@@ -273,20 +273,27 @@ fn bombs_in_every_format_are_refused_fast_and_small() {
 
 #[test]
 fn valid_but_large_inputs_are_refused_by_the_budget_not_decoded() {
-    // A real 2048x1024 EXR (about 25 MB decoded) under a 4 MB budget: refused naming the
-    // size, the budget and the flag; the same file under the default budget bakes.
+    // A real 2048x1024 EXR (about 25 MB decoded) is read as a stream: a budget below its
+    // window of rows refuses it, naming the size, the budget and the flag, before a row is
+    // decoded; one of 4 MB, a sixth of the image, bakes (the image is never held whole).
     let d = tempfile::tempdir().unwrap();
     let p = write(
         d.path(),
         "big.exr",
         &encoded("a.exr", &noise(2048, 1024), &WriteOptions::default()),
     );
-    let line = refused(&p, &["--max-memory", "40M"], 3, "2048x1024", 100.0);
-    assert!(line.contains("budget of 41 MB"), "{line}");
-    // Under 4 MB not even the file's bytes fit.
-    refused(&p, &["--max-memory", "4M"], 3, "budget of 4194 kB", 100.0);
-    let r = run(&p, &d.path().join("ok"), &[]);
+    let line = refused(&p, &["--max-memory", "500K"], 3, "2048x1024", 100.0);
+    assert!(line.contains("budget of 512 kB"), "{line}");
+    let r = run(&p, &d.path().join("ok"), &["--max-memory", "4M"]);
     assert_eq!(r.code, 0, "{}", r.stderr);
+    // Below the streaming threshold the image is decoded whole: 1024x512 (a 5 MB file, 6 MB
+    // decoded) is refused under 8 MB.
+    let small = write(
+        d.path(),
+        "small.exr",
+        &encoded("a.exr", &noise(1024, 512), &WriteOptions::default()),
+    );
+    refused(&small, &["--max-memory", "8M"], 3, "1024x512", 100.0);
 }
 
 #[test]
