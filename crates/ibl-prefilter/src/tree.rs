@@ -584,10 +584,10 @@ fn weight_at<const HORIZON: bool>(dq: f32, var: f32, a2: f32, b: f32) -> f32 {
 }
 
 /// The per-cell terms of one weight kind (`o` = 0: numerator, 10: normalisation) that every
-/// roughness shares: chord² + (1 − |m̄|²) from n, and Var(n·l) = nᵀ C n (one straight loop the
-/// compiler vectorises).
+/// roughness shares, for the cells `start ..` (as many as `dq` holds): chord² + (1 − |m̄|²)
+/// from n, and Var(n·l) = nᵀ C n (one straight loop the compiler vectorises).
 #[inline(always)]
-fn geometry(block: &CellBlock, o: usize, n: Vec3, dq: &mut [f32], var: &mut [f32]) {
+fn geometry(block: &CellBlock, o: usize, start: usize, n: Vec3, dq: &mut [f32], var: &mut [f32]) {
     let nn = [
         n.x * n.x,
         n.y * n.y,
@@ -598,20 +598,9 @@ fn geometry(block: &CellBlock, o: usize, n: Vec3, dq: &mut [f32], var: &mut [f32
     ];
     let c = &block.cols;
     let len = dq.len();
-    let (mx, my, mz, mq) = (
-        &c[o][..len],
-        &c[o + 1][..len],
-        &c[o + 2][..len],
-        &c[o + 3][..len],
-    );
-    let (c0, c1, c2, c3, c4, c5) = (
-        &c[o + 4][..len],
-        &c[o + 5][..len],
-        &c[o + 6][..len],
-        &c[o + 7][..len],
-        &c[o + 8][..len],
-        &c[o + 9][..len],
-    );
+    let col = |k: usize| &c[o + k][start..start + len];
+    let (mx, my, mz, mq) = (col(0), col(1), col(2), col(3));
+    let (c0, c1, c2, c3, c4, c5) = (col(4), col(5), col(6), col(7), col(8), col(9));
     let var = &mut var[..len];
     for k in 0..len {
         let (dx, dy, dz) = (n.x - mx[k], n.y - my[k], n.z - mz[k]);
@@ -625,6 +614,12 @@ fn geometry(block: &CellBlock, o: usize, n: Vec3, dq: &mut [f32], var: &mut [f32
     }
 }
 
+/// Cells summed per pass of [`accumulate`]: their columns and scratch (30 × 4 bytes a cell,
+/// 30 KB) stay in the L1 cache while every roughness reads them, where a whole cut (~700
+/// cells) streamed from L2 once per roughness and bound the sum. A multiple of the 64-cell
+/// flush period, so the flushes (and the bits) are those of one pass over the cut.
+const CELLS_PER_PASS: usize = 256;
+
 /// Σ over a block of (W_num·E_rgb, W_den·Ω) for every α² of `a2s` (into `acc`, one entry
 /// each), in 8 f32 lanes flushed to f64 every 64 cells. The geometry is computed once for all
 /// of them; only the kernel's radial profile is evaluated per roughness.
@@ -637,56 +632,59 @@ fn accumulate<const HORIZON: bool>(
     acc: &mut [[f64; 4]],
 ) {
     const L: usize = LANES;
+    const _: () = assert!(CELLS_PER_PASS.is_multiple_of(64));
     let len = block.cols[0].len();
     debug_assert!(len.is_multiple_of(L));
     if len == 0 {
         return;
     }
-    scratch.resize(6 * len, 0.0);
-    let (dm, rest) = scratch.split_at_mut(len);
-    let (vm, rest) = rest.split_at_mut(len);
-    let (dg, rest) = rest.split_at_mut(len);
-    let (vg, rest) = rest.split_at_mut(len);
-    let (wm, wg) = rest.split_at_mut(len);
-    geometry(block, 0, n, dm, vm);
-    geometry(block, 10, n, dg, vg);
-    let (er, eg, eb, om) = (
-        &block.cols[20][..len],
-        &block.cols[21][..len],
-        &block.cols[22][..len],
-        &block.cols[23][..len],
-    );
-    for (&a2, acc) in a2s.iter().zip(acc.iter_mut()) {
-        let b = 1.0 - a2;
-        // The weights over the whole block (a loop the compiler vectorises; its scalar tail
-        // never runs, blocks being padded to whole lanes), then their sums in whole chunks of
-        // L cells: fixed-length slices carry no bounds checks and compile to vector
-        // multiply-adds (indexed, the sums stayed scalar: a fifth of the bake's CPU). The
-        // same operations in the same order: the same bits.
-        for k in 0..len {
-            wm[k] = weight_at::<HORIZON>(dm[k], vm[k], a2, b);
-            wg[k] = weight_at::<HORIZON>(dg[k], vg[k], a2, b);
-        }
-        let mut lanes = [[0.0f32; L]; 4];
-        let chunks = wm
-            .chunks_exact(L)
-            .zip(wg.chunks_exact(L))
-            .zip(er.chunks_exact(L))
-            .zip(eg.chunks_exact(L))
-            .zip(eb.chunks_exact(L))
-            .zip(om.chunks_exact(L));
-        for (q, (((((wm8, wg8), er8), eg8), eb8), om8)) in chunks.enumerate() {
-            for k in 0..L {
-                lanes[0][k] += wm8[k] * er8[k];
-                lanes[1][k] += wm8[k] * eg8[k];
-                lanes[2][k] += wm8[k] * eb8[k];
-                lanes[3][k] += wg8[k] * om8[k];
+    let pass = CELLS_PER_PASS.min(len);
+    scratch.resize(6 * pass, 0.0);
+    let (dm, rest) = scratch.split_at_mut(pass);
+    let (vm, rest) = rest.split_at_mut(pass);
+    let (dg, rest) = rest.split_at_mut(pass);
+    let (vg, rest) = rest.split_at_mut(pass);
+    let (wm, wg) = rest.split_at_mut(pass);
+    for start in (0..len).step_by(pass) {
+        let m = pass.min(len - start);
+        geometry(block, 0, start, n, &mut dm[..m], vm);
+        geometry(block, 10, start, n, &mut dg[..m], vg);
+        let col = |k: usize| &block.cols[k][start..start + m];
+        let (er, eg, eb, om) = (col(20), col(21), col(22), col(23));
+        for (&a2, acc) in a2s.iter().zip(acc.iter_mut()) {
+            let b = 1.0 - a2;
+            // The weights over the pass's cells (a loop the compiler vectorises; its scalar
+            // tail never runs, blocks being padded to whole lanes), then their sums in whole
+            // chunks of L cells: fixed-length slices carry no bounds checks and compile to
+            // vector multiply-adds (indexed, the sums stayed scalar: a fifth of the bake's
+            // CPU). The same operations in the same order: the same bits.
+            let (dm, vm, dg, vg) = (&dm[..m], &vm[..m], &dg[..m], &vg[..m]);
+            let (wm, wg) = (&mut wm[..m], &mut wg[..m]);
+            for k in 0..m {
+                wm[k] = weight_at::<HORIZON>(dm[k], vm[k], a2, b);
+                wg[k] = weight_at::<HORIZON>(dg[k], vg[k], a2, b);
             }
-            let i = (q + 1) * L;
-            if i.is_multiple_of(64) || i == len {
-                for c in 0..4 {
-                    acc[c] += lanes[c].iter().map(|v| *v as f64).sum::<f64>();
-                    lanes[c] = [0.0; L];
+            let mut lanes = [[0.0f32; L]; 4];
+            let chunks = wm
+                .chunks_exact(L)
+                .zip(wg.chunks_exact(L))
+                .zip(er.chunks_exact(L))
+                .zip(eg.chunks_exact(L))
+                .zip(eb.chunks_exact(L))
+                .zip(om.chunks_exact(L));
+            for (q, (((((wm8, wg8), er8), eg8), eb8), om8)) in chunks.enumerate() {
+                for k in 0..L {
+                    lanes[0][k] += wm8[k] * er8[k];
+                    lanes[1][k] += wm8[k] * eg8[k];
+                    lanes[2][k] += wm8[k] * eb8[k];
+                    lanes[3][k] += wg8[k] * om8[k];
+                }
+                let i = start + (q + 1) * L;
+                if i.is_multiple_of(64) || i == len {
+                    for c in 0..4 {
+                        acc[c] += lanes[c].iter().map(|v| *v as f64).sum::<f64>();
+                        lanes[c] = [0.0; L];
+                    }
                 }
             }
         }
