@@ -47,9 +47,10 @@ impl BorderedLevel {
         // Texel space with centres at integers, shifted by the border: x ∈ [0.5, n + 0.5].
         let x = ((sc + 1.0) * 0.5 * n + 0.5).clamp(0.0, n + 0.999);
         let y = ((tc + 1.0) * 0.5 * n + 0.5).clamp(0.0, n + 0.999);
-        let (x0, y0) = (x.floor(), y.floor());
-        let (fx, fy) = (x - x0, y - y0);
-        let (x0, y0) = (x0 as usize, y0 as usize);
+        // x, y ≥ 0: truncation is the floor, and stays inline where `f32::floor` is a libm
+        // call on the x86-64 baseline (no SSE4.1 round; 9% of shexp-fit's time).
+        let (x0, y0) = (x as usize, y as usize);
+        let (fx, fy) = (x - x0 as f32, y - y0 as f32);
         let a = self.at(face, x0, y0);
         let b = self.at(face, x0 + 1, y0);
         let c = self.at(face, x0, y0 + 1);
@@ -144,8 +145,9 @@ impl BorderedMips {
     #[inline]
     pub fn sample(&self, d: Vec3, lod: f32) -> Rgb {
         let lod = lod.clamp(0.0, self.max_lod() as f32);
-        let l0 = lod.floor();
-        self.trilinear(d, l0 as usize, lod - l0)
+        // lod ≥ 0: truncation is the floor (see `BorderedLevel::bilinear`).
+        let l0 = lod as usize;
+        self.trilinear(d, l0, lod - l0 as f32)
     }
 }
 

@@ -148,7 +148,7 @@ pub fn bilinear_taps(n: usize, d: Vec3) -> [(usize, f32); 6] {
     let (face, sc, tc) = Face::from_direction(d);
     let x = (sc + 1.0) * 0.5 * n as f32 - 0.5;
     let y = (tc + 1.0) * 0.5 * n as f32 - 0.5;
-    let (x0, y0) = (x.floor(), y.floor());
+    let (x0, y0) = (floor(x), floor(y));
     let (fx, fy) = (x - x0, y - y0);
     let (x0, y0) = (x0 as isize, y0 as isize);
     let mut taps = [(0usize, 0.0f32); 6];
@@ -330,8 +330,8 @@ impl Cubemap {
         let n = self.size as f32;
         let x = (sc + 1.0) * 0.5 * n - 0.5;
         let y = (tc + 1.0) * 0.5 * n - 0.5;
-        let x0 = x.floor();
-        let y0 = y.floor();
+        let x0 = floor(x);
+        let y0 = floor(y);
         let fx = x - x0;
         let fy = y - y0;
         let (x0, y0) = (x0 as isize, y0 as isize);
@@ -402,11 +402,26 @@ impl Cubemap {
     }
 }
 
+/// ⌊x⌋ of a texel coordinate, inline: on the x86-64 baseline (no SSE4.1 `roundss`)
+/// `f32::floor` is a call into libm, which the reads' texel lookups made millions of times a
+/// bake. Truncate, then step down where truncation rounded a negative value up: exact for the
+/// finite values a read meets (|x| < 2⁶³); a NaN gives 0, whose texel index (0) and fraction
+/// (NaN) are what `f32::floor`'s NaN gave.
+#[inline(always)]
+fn floor(x: f32) -> f32 {
+    let t = x as i64 as f32;
+    if t > x {
+        t - 1.0
+    } else {
+        t
+    }
+}
+
 /// Texel index of face coordinates, clamped to the face.
 #[inline]
 pub fn face_texel_index(sc: f32, tc: f32, n: usize) -> (usize, usize) {
-    let fi = ((sc + 1.0) * 0.5 * n as f32).floor() as isize;
-    let fj = ((tc + 1.0) * 0.5 * n as f32).floor() as isize;
+    let fi = floor((sc + 1.0) * 0.5 * n as f32) as isize;
+    let fj = floor((tc + 1.0) * 0.5 * n as f32) as isize;
     (
         fi.clamp(0, n as isize - 1) as usize,
         fj.clamp(0, n as isize - 1) as usize,
@@ -548,6 +563,29 @@ mod tests {
             }
         }
         assert!((s - texel_solid_angle(i, j, n)).abs() < 1e-8);
+    }
+
+    #[test]
+    fn the_inline_floor_is_f32_floor() {
+        let mut rng = crate::sampling::Pcg32::new(7, 1);
+        let mut xs = vec![
+            0.0f32, -0.0, 0.5, -0.5, 1.0, -1.0, 1e-30, -1e-30, 8388607.5, -8388607.5,
+        ];
+        xs.extend([16777216.0f32, -16777217.0, 1e18, -1e18]);
+        for k in -2000..2000 {
+            let v = k as f32 / 7.0;
+            xs.extend([
+                v,
+                f32::from_bits(v.to_bits() + 1),
+                f32::from_bits(v.to_bits().wrapping_sub(1)),
+            ]);
+        }
+        xs.extend((0..10_000).map(|_| (rng.next_f32() - 0.5) * 4096.0));
+        // (== takes −0 for 0: a read's coordinate x − 0.5 is never −0.)
+        for x in xs.into_iter().filter(|x| !x.is_nan()) {
+            assert_eq!(floor(x), x.floor(), "{x:e}");
+        }
+        assert_eq!(floor(f32::NAN), 0.0);
     }
 
     #[test]
