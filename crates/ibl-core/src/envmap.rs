@@ -1225,6 +1225,23 @@ mod tests {
                     && !e.contains('\n'),
                 "{e}"
             );
+            // The same for rows handed out in bands: the bands before the cut, then the error.
+            let Opened::Streamed(s) = open_streaming_from(&cut, policy, 0).unwrap() else {
+                panic!("streamed")
+            };
+            let mut seen = 0;
+            let e = s
+                .read_bands(32, |_, band| {
+                    seen += band.height;
+                    Ok(())
+                })
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.starts_with(&format!("{}: ", cut.display())) && e.contains("scan line"),
+                "{e}"
+            );
+            assert!(seen < h, "{seen} rows of a cut file");
             // Corrupt mid-stream: a run overrunning its line.
             let mut bad = bytes.clone();
             let at = bytes.len() / 2;

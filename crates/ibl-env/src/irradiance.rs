@@ -580,12 +580,25 @@ const STREAM_BAND: usize = 32;
 fn project_streamed(
     params: &Params,
     stream: EquirectStream,
-) -> Result<(Vec<[f64; 3]>, Option<Image>, InputChecks)> {
+) -> Result<(
+    Vec<[f64; 3]>,
+    Option<(Image, io::budget::Reservation)>,
+    InputChecks,
+)> {
     let (w, h) = (stream.width(), stream.height());
     let factor = reduce_factor(w, h, params.exact_source_width);
-    let mut reduced = params
-        .exact_cube()
-        .then(|| Image::new(w / factor, h / factor, 3));
+    // The reduced image is held against the memory budget until the cube is convolved: with
+    // --exact-source-width 0 it is the whole image the stream otherwise never holds.
+    let (rw, rh) = (w / factor, h / factor);
+    let hold = match params.exact_cube() {
+        true => Some(io::budget::reserve(
+            stream.path(),
+            &format!("the {rw}x{rh} equirect the exact cube convolves"),
+            (rw * rh * 12) as u64,
+        )?),
+        false => None,
+    };
+    let mut reduced = hold.as_ref().map(|_| Image::new(rw, rh, 3));
     let mut radiance = vec![[0.0f64; 3]; num_coeffs(params.bands)];
     let band = factor * STREAM_BAND.div_ceil(factor);
     let checks = stream.read_bands(band, |first, rows| {
@@ -610,7 +623,7 @@ fn project_streamed(
         }
         Ok(())
     })?;
-    Ok((radiance, reduced, checks))
+    Ok((radiance, reduced.zip(hold), checks))
 }
 
 /// Projects, convolves and encodes `DIR/<sh_file>` and the irradiance cube from an
@@ -626,19 +639,22 @@ pub fn run(
     let path = input.path().to_path_buf();
     // The source the exact cube convolves, with the width it is reduced to there (a streamed
     // one comes reduced).
-    let (radiance, exact_source, checks) = match input {
+    let (radiance, exact_source, checks, hold) = match input {
         Opened::Loaded(l) => {
             let radiance = project(&l.env, params.bands, params.rotate);
             let checks = l.checks();
             let source = params
                 .exact_cube()
                 .then_some((l.env, params.exact_source_width));
-            (radiance, source, checks)
+            (radiance, source, checks, None)
         }
         Opened::Streamed(s) => {
             let (radiance, reduced, checks) = project_streamed(params, s)?;
-            let source = reduced.map(|img| (Environment::Equirect(img), 0));
-            (radiance, source, checks)
+            let (source, hold) = match reduced {
+                Some((img, hold)) => (Some((Environment::Equirect(img), 0)), Some(hold)),
+                None => (None, None),
+            };
+            (radiance, source, checks, hold)
         }
     };
     let irr = irradiance_coefficients(&radiance, params.bands, params.window);
@@ -673,7 +689,7 @@ pub fn run(
         ),
         None => cube_from_sh(&irr, params.size, progress),
     };
-    drop(exact_source);
+    drop((exact_source, hold));
     // Finite input, finite output: E/π is at most the largest radiance, so only input within
     // a factor of the f32 limit can get here; no pixel format holds more than rgba32f.
     if let Some(v) = cube

@@ -286,6 +286,17 @@ fn valid_but_large_inputs_are_refused_by_the_budget_not_decoded() {
     assert!(line.contains("budget of 512 kB"), "{line}");
     let r = run(&p, &d.path().join("ok"), &["--max-memory", "4M"]);
     assert_eq!(r.code, 0, "{}", r.stderr);
+    // Its exact cube from the source's own texels needs the whole image after all (25 MB):
+    // refused before a row is read.
+    let exact = ["--max-memory", "8M", "--exact", "--exact-source-width", "0"];
+    let line = refused(
+        &p,
+        &exact,
+        3,
+        "2048x1024 equirect the exact cube convolves",
+        100.0,
+    );
+    assert!(line.contains("budget of 8388 kB"), "{line}");
     // Below the streaming threshold the image is decoded whole: 1024x512 (a 5 MB file, 6 MB
     // decoded) is refused under 8 MB.
     let small = write(
