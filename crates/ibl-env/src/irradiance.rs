@@ -569,6 +569,9 @@ pub struct Baked {
     pub input: InputChecks,
 }
 
+/// An image and its hold on the memory budget.
+type HeldImage = (Image, io::budget::Reservation);
+
 /// Rows of a streamed equirect held at a time (rounded up to whole reduction blocks).
 const STREAM_BAND: usize = 32;
 
@@ -580,11 +583,7 @@ const STREAM_BAND: usize = 32;
 fn project_streamed(
     params: &Params,
     stream: EquirectStream,
-) -> Result<(
-    Vec<[f64; 3]>,
-    Option<(Image, io::budget::Reservation)>,
-    InputChecks,
-)> {
+) -> Result<(Vec<[f64; 3]>, Option<HeldImage>, InputChecks)> {
     let (w, h) = (stream.width(), stream.height());
     let factor = reduce_factor(w, h, params.exact_source_width);
     // The reduced image is held against the memory budget until the cube is convolved: with
