@@ -1059,6 +1059,20 @@ fn read_container_cube(
     io::texture::decode_cube(path, &tex.payload).map(|m| Some((m, note, tex.metadata)))
 }
 
+/// The A channel of a cube chain in a container (`rgba16f`, `rgba32f`), each of the three
+/// channels holding it ([`io::texture::decode_alpha`]); `None` for face images and formats
+/// without one. The custom lookup keeps its mid-interval correction there.
+pub fn read_cube_chain_alpha(path: &Path) -> Result<Option<CubeMips>> {
+    if path.is_dir() {
+        return Ok(None);
+    }
+    let bytes = io::budget::read_file(path)?;
+    match io::container::read(path, &bytes)? {
+        Some(tex) => io::texture::decode_alpha(path, &tex.payload),
+        None => Ok(None),
+    }
+}
+
 /// Loads a cube chain written by [`crate::output::encode_cube`] (faces or any container).
 pub fn read_cube_chain(path: &Path) -> Result<CubeMips> {
     if let Some((mips, _, _)) = read_container_cube(path)? {

@@ -205,6 +205,20 @@ pub fn encode_chain(
     encode(dir, mips, enc, name, metadata, true)
 }
 
+/// [`encode_chain`] with a fourth channel: `alpha`'s channel 0 becomes each texel's A
+/// ([`texture::set_alpha`]). Only a container (KTX2, KTX1, DDS) in `rgba16f` or `rgba32f`
+/// holds it; faces (EXR) or other formats are refused rather than written without it.
+pub fn encode_chain_with_alpha(
+    dir: &Path,
+    mips: &CubeMips,
+    alpha: &CubeMips,
+    enc: &Encoding,
+    name: &str,
+    metadata: &[(String, Vec<u8>)],
+) -> Result<EncodedCube> {
+    encode_with(dir, mips, Some(alpha), enc, name, metadata, true)
+}
+
 fn encode(
     dir: &Path,
     mips: &CubeMips,
@@ -213,9 +227,30 @@ fn encode(
     metadata: &[(String, Vec<u8>)],
     chain: bool,
 ) -> Result<EncodedCube> {
-    let (payload, levels) = texture::encode_chain(mips, enc.format, enc.bc6h_quality);
+    encode_with(dir, mips, None, enc, name, metadata, chain)
+}
+
+fn encode_with(
+    dir: &Path,
+    mips: &CubeMips,
+    alpha: Option<&CubeMips>,
+    enc: &Encoding,
+    name: &str,
+    metadata: &[(String, Vec<u8>)],
+    chain: bool,
+) -> Result<EncodedCube> {
+    let (mut payload, levels) = texture::encode_chain(mips, enc.format, enc.bc6h_quality);
     let files = match (enc.layout.codec(), enc.layout.container_path(dir, name)) {
-        (Some(codec), Some(path)) => vec![(path, codec.encode(&payload, enc.zstd, metadata)?)],
+        (Some(codec), Some(path)) => {
+            if let Some(a) = alpha {
+                texture::set_alpha(&path, &mut payload, a)?;
+            }
+            vec![(path, codec.encode(&payload, enc.zstd, metadata)?)]
+        }
+        _ if alpha.is_some() => return Err(Error::unsupported(
+            dir,
+            "face images cannot hold the chain's alpha channel: use a container (--layout ktx2)",
+        )),
         _ => encode_faces(dir, mips, enc.format, chain)?,
     };
     let clamped: usize = levels.iter().map(|l| l.clamped).sum();

@@ -116,11 +116,6 @@ fn main() {
         }
         return;
     }
-    // `-- --two-tap`: the two-tap custom lookup experiment (docs/notes/custom-2tap.md, printed).
-    if std::env::args().any(|a| a == "--two-tap") {
-        two_tap(&root);
-        return;
-    }
     if std::env::args().any(|a| a == "--custom-only") {
         custom_section(&root, quick);
         return;
@@ -951,12 +946,26 @@ fn sun_power_error(p: &Params) -> f64 {
     let b = BorderedMips::new(&chain.mips);
     let m = p.lookup();
     let (levels, size) = (chain.mips.levels.len(), p.size);
+    // The custom lookup reads its two taps and the alpha channel; the others one trilinear tap.
+    let custom = p.custom_lookup().map(|lk| {
+        let alpha = chain
+            .correction
+            .as_ref()
+            .expect("custom chains have an alpha");
+        (
+            lk,
+            ibl_prefilter::custom::CustomChain::new(&chain.mips, alpha),
+        )
+    });
+    let read = |d, r: f32| match &custom {
+        Some((lk, cc)) => lk.read(cc, d, r),
+        None => b.sample(d, m.lod(r, levels, size)),
+    };
     let per_r = (0..=32)
         .into_par_iter()
         .map(|k| {
             let r = k as f32 / 32.0;
-            let lod = m.lod(r, levels, size);
-            let got = power(512, &|f, i, j| b.sample(texel_direction(f, i, j, 512), lod));
+            let got = power(512, &|f, i, j| read(texel_direction(f, i, j, 512), r));
             (got - want) / want
         })
         .collect::<Vec<f64>>();
@@ -1084,277 +1093,4 @@ fn custom_section(root: &Path, quick: bool) {
     };
     std::fs::write(&path, format!("{keep}{md}")).unwrap();
     println!("{md}");
-}
-
-/// A two-tap lookup `w·tap(a) + (1 − w)·tap(b)` as per-level weights of a chain of `n` levels
-/// (each trilinear tap splits its weight between the two levels around its lod).
-fn two_tap_weights(n: usize, a: f32, b: f32, w: f32) -> Vec<f64> {
-    let mut c = vec![0.0f64; n];
-    for (lod, wt) in [(a, w), (b, 1.0 - w)] {
-        let lod = lod.clamp(0.0, (n - 1) as f32);
-        let l0 = lod.floor() as usize;
-        let f = (lod - l0 as f32) as f64;
-        c[l0] += wt as f64 * (1.0 - f);
-        if l0 + 1 < n {
-            c[l0 + 1] += wt as f64 * f;
-        }
-    }
-    c
-}
-
-/// Mean and p99 of |Σ c_l L_l − y| / y over the directions (luminance is linear in the levels).
-fn two_tap_err(c: &[f64], lv: &[Vec<f64>], y: &[f64]) -> (f64, f64) {
-    let mut e: Vec<f64> = (0..y.len())
-        .filter(|&d| y[d] > 1e-12)
-        .map(|d| {
-            let x: f64 = c.iter().zip(lv).map(|(c, l)| c * l[d]).sum();
-            ((x - y[d]) / y[d]).abs()
-        })
-        .collect();
-    let mean = e.iter().sum::<f64>() / e.len().max(1) as f64;
-    (mean, ibl_prefilter::runtime::quantile(&mut e, 0.99))
-}
-
-/// The two-tap experiment: per roughness, the best `(a, b, w)` on the design fixtures (a grid
-/// around the one-tap lod), then the same per-roughness table read on the held-out ones, against
-/// the one-tap lookup of the same (one-tap-fitted) chain. Printed.
-fn two_tap(root: &Path) {
-    use ibl_core::bordered::BorderedMips;
-    use ibl_prefilter::runtime::{probe_directions, Reference, REPORT_DIRECTIONS};
-    use ibl_prefilter::tree::{CellTree, TreeBuffers};
-    let envs = custom_envs(root, false);
-    let p = Params {
-        target: Target::Custom,
-        ..Default::default()
-    };
-    let dirs = probe_directions(REPORT_DIRECTIONS);
-    let rs: Vec<f32> = (0..=32).map(|k| k as f32 / 32.0).collect();
-    // Per env: lv[l][d] (level reads), y[k][d] (exact), one-tap lod per r.
-    struct Env {
-        name: String,
-        design: bool,
-        lv: Vec<Vec<f64>>,
-        y: Vec<Vec<f64>>,
-    }
-    let mut data = Vec::new();
-    let mut lods = Vec::new();
-    let mut n = 0;
-    for (name, design, env) in &envs {
-        let t = Instant::now();
-        let chain = bake_chain(&p, env, &NoProgress).unwrap();
-        n = chain.mips.levels.len();
-        let b = BorderedMips::new(&chain.mips);
-        let source = env.to_cube(chain.report.source_size, Filter::Area, 0.0, &NoProgress);
-        let tree = CellTree::new(&source);
-        let reference = Reference::Tree {
-            tree: &tree,
-            source: &source,
-            params: ibl_prefilter::bake::RUNTIME_REFERENCE,
-        };
-        let lv: Vec<Vec<f64>> = (0..n)
-            .map(|l| {
-                dirs.iter()
-                    .map(|&d| luminance(b.sample(d, l as f32)) as f64)
-                    .collect()
-            })
-            .collect();
-        let y: Vec<Vec<f64>> = rs
-            .par_iter()
-            .map_init(TreeBuffers::default, |buf, &r| {
-                dirs.iter()
-                    .map(|&d| luminance(reference.radiance(d, r, buf)) as f64)
-                    .collect()
-            })
-            .collect();
-        lods = rs.iter().map(|&r| p.lookup().lod(r, n, p.size)).collect();
-        eprintln!("two-tap: {name} ({:.1} s)", t.elapsed().as_secs_f64());
-        data.push(Env {
-            name: name.clone(),
-            design: *design,
-            lv,
-            y,
-        });
-    }
-    // Per r: the best (a, b, w) on the design envs (the worse of their means), grid 0.05.
-    let step = 0.05f32;
-    let table: Vec<(f32, f32, f32)> = (0..rs.len())
-        .into_par_iter()
-        .map(|k| {
-            let lod = lods[k];
-            let mut best = (f64::MAX, (lod, lod, 1.0));
-            for ia in -40..=10 {
-                let a = (lod + ia as f32 * step).max(0.0);
-                for ib in 0..=50 {
-                    let bb = (lod + ib as f32 * step).min((n - 1) as f32);
-                    if bb < a {
-                        continue;
-                    }
-                    for iw in 0..=20 {
-                        let w = iw as f32 / 20.0;
-                        let c = two_tap_weights(n, a, bb, w);
-                        let s = data
-                            .iter()
-                            .filter(|e| e.design)
-                            .map(|e| two_tap_err(&c, &e.lv, &e.y[k]).0)
-                            .fold(0.0, f64::max);
-                        if s < best.0 {
-                            best = (s, (a, bb, w));
-                        }
-                    }
-                }
-            }
-            best.1
-        })
-        .collect();
-    // Control: the best single tap per r (a lod curve refitted per r on the design fixtures).
-    let one_table: Vec<f32> = (0..rs.len())
-        .into_par_iter()
-        .map(|k| {
-            let mut best = (f64::MAX, lods[k]);
-            for ia in -40..=40 {
-                let a = (lods[k] + ia as f32 * 0.025).clamp(0.0, (n - 1) as f32);
-                let c = two_tap_weights(n, a, a, 1.0);
-                let s = data
-                    .iter()
-                    .filter(|e| e.design)
-                    .map(|e| two_tap_err(&c, &e.lv, &e.y[k]).0)
-                    .fold(0.0, f64::max);
-                if s < best.0 {
-                    best = (s, a);
-                }
-            }
-            best.1
-        })
-        .collect();
-    for e in &data {
-        let mut prof = Vec::new();
-        let (mut wm, mut wq) = (0.0f64, 0.0f64);
-        for k in 0..rs.len() {
-            let c = two_tap_weights(n, one_table[k], one_table[k], 1.0);
-            let (m, q) = two_tap_err(&c, &e.lv, &e.y[k]);
-            prof.push(format!("{:.1}", 100.0 * m));
-            if rs[k] >= 0.1 - 1e-6 {
-                wm = wm.max(m);
-                wq = wq.max(q);
-            }
-        }
-        println!(
-            "one-tap per-r lod table {}{}: worst mean {:.2}% p99 {:.1}%\n   {}",
-            e.name,
-            if e.design { "*" } else { "" },
-            100.0 * wm,
-            100.0 * wq,
-            prof.join(" ")
-        );
-    }
-    println!(
-        "per r: refitted one-tap lod {}",
-        one_table
-            .iter()
-            .map(|a| format!("{a:.3}"))
-            .collect::<Vec<_>>()
-            .join(" ")
-    );
-    println!("per r = k/32: one-tap lod -> (a, b, w)");
-    for k in 0..rs.len() {
-        println!(
-            "  r {:.4} lod {:.3} -> a {:.2} b {:.2} w {:.2}",
-            rs[k], lods[k], table[k].0, table[k].1, table[k].2
-        );
-    }
-    // A shader-friendly family: a = lod − δa·g, b = lod + δb·g, weights (w, 1 − w),
-    // g = clamp(1 − lod/L, 0, 1) (the second tap fades out above lod L; L = 100: never).
-    let fam = |da: f32, db: f32, w: f32, ll: f32, lod: f32| {
-        let g = (1.0 - lod / ll).clamp(0.0, 1.0);
-        (lod - da * g, lod + db * g, w)
-    };
-    let mut combos = Vec::new();
-    for &ll in &[1.5f32, 2.0, 2.5, 3.0, 4.0, 6.0, 100.0] {
-        for ia in 0..=15 {
-            for ib in 0..=15 {
-                for iw in 0..=10 {
-                    combos.push((ia as f32 * 0.1, ib as f32 * 0.1, iw as f32 / 10.0, ll));
-                }
-            }
-        }
-    }
-    let score = |e: &Env, c: (f32, f32, f32, f32)| {
-        (0..rs.len())
-            .filter(|&k| rs[k] >= 0.1 - 1e-6)
-            .map(|k| {
-                let (a, b, w) = fam(c.0, c.1, c.2, c.3, lods[k]);
-                two_tap_err(&two_tap_weights(n, a, b, w), &e.lv, &e.y[k]).0
-            })
-            .fold(0.0, f64::max)
-    };
-    let best = combos
-        .par_iter()
-        .map(|&c| {
-            let s = data
-                .iter()
-                .filter(|e| e.design)
-                .map(|e| score(e, c))
-                .fold(0.0, f64::max);
-            (s, c)
-        })
-        .min_by(|x, y| x.0.total_cmp(&y.0))
-        .unwrap();
-    println!(
-        "family best on design: worst {:.2}% at da {} db {} w {} L {}",
-        100.0 * best.0,
-        best.1 .0,
-        best.1 .1,
-        best.1 .2,
-        best.1 .3
-    );
-    for e in &data {
-        let c = best.1;
-        let mut prof = Vec::new();
-        let (mut wm, mut wq) = (0.0f64, 0.0f64);
-        for k in 0..rs.len() {
-            let (a, b, w) = fam(c.0, c.1, c.2, c.3, lods[k]);
-            let (m, q) = two_tap_err(&two_tap_weights(n, a, b, w), &e.lv, &e.y[k]);
-            prof.push(format!("{:.1}", 100.0 * m));
-            if rs[k] >= 0.1 - 1e-6 {
-                wm = wm.max(m);
-                wq = wq.max(q);
-            }
-        }
-        println!(
-            "family {}{}: worst mean {:.2}% p99 {:.1}%\n   {}",
-            e.name,
-            if e.design { "*" } else { "" },
-            100.0 * wm,
-            100.0 * wq,
-            prof.join(" ")
-        );
-    }
-    for e in &data {
-        let mut prof = [Vec::new(), Vec::new()];
-        let (mut wm, mut wq) = ([0.0f64; 2], [0.0f64; 2]);
-        for k in 0..rs.len() {
-            let one = two_tap_weights(n, lods[k], lods[k], 1.0);
-            let (a, b, w) = table[k];
-            let two = two_tap_weights(n, a, b, w);
-            for (i, c) in [one, two].iter().enumerate() {
-                let (m, q) = two_tap_err(c, &e.lv, &e.y[k]);
-                prof[i].push(format!("{:.1}", 100.0 * m));
-                if rs[k] >= 0.1 - 1e-6 {
-                    wm[i] = wm[i].max(m);
-                    wq[i] = wq[i].max(q);
-                }
-            }
-        }
-        println!(
-            "{}{}: one-tap worst mean {:.2}% p99 {:.1}% | two-tap worst mean {:.2}% p99 {:.1}%\n   one: {}\n   two: {}",
-            e.name,
-            if e.design { "*" } else { "" },
-            100.0 * wm[0],
-            100.0 * wq[0],
-            100.0 * wm[1],
-            100.0 * wq[1],
-            prof[0].join(" "),
-            prof[1].join(" ")
-        );
-    }
 }

@@ -1,7 +1,7 @@
 //! The `prefilter` bake: `Params` (CLI flags and RON keys alike) and the pure `run` that turns
 //! a loaded environment into the encoded mip chain plus `prefilter.json`.
 
-use crate::custom::{self, CustomLookup};
+use crate::custom::{self, CustomChain, CustomLookup};
 use crate::error::{Error, Result};
 use crate::filter::filter_level;
 use crate::fit;
@@ -15,6 +15,7 @@ use ibl_core::cube::{mip_sizes, texel_direction, Cubemap, Face};
 use ibl_core::envmap::{Environment, Opened};
 use ibl_core::equirect::Filter;
 use ibl_core::io;
+use ibl_core::io::format::PixelFormat;
 use ibl_core::io::texture::LevelEncoding;
 use ibl_core::output::{self, Encoding};
 use ibl_core::progress::Progress;
@@ -301,6 +302,13 @@ pub(crate) const MAX_SOURCE_FACTOR: usize = 2;
 /// (bench/runtime.md).
 pub const GLTF_SMALLEST_FACE: usize = 4;
 
+/// Smallest face of a default `custom` chain: 8×8 (6 levels on 256²). With the midpoint
+/// correction the blend between levels is no longer what costs (docs/notes/custom-quad.md),
+/// and an 8×8 last level is read at r = 1 within 0.2–1.2% where the 4×4 one of a 7-level chain
+/// left 1.2–5.3% (fixtures, worst mean over r ≥ 0.1: 0.3–1.0% on five of six with 6 levels,
+/// 0.8–4.1% with 7).
+pub const CUSTOM_SMALLEST_FACE: usize = 8;
+
 /// Targets whose levels are fitted to the lookup unless --fit-lookup says otherwise: every one
 /// whose engine reads the chain through a fixed lod mapping. At the same bytes the fitted chain
 /// measured a lower worst error over r ∈ [0.25, 1] on every fixture and every target
@@ -382,7 +390,17 @@ impl Params {
                 self.target.name()
             )));
         }
-        self.encoding()?;
+        let enc = self.encoding()?;
+        if self.target == Target::Custom
+            && (!matches!(enc.format, PixelFormat::Rgba16f | PixelFormat::Rgba32f)
+                || enc.layout.codec().is_none())
+        {
+            return Err(Error::param(format!(
+                "--target custom stores its lookup's correction in the alpha channel: it needs --format rgba16f or rgba32f in a container (ktx2, ktx1, dds), not {} in {}",
+                enc.format.name(),
+                enc.layout.codec().map_or("face images", |c| c.name())
+            )));
+        }
         Ok(())
     }
 
@@ -404,7 +422,8 @@ impl Params {
     pub fn chain_levels(&self) -> usize {
         let m = max_levels(self.size);
         self.levels.unwrap_or_else(|| match self.target {
-            Target::Gltf | Target::Custom => mip_sizes(self.size, GLTF_SMALLEST_FACE).len(),
+            Target::Gltf => mip_sizes(self.size, GLTF_SMALLEST_FACE).len(),
+            Target::Custom => mip_sizes(self.size, CUSTOM_SMALLEST_FACE).len(),
             Target::Babylon => m,
             t => t.spec().levels.min(m),
         })
@@ -464,6 +483,14 @@ impl Params {
     pub fn fits_lookup(&self) -> bool {
         self.fit_lookup
             .unwrap_or(!self.reference && fit_by_default(self.target))
+    }
+
+    /// Whether inner levels are fitted to the engine's linear blend between levels
+    /// ([`crate::fit`]): with the lookup fit, for every target but custom, whose lookup makes
+    /// the blend exact at each interval's midpoint instead (its levels stay the kernel's, so
+    /// that the three points of its quadratic are exact; [`crate::custom`]).
+    pub(crate) fn fits_blend(&self) -> bool {
+        self.fits_lookup() && self.target != Target::Custom
     }
 
     /// Hammersley points per texel with --method fis.
@@ -615,6 +642,9 @@ pub struct EstimatedError {
 pub struct Chain {
     /// The levels, mirror first.
     pub mips: CubeMips,
+    /// `--target custom`: the chain's alpha channel, the lookup's midpoint correction
+    /// ([`crate::custom::correction`]), in each of the three channels; none for the others.
+    pub correction: Option<CubeMips>,
     /// What `prefilter.json` will record.
     pub report: Report,
     /// Seconds per level (0 for the mirror level).
@@ -717,7 +747,18 @@ pub fn run(
     if let Some(lk) = &chain.report.custom_lookup {
         metadata.extend(lk.metadata(&chain.report.level_roughness));
     }
-    let encoded = output::encode_chain(out_dir, &oriented, &enc, params.chain_name(), &metadata)?;
+    let encoded = match &chain.correction {
+        // Custom chains are in our frame (no orientation to apply to the alpha).
+        Some(alpha) => output::encode_chain_with_alpha(
+            out_dir,
+            &oriented,
+            alpha,
+            &enc,
+            params.chain_name(),
+            &metadata,
+        )?,
+        None => output::encode_chain(out_dir, &oriented, &enc, params.chain_name(), &metadata)?,
+    };
     chain.report.encoding = Some(output::encoding_report(&enc, &encoded.levels));
     chain.warnings.extend(encoded.warnings);
     // Babylon loads the `.env` alone: the chain's own files (EXR faces) would be strays.
@@ -983,7 +1024,7 @@ fn bake_resampled(params: &Params, resampled: Resampled, progress: &dyn Progress
         let k = footprint_factor(n, r);
         // With the lookup fit, the kernel at the fit's nodes too, in the same pass (the
         // tree shares its cuts and cell geometry between them).
-        let plan = (fits && l < n_baked.min(n_chain - 1))
+        let plan = (params.fits_blend() && l < n_baked.min(n_chain - 1))
             .then(|| fit::plan(params.lookup(), l, n_chain, size, fit::FIT_NODES));
         let mut rs = vec![r];
         rs.extend(
@@ -1080,6 +1121,41 @@ fn bake_resampled(params: &Params, resampled: Resampled, progress: &dyn Progress
             }
         }
     }
+    // The custom lookup's alpha channel: per interval, the kernel at its midpoint on the finer
+    // level's texels, as a correction of the linear blend of the levels as stored.
+    let tc = Instant::now();
+    let correction = params.custom_lookup().map(|lk| {
+        let mut alpha = Vec::with_capacity(levels.len());
+        for l in 0..levels.len() {
+            if l + 1 == levels.len() {
+                alpha.push(custom::zero_alpha(&levels[l]));
+                break;
+            }
+            let n = levels[l].size;
+            let (mid, w) = convolve_level_many(
+                &engine,
+                &source,
+                &texels,
+                n,
+                &[lk.mid_roughness(l)],
+                progress,
+            )
+            .remove(0);
+            if let Some(lw) = level_work.get_mut(l + 1) {
+                *lw += w;
+            }
+            alpha.push(custom::correction(
+                &levels[l],
+                &levels[l + 1],
+                &reduce_to(mid, n),
+            ));
+        }
+        CubeMips { levels: alpha }
+    });
+    fit_seconds += tc.elapsed().as_secs_f64();
+    if correction.is_some() {
+        cpu.stage("midpoints".into());
+    }
     let note = (n_baked < n_chain).then(|| {
         format!(
             "--max-roughness {}: levels 0..={} (roughness <= {}) carry the accuracy contract{}; levels {}..={} are the exact kernel at their roughness, unfitted, kept because {}'s lookup ({}) reads each level at its roughness only on the full chain of {} levels (and blends level {} with level {} up to the cut)",
@@ -1157,13 +1233,22 @@ fn bake_resampled(params: &Params, resampled: Resampled, progress: &dyn Progress
             &payload,
         )?)
     };
-    let mut runtime_report = runtime::evaluate_with(
-        decoded.as_ref().unwrap_or(&mips),
-        params.target,
-        params.lookup(),
-        runtime::REPORT_DIRECTIONS,
-        &reference,
-    );
+    let looked_up = decoded.as_ref().unwrap_or(&mips);
+    let mut runtime_report = match (&correction, params.custom_lookup()) {
+        (Some(alpha), Some(lk)) => runtime::evaluate_custom(
+            &CustomChain::new(looked_up, alpha),
+            &lk,
+            runtime::REPORT_DIRECTIONS,
+            &reference,
+        ),
+        _ => runtime::evaluate_with(
+            looked_up,
+            params.target,
+            params.lookup(),
+            runtime::REPORT_DIRECTIONS,
+            &reference,
+        ),
+    };
     runtime_report.format = enc.format.name();
     let runtime_seconds = tr.elapsed().as_secs_f64();
     cpu.stage("runtime".into());
@@ -1173,6 +1258,7 @@ fn bake_resampled(params: &Params, resampled: Resampled, progress: &dyn Progress
     };
     Ok(Chain {
         mips,
+        correction,
         report,
         level_seconds,
         level_work,
@@ -1228,7 +1314,8 @@ fn fit_to_lookup(
     // one as stored (fitted already), the coarser one exact (first sweep, assumed to
     // follow) then as stored. The last level's values stay the kernel's: at r = 1 the
     // lookup reads it alone.
-    for sweep in 0..fit::SWEEPS {
+    let sweeps = if params.fits_blend() { fit::SWEEPS } else { 0 };
+    for sweep in 0..sweeps {
         for l in 1..n_baked.min(n_chain - 1) {
             let n = stages[l].exact.size;
             if stages[l].fitting.is_none() {

@@ -174,6 +174,21 @@ pub fn abs_rel_stats(
     dirs: &[Vec3],
     reference: &Reference,
 ) -> Vec<AbsRel> {
+    abs_rel_stats_of(
+        &|d, r| lookup(chain, mapping, d, r),
+        roughness,
+        dirs,
+        reference,
+    )
+}
+
+/// [`abs_rel_stats`] of any read `read(d, r)` (the custom lookup's two taps).
+pub fn abs_rel_stats_of(
+    read: &(dyn Fn(Vec3, f32) -> Rgb + Sync),
+    roughness: &[f32],
+    dirs: &[Vec3],
+    reference: &Reference,
+) -> Vec<AbsRel> {
     use rayon::prelude::*;
     // The reference per direction at every roughness at once (one cut per group of roughness
     // values sharing a leaf level, not one per roughness: the report cost 9% of the bake),
@@ -193,7 +208,7 @@ pub fn abs_rel_stats(
                 .iter()
                 .zip(&refs)
                 .map(|(&d, y)| {
-                    let x = lookup(chain, mapping, d, r);
+                    let x = read(d, r);
                     (luminance(x) as f64, luminance(y[k]) as f64)
                 })
                 .collect();
@@ -254,9 +269,26 @@ pub fn evaluate_with(
     reference: &Reference,
 ) -> RuntimeReport {
     let chain = BorderedMips::new(mips);
+    report_of(
+        &|d, r| lookup(&chain, mapping, d, r),
+        target,
+        mapping,
+        directions,
+        reference,
+    )
+}
+
+/// The report of any read at the report's roughness values and `directions` directions.
+fn report_of(
+    read: &(dyn Fn(Vec3, f32) -> Rgb + Sync),
+    target: Target,
+    mapping: LodMapping,
+    directions: usize,
+    reference: &Reference,
+) -> RuntimeReport {
     let roughness = roughness_grid(ROUGHNESS_STEPS);
     let dirs = probe_directions(directions);
-    let stats = abs_rel_stats(&chain, mapping, &roughness, &dirs, reference);
+    let stats = abs_rel_stats_of(read, &roughness, &dirs, reference);
     RuntimeReport {
         target,
         lookup: mapping.name(),
@@ -267,6 +299,23 @@ pub fn evaluate_with(
         reference: reference.name(),
         format: "rgba32f",
     }
+}
+
+/// [`evaluate`] of the custom lookup: its two taps and midpoint correction
+/// ([`CustomLookup::read`]) on `chain` as baked.
+pub fn evaluate_custom(
+    chain: &crate::custom::CustomChain,
+    lk: &CustomLookup,
+    directions: usize,
+    reference: &Reference,
+) -> RuntimeReport {
+    report_of(
+        &|d, r| lk.read(chain, d, r),
+        Target::Custom,
+        LodMapping::Custom { alpha0: lk.alpha0 },
+        directions,
+        reference,
+    )
 }
 
 #[cfg(test)]

@@ -41,7 +41,9 @@ pub enum LodMapping {
     /// α = r², s = (N−1)/log2(1 + 1/α₀) so that r = 1 lands on the last level. Levels are
     /// geometric in α above α₀ (the lobe's width, hence the texels it needs, goes as α, and the
     /// level sizes halve) and linear in α below it, down to the mirror at lod 0. The shader
-    /// reads it with one trilinear tap; see [`custom_lod`].
+    /// reads levels ⌊lod⌋ and ⌊lod⌋ + 1 with two bilinear taps and corrects their linear blend
+    /// by the chain's alpha channel (the kernel at the interval's midpoint:
+    /// `ibl_prefilter::custom`); see [`custom_lod`].
     Custom {
         /// α₀, the knee between the linear and the geometric spacing.
         alpha0: f32,
@@ -65,9 +67,10 @@ pub fn custom_scale(alpha0: f32, levels: usize) -> f32 {
 pub(crate) const BABYLON_LOD_SCALE: f32 = 0.8;
 /// α₀ of the `custom` target's lookup, chosen on the design fixtures only (city_512,
 /// interior_256; `bench-ibl-prefilter -- --custom-design`): worst mean error over r ∈ [0.1, 1]
-/// on 256² × 7 fitted levels, city / interior, α₀ = 0.003: 1.9 / 3.4%, 0.006: 1.7 / 2.9%,
-/// 0.01: 1.5 / 2.5%, 0.015: 1.2 / 2.7%, 0.03: 3.8 / 4.9%, 0.1: 8.6 / 14.6% (6 levels, last
-/// 8²: 0.01 gave 1.9 / 3.4%). Overridden per bake by `prefilter --custom-alpha0`.
+/// of the two-tap lookup with its midpoint correction on 256² × 6 levels (last 8²), city /
+/// interior, α₀ = 0.005: 0.59 / 0.86%, 0.01: 0.46 / 0.61%, 0.02: 0.71 / 1.02%, 0.04: 1.01 /
+/// 1.25% (docs/notes/custom-quad.md; the one-tap lookup of 7 fitted levels before it chose
+/// 0.01 too: 1.5 / 2.5%). Overridden per bake by `prefilter --custom-alpha0`.
 pub const CUSTOM_ALPHA0: f32 = 0.01;
 /// UNITY_SPECCUBE_LOD_STEPS (ImageBasedLighting.hlsl: "the last mip index, we generate 7 mips").
 pub(crate) const UNITY_LOD_STEPS: f32 = 6.0;
@@ -81,7 +84,7 @@ impl LodMapping {
             LodMapping::Unity => "lod = 6 r(1.7-0.7r)",
             LodMapping::Babylon { .. } => "lod = 0.8 log2(size r^2)",
             LodMapping::Pmrem => "pmrem (filtered by the engine)",
-            LodMapping::Custom { .. } => "lod = s log2(1 + r^2/a0)",
+            LodMapping::Custom { .. } => "lod = s log2(1 + r^2/a0), 2 taps + midpoint",
         }
     }
 

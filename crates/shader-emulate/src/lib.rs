@@ -18,7 +18,7 @@ use ibl_core::bordered::BorderedMips;
 use ibl_core::cube::{face_texel_index, Face};
 use ibl_core::sampling::Pcg32;
 use ibl_core::{CubeMips, Cubemap, Rgb};
-use ibl_prefilter::custom::CustomLookup;
+use ibl_prefilter::custom::{CustomChain, CustomLookup};
 use ibl_shexp::dfg::Dfg;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -234,8 +234,8 @@ pub const ANISO_VIEW_POLAR: [f32; 3] = [0.25, 0.8, 1.25];
 /// table at (n·v, r_iso) — the evaluator's `iso` term (`ibl_aniso::methods`, `split`:
 /// E0 = L(A+B), E1 = L·B) in radiance form F0·E0 + (1−F0)·E1.
 pub struct IsoSplitSum<'a> {
-    /// The prefiltered chain, bordered.
-    pub chain: &'a BorderedMips,
+    /// The prefiltered chain and its alpha (the custom lookup's correction), bordered.
+    pub chain: &'a CustomChain,
     /// Its lookup (constants from its sidecar).
     pub lookup: &'a CustomLookup,
     /// The DFG table (A, B).
@@ -325,6 +325,17 @@ pub fn jitter(inputs: &Grid, eps: f32, seed: u64) -> Grid {
         }
     }
     g
+}
+
+/// The alpha channel of a custom chain's container (the lookup's midpoint correction),
+/// refused in a line when the file has none (faces, or a format without alpha).
+pub fn chain_alpha(path: &Path) -> Result<CubeMips> {
+    ibl_core::envmap::read_cube_chain_alpha(path)?.ok_or_else(|| {
+        invalid(
+            path,
+            "no alpha channel (the custom lookup's correction needs an rgba16f or rgba32f container)",
+        )
+    })
 }
 
 /// The custom lookup of a chain as its `prefilter.json` states it, rebuilt by
@@ -441,9 +452,9 @@ impl ReadClass {
 
 /// The custom lookup's CPU emulation ([`CustomLookup::read`]) at every input case; alpha
 /// flags the cases whose read touches a cube-corner texel ([`ReadClass::alpha`]).
-pub fn emulate_custom(inputs: &Grid, chain: &BorderedMips, lk: &CustomLookup) -> Grid {
+pub fn emulate_custom(inputs: &Grid, chain: &CustomChain, lk: &CustomLookup) -> Grid {
     let mut data = Vec::with_capacity(inputs.count * 4);
-    let sizes = chain.sizes();
+    let sizes = chain.rgb.sizes();
     for i in 0..inputs.count {
         let c = inputs.case(i);
         let d = Vec3::new(c[0], c[1], c[2]);
@@ -621,13 +632,22 @@ fn gl_bilinear(cube: &Cubemap, d: Vec3) -> Rgb {
 
 /// The custom lookup read through [`gl_corner_read`] (diagnosis), alpha as
 /// [`emulate_custom`]'s.
-pub fn emulate_custom_gl_corners(inputs: &Grid, chain: &CubeMips, lk: &CustomLookup) -> Grid {
+pub fn emulate_custom_gl_corners(
+    inputs: &Grid,
+    chain: &CubeMips,
+    alpha: &CubeMips,
+    lk: &CustomLookup,
+) -> Grid {
     let sizes: Vec<usize> = chain.levels.iter().map(|l| l.size).collect();
     let mut data = Vec::with_capacity(inputs.count * 4);
+    let last = chain.levels.len() - 1;
     for i in 0..inputs.count {
         let c = inputs.case(i);
         let d = Vec3::new(c[0], c[1], c[2]);
-        let rgb = gl_corner_read(chain, d, lk.lod(c[3]));
+        let rgb = lk.read_taps(c[3], |l| {
+            let [x, y, z] = gl_bilinear(&chain.levels[l.min(last)], d);
+            [x, y, z, gl_bilinear(&alpha.levels[l.min(last)], d)[0]]
+        });
         let class = ReadClass::of(d, read_touches_corner(&sizes, d, lk.lod(c[3])));
         data.extend([rgb[0], rgb[1], rgb[2], class.alpha()]);
     }
@@ -746,7 +766,8 @@ mod tests {
     /// `f(iso)` with the isotropic split sum over a constant environment (L = 1 everywhere).
     fn with_unit_iso<T>(f: impl FnOnce(&IsoSplitSum) -> T) -> T {
         let mips = CubeMips::build(Cubemap::constant(8, [1.0; 3]), 4);
-        let chain = BorderedMips::new(&mips);
+        let zero = CubeMips::build(Cubemap::constant(8, [0.0; 3]), 4);
+        let chain = CustomChain::new(&mips, &zero);
         let lookup = CustomLookup::new(0.01, mips.levels.len(), 8);
         f(&IsoSplitSum {
             chain: &chain,
@@ -878,7 +899,9 @@ mod tests {
     fn emulations_on_constant_environments() {
         let cube = ibl_core::Cubemap::constant(8, [2.0, 1.0, 0.5]);
         let mips = CubeMips::build(cube.clone(), 4);
-        let chain = BorderedMips::new(&mips);
+        // A zero correction: the constant comes back at every roughness.
+        let zero = CubeMips::build(Cubemap::constant(8, [0.0; 3]), 4);
+        let chain = CustomChain::new(&mips, &zero);
         let lk = CustomLookup::new(0.01, mips.levels.len(), 8);
         let out = emulate_custom(&custom_inputs(16, 5), &chain, &lk);
         assert!(out
@@ -887,7 +910,7 @@ mod tests {
             .all(|c| (c[0] - 2.0).abs() < 1e-5 && (c[2] - 0.5).abs() < 1e-5));
         // The GPU model agrees with the emulation (and on a constant cube reads the constant:
         // the GL rule, three equal corner samples give that value).
-        let gl = emulate_custom_gl_corners(&custom_inputs(16, 5), &mips, &lk);
+        let gl = emulate_custom_gl_corners(&custom_inputs(16, 5), &mips, &zero, &lk);
         assert!(gl
             .data
             .chunks(4)

@@ -120,7 +120,8 @@ fn run(cli: Cli) -> Result<bool> {
                     };
                     let mips = ibl_core::envmap::read_cube_chain(&chain)?;
                     let lookup = custom_lookup_from_sidecar(&sc, &mips)?;
-                    let chain = ibl_core::bordered::BorderedMips::new(&mips);
+                    let alpha = shader_emulate::chain_alpha(&chain)?;
+                    let chain = ibl_prefilter::custom::CustomChain::new(&mips, &alpha);
                     aniso_inputs(
                         normals,
                         &IsoSplitSum {
@@ -162,10 +163,12 @@ fn run(cli: Cli) -> Result<bool> {
                         });
                     };
                     let lk = custom_lookup_from_sidecar(&sc, &mips)?;
+                    let alpha = shader_emulate::chain_alpha(&chain)?;
                     if gl_corners {
-                        shader_emulate::emulate_custom_gl_corners(&inp, &mips, &lk)
+                        shader_emulate::emulate_custom_gl_corners(&inp, &mips, &alpha, &lk)
                     } else {
-                        emulate_custom(&inp, &ibl_core::bordered::BorderedMips::new(&mips), &lk)
+                        let chain = ibl_prefilter::custom::CustomChain::new(&mips, &alpha);
+                        emulate_custom(&inp, &chain, &lk)
                     }
                 }
                 Kind::Aniso => emulate_aniso(

@@ -31,6 +31,43 @@ fn sky(n: usize) -> Cubemap {
     })
 }
 
+/// A custom chain as `prefilter --target custom` writes it: `dir/prefilter.ktx2`, RGBA16F,
+/// with `alpha`'s channel 0 in the alpha channel. Returns its path.
+fn write_custom_chain(
+    dir: &Path,
+    mips: &ibl_core::CubeMips,
+    alpha: &ibl_core::CubeMips,
+) -> std::path::PathBuf {
+    std::fs::create_dir_all(dir).unwrap();
+    let enc = ibl_core::output::Encoding {
+        layout: ibl_core::output::Layout::Ktx2,
+        format: ibl_core::io::format::PixelFormat::Rgba16f,
+        ..Default::default()
+    };
+    let e = ibl_core::output::encode_chain_with_alpha(dir, mips, alpha, &enc, "prefilter", &[])
+        .unwrap();
+    for (p, b) in &e.files {
+        std::fs::write(p, b).unwrap();
+    }
+    dir.join("prefilter.ktx2")
+}
+
+/// A small correction (signed, smooth) for a chain of `mips`' shape.
+fn some_alpha(mips: &ibl_core::CubeMips) -> ibl_core::CubeMips {
+    ibl_core::CubeMips {
+        levels: mips
+            .levels
+            .iter()
+            .map(|c| {
+                Cubemap::from_fn(c.size, |d| {
+                    let v = 0.05 * d.normalize().x;
+                    [v, v, v]
+                })
+            })
+            .collect(),
+    }
+}
+
 fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
@@ -43,11 +80,8 @@ fn inputs_emulate_compare_and_the_gate() {
     write_faces(&d.join("env"), "", &sky(8));
     let (inp, cpu) = (d.join("in.json"), d.join("cpu.json"));
     // The isotropic split sum's chain (isoSpecular input) and its sidecar.
-    let chain = d.join("chain");
     let mips = ibl_core::CubeMips::build(sky(8), 2);
-    for (l, c) in mips.levels.iter().enumerate() {
-        write_faces(&chain, &format!("m{l}_"), c);
-    }
+    let chain = write_custom_chain(&d.join("chain"), &mips, &some_alpha(&mips));
     let lk = ibl_prefilter::custom::CustomLookup::new(0.01, mips.levels.len(), 8);
     let sidecar = d.join("prefilter.json");
     std::fs::write(
@@ -132,11 +166,8 @@ fn inputs_emulate_compare_and_the_gate() {
 fn custom_emulation_checks_its_sidecar() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let chain = d.join("chain");
     let mips = ibl_core::CubeMips::build(sky(8), 2);
-    for (l, c) in mips.levels.iter().enumerate() {
-        write_faces(&chain, &format!("m{l}_"), c);
-    }
+    let chain = write_custom_chain(&d.join("chain"), &mips, &some_alpha(&mips));
     let lk = ibl_prefilter::custom::CustomLookup::new(0.01, mips.levels.len(), 8);
     let sidecar = d.join("prefilter.json");
     std::fs::write(
@@ -185,6 +216,15 @@ fn custom_emulation_checks_its_sidecar() {
     std::fs::remove_file(&cpu).unwrap();
     assert_one_line_error(&run(&bad), 2, "wrong.json");
     assert!(!cpu.exists());
+    // A chain without an alpha channel (face images) cannot hold the correction: refused.
+    let faces = d.join("faces");
+    for (l, c) in mips.levels.iter().enumerate() {
+        write_faces(&faces, &format!("m{l}_"), c);
+    }
+    let mut a = args(&sidecar);
+    a[3] = s(&faces).into();
+    let out = BIN.run(&a.iter().map(String::as_str).collect::<Vec<_>>());
+    assert_one_line_error(&out, 2, "alpha");
     // No sidecar, a malformed input grid: one line naming the file, exit 2.
     let out = BIN.run(&["emulate", s(&inp), "--chain", s(&chain), "-o", s(&cpu)]);
     assert_one_line_error(&out, 2, "--sidecar");

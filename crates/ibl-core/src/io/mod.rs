@@ -55,6 +55,13 @@ pub(crate) fn f16_saturating(v: f32) -> half::f16 {
     half::f16::from_f32(v.clamp(-65504.0, 65504.0))
 }
 
+/// `v` as an RGBA16F texel stores it: rounded to the nearest half, saturating at ±65504
+/// ([`f16_saturating`]). What a bake must emulate when it reads back what it will write.
+#[inline]
+pub fn f16_round(v: f32) -> f32 {
+    f16_saturating(v).to_f32()
+}
+
 /// Encoding choices for [`encode_image`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct WriteOptions {

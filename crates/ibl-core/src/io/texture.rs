@@ -240,6 +240,97 @@ pub fn decode_cube(path: &Path, p: &Payload) -> Result<CubeMips> {
     Ok(CubeMips { levels })
 }
 
+/// Writes a fourth channel into an encoded RGBA chain: `alpha`'s channel 0 (a chain of the
+/// payload's shape) becomes each texel's A, in the payload's precision (f16 rounds to
+/// nearest, saturating; f32 as it is). The custom lookup stores its mid-interval correction
+/// there (`ibl_prefilter::custom`). Only `rgba16f` and `rgba32f` have an A channel to write:
+/// any other format, or a chain of another shape, is refused.
+pub fn set_alpha(path: &Path, p: &mut Payload, alpha: &CubeMips) -> Result<()> {
+    let bytes_per = match p.format {
+        PixelFormat::Rgba16f => 8,
+        PixelFormat::Rgba32f => 16,
+        f => {
+            return Err(Error::unsupported(
+                path,
+                format!(
+                "{} has no alpha channel to hold the lookup's correction: use rgba16f or rgba32f",
+                f.name()
+            ),
+            ))
+        }
+    };
+    if alpha.levels.len() != p.levels.len() || p.faces != 6 {
+        return Err(Error::invalid(
+            path,
+            "the alpha chain's shape is not the chain's",
+        ));
+    }
+    for (l, faces) in p.levels.iter_mut().enumerate() {
+        let (n, _) = p_level_dims(p.width, l);
+        let cube = &alpha.levels[l];
+        if cube.size != n {
+            return Err(Error::invalid(
+                path,
+                "the alpha chain's shape is not the chain's",
+            ));
+        }
+        for (bytes, img) in faces.iter_mut().zip(&cube.faces) {
+            for (px, t) in bytes
+                .chunks_exact_mut(bytes_per)
+                .zip(img.data.chunks_exact(img.channels))
+            {
+                let a = t[0];
+                if bytes_per == 8 {
+                    px[6..8].copy_from_slice(&super::f16_saturating(a).to_le_bytes());
+                } else {
+                    px[12..16].copy_from_slice(&a.to_le_bytes());
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+fn p_level_dims(width: usize, l: usize) -> (usize, usize) {
+    let n = (width >> l).max(1);
+    (n, n)
+}
+
+/// The A channel of an RGBA cube chain (`rgba16f`, `rgba32f`) as a chain whose three channels
+/// each hold it; `None` for formats without one.
+pub fn decode_alpha(path: &Path, p: &Payload) -> Result<Option<CubeMips>> {
+    p.check(path)?;
+    let (bytes_per, off) = match p.format {
+        PixelFormat::Rgba16f => (8, 6),
+        PixelFormat::Rgba32f => (16, 12),
+        _ => return Ok(None),
+    };
+    if p.faces != 6 || p.width != p.height {
+        return Err(Error::invalid(path, "not a cube map (need 6 square faces)"));
+    }
+    let mut levels = Vec::with_capacity(p.levels.len());
+    for (l, faces) in p.levels.iter().enumerate() {
+        let (n, _) = p.level_dims(l);
+        let imgs: Vec<Image> = faces
+            .iter()
+            .map(|b| {
+                let mut img = Image::new(n, n, 3);
+                for (t, px) in img.data.chunks_exact_mut(3).zip(b.chunks_exact(bytes_per)) {
+                    let a = if bytes_per == 8 {
+                        half::f16::from_le_bytes([px[off], px[off + 1]]).to_f32()
+                    } else {
+                        f32::from_le_bytes(px[off..off + 4].try_into().unwrap())
+                    };
+                    t.fill(a);
+                }
+                img
+            })
+            .collect();
+        levels.push(Cubemap::from_faces(imgs.try_into().expect("six faces"))?);
+    }
+    Ok(Some(CubeMips { levels }))
+}
+
 /// Mean and largest relative error of `decoded` against `float` (see [`ERROR_METRIC`]).
 pub fn relative_errors(float: &[Image], decoded: &[Image]) -> (f64, f64) {
     let m = |px: &[f32]| px[0].max(px[1]).max(px[2]).max(0.0) as f64;
