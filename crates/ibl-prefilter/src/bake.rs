@@ -1121,16 +1121,14 @@ fn bake_resampled(params: &Params, resampled: Resampled, progress: &dyn Progress
             }
         }
     }
-    // The custom lookup's alpha channel: per interval, the kernel at its midpoint on the finer
-    // level's texels, as a correction of the linear blend of the levels as stored.
+    // The custom lookup's alpha channel: per interval, the kernel's luminance at its midpoint
+    // on the finer level's texels, less that level's own.
     let tc = Instant::now();
     let correction = params.custom_lookup().map(|lk| {
-        let mut alpha = Vec::with_capacity(levels.len());
-        for l in 0..levels.len() {
-            if l + 1 == levels.len() {
-                alpha.push(custom::zero_alpha(&levels[l]));
-                break;
-            }
+        // Coarse to fine: each level's bounds read the level above's alpha.
+        let top = levels.len() - 1;
+        let mut alpha: Vec<Cubemap> = vec![custom::zero_alpha(&levels[top])];
+        for l in (0..top).rev() {
             let n = levels[l].size;
             let (mid, w) = convolve_level_many(
                 &engine,
@@ -1141,14 +1139,12 @@ fn bake_resampled(params: &Params, resampled: Resampled, progress: &dyn Progress
                 progress,
             )
             .remove(0);
-            if let Some(lw) = level_work.get_mut(l + 1) {
-                *lw += w;
-            }
-            alpha.push(custom::correction(
-                &levels[l],
-                &levels[l + 1],
-                &reduce_to(mid, n),
-            ));
+            level_work[l + 1] += w;
+            // The first and the last interval are read by the quadratic (CustomLookup::reads_quadratic).
+            let above = (l > 0 && l + 1 < top).then(|| &alpha[0]);
+            let mid = reduce_to(mid, n);
+            let m = custom::correction(&levels[l], &mid, &levels[l + 1], above, l == 0);
+            alpha.insert(0, m);
         }
         CubeMips { levels: alpha }
     });
