@@ -642,7 +642,7 @@ pub struct EstimatedError {
 pub struct Chain {
     /// The levels, mirror first.
     pub mips: CubeMips,
-    /// `--target custom`: the chain's alpha channel, the lookup's midpoint correction
+    /// `--target custom`: the chain's alpha channel, the lookup's midpoints
     /// ([`crate::custom::correction`]), in each of the three channels; none for the others.
     pub correction: Option<CubeMips>,
     /// What `prefilter.json` will record.

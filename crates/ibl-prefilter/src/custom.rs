@@ -122,8 +122,9 @@ impl CustomLookup {
     }
 
     /// The CPU emulation of the emitted shader, operation for operation in f32: two seamless
-    /// bilinear taps (levels l and l + 1), their linear blend c, and the quadratic correction
-    /// c·max(1 + 4t(1−t)·A/Y(c), 0) with A from level l's alpha.
+    /// bilinear taps (levels l and l + 1, RGBA), the midpoint from level l's alpha, Lagrange's
+    /// polynomial in t through the levels and the midpoints ([`Self::read_taps`]), and the linear
+    /// blend c scaled to its luminance, c·max(lum/Y(c), 0).
     pub fn read(&self, chain: &CustomChain, d: Vec3, r: f32) -> Rgb {
         self.read_taps(r, |l| {
             let [x, y, z] = chain.rgb.bilinear(d, l);

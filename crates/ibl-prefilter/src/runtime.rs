@@ -301,7 +301,7 @@ fn report_of(
     }
 }
 
-/// [`evaluate`] of the custom lookup: its two taps and midpoint correction
+/// [`evaluate`] of the custom lookup: its two taps and the polynomial through the midpoints
 /// ([`CustomLookup::read`]) on `chain` as baked.
 pub fn evaluate_custom(
     chain: &crate::custom::CustomChain,

@@ -52,9 +52,9 @@ pub enum Target {
     /// Unity: DDS cube with Unity's mip mapping, SphericalHarmonicsL2.
     Unity,
     /// Our own lookup for renderers written by the user: KTX2 RGBA16F chain whose level
-    /// spacing and lookup (lod = s·log2(1 + r²/α₀), two taps and a midpoint correction kept in
-    /// the chain's alpha channel) are designed together, the lookup emitted as GLSL / HLSL /
-    /// WGSL beside it (docs/CUSTOM_LOOKUP.md).
+    /// spacing and lookup (lod = s·log2(1 + r²/α₀), two taps and a polynomial through
+    /// midpoints kept in the chain's alpha channel) are designed together, the lookup emitted
+    /// as GLSL / HLSL / WGSL beside it (docs/CUSTOM_LOOKUP.md).
     Custom,
 }
 

@@ -327,7 +327,7 @@ pub fn jitter(inputs: &Grid, eps: f32, seed: u64) -> Grid {
     g
 }
 
-/// The alpha channel of a custom chain's container (the lookup's midpoint correction),
+/// The alpha channel of a custom chain's container (the lookup's midpoints),
 /// refused in a line when the file has none (faces, or a format without alpha).
 pub fn chain_alpha(path: &Path) -> Result<CubeMips> {
     ibl_core::envmap::read_cube_chain_alpha(path)?.ok_or_else(|| {
