@@ -302,11 +302,11 @@ pub(crate) const MAX_SOURCE_FACTOR: usize = 2;
 /// (bench/runtime.md).
 pub const GLTF_SMALLEST_FACE: usize = 4;
 
-/// Smallest face of a default `custom` chain: 8×8 (6 levels on 256²). With the midpoint
-/// correction the blend between levels is no longer what costs (docs/notes/custom-quad.md),
-/// and an 8×8 last level is read at r = 1 within 0.2–1.2% where the 4×4 one of a 7-level chain
-/// left 1.2–5.3% (fixtures, worst mean over r ≥ 0.1: 0.3–1.0% on five of six with 6 levels,
-/// 0.8–4.1% with 7).
+/// Smallest face of a default `custom` chain: 8×8 (6 levels on 256²). With the midpoints the
+/// blend between levels is no longer what costs (docs/notes/custom-quad.md), and an 8×8 last
+/// level is read at r = 1 within 0.3–0.4% where the 4×4 one of a 7-level chain left 1.2–1.6%
+/// (design fixtures city / interior, worst mean over r ≥ 0.1: 0.50 / 0.55% with 6 levels,
+/// 1.21 / 1.61% with 7, 0.67 / 1.30% with 5; `bench-ibl-prefilter -- --custom-design`).
 pub const CUSTOM_SMALLEST_FACE: usize = 8;
 
 /// Targets whose levels are fitted to the lookup unless --fit-lookup says otherwise: every one
@@ -486,9 +486,9 @@ impl Params {
     }
 
     /// Whether inner levels are fitted to the engine's linear blend between levels
-    /// ([`crate::fit`]): with the lookup fit, for every target but custom, whose lookup makes
-    /// the blend exact at each interval's midpoint instead (its levels stay the kernel's, so
-    /// that the three points of its quadratic are exact; [`crate::custom`]).
+    /// ([`crate::fit`]): with the lookup fit, for every target but custom, whose lookup reads
+    /// a polynomial through the levels and the intervals' midpoints instead (its levels stay the
+    /// kernel's, so that the polynomial's nodes are exact; [`crate::custom`]).
     pub(crate) fn fits_blend(&self) -> bool {
         self.fits_lookup() && self.target != Target::Custom
     }
@@ -1139,7 +1139,7 @@ fn bake_resampled(params: &Params, resampled: Resampled, progress: &dyn Progress
                 progress,
             )
             .remove(0);
-            level_work[l + 1] += w;
+            level_work[l] += w;
             // The first and the last interval are read by the quadratic (CustomLookup::reads_quadratic).
             let above = (l > 0 && l + 1 < top).then(|| &alpha[0]);
             let mid = reduce_to(mid, n);

@@ -34,7 +34,7 @@ use ibl_target::lod::{custom_lod, custom_scale};
 use serde::Serialize;
 
 /// The lookup formula as the sidecar and the KTX2 metadata state it.
-pub const FORMULA: &str = "lod = clamp(scale * log2(1 + r*r*inv_alpha0), 0, max_lod); l = max(min(floor(lod), max_lod - 1), 0); t = lod - l; a = textureLod(chain, R, l); b = textureLod(chain, R, l + 1); ya = dot(a.rgb, luma); yb = dot(b.rgb, luma); Y = Lagrange through (0, ya), (1/2, ya + a.a), (1, yb), and (3/2, yb + b.a) unless l + 1 = max_lod, at t; c = a.rgb + (b.rgb - a.rgb) * t; y = dot(c, luma); radiance = y > 0 ? c * max(Y / y, 0) : c";
+pub const FORMULA: &str = "lod = clamp(scale * log2(1 + r*r*inv_alpha0), 0, max_lod); l = max(min(floor(lod), max_lod - 1), 0); t = lod - l; a = textureLod(chain, R, l); b = textureLod(chain, R, l + 1); ya = dot(a.rgb, luma); yb = dot(b.rgb, luma); ma = (l == 0 ? (ya + yb) / 2 : ya) + a.a; lum = Lagrange polynomial at t through (0, ya), (1/2, ma), (1, yb) and, unless l == 0 or l + 1 == max_lod, (3/2, yb + b.a); c = a.rgb + (b.rgb - a.rgb) * t; y = dot(c, luma); radiance = y > 0 ? c * max(lum / y, 0) : c";
 
 /// Names of the emitted shader files, written beside the chain.
 pub const SHADER_FILES: [&str; 3] = ["lookup.glsl", "lookup.hlsl", "lookup.wgsl"];
@@ -66,7 +66,7 @@ pub struct CustomLookup {
 }
 
 /// A custom chain as its shader samples it: the RGB levels and their alpha channel (the
-/// mid-interval correction, [`correction`]), each bordered for seamless reads.
+/// midpoints, [`correction`]), each bordered for seamless reads.
 pub struct CustomChain {
     /// The levels' RGB.
     pub rgb: BorderedMips,
@@ -454,7 +454,7 @@ pub fn correction(
     a
 }
 
-/// The alpha chain of a chain whose last level has no interval above it (zero there).
+/// The last level's alpha: zero (no interval above it to hold a midpoint of).
 pub fn zero_alpha(level: &Cubemap) -> Cubemap {
     Cubemap::new(level.size)
 }

@@ -234,7 +234,7 @@ pub const ANISO_VIEW_POLAR: [f32; 3] = [0.25, 0.8, 1.25];
 /// table at (n·v, r_iso) — the evaluator's `iso` term (`ibl_aniso::methods`, `split`:
 /// E0 = L(A+B), E1 = L·B) in radiance form F0·E0 + (1−F0)·E1.
 pub struct IsoSplitSum<'a> {
-    /// The prefiltered chain and its alpha (the custom lookup's correction), bordered.
+    /// The prefiltered chain and its alpha (the custom lookup's midpoints), bordered.
     pub chain: &'a CustomChain,
     /// Its lookup (constants from its sidecar).
     pub lookup: &'a CustomLookup,
@@ -630,7 +630,8 @@ fn gl_bilinear(cube: &Cubemap, d: Vec3) -> Rgb {
     })
 }
 
-/// The custom lookup read through [`gl_corner_read`] (diagnosis), alpha as
+/// The custom lookup with each tap read by the GPU model's bilinear (`gl_bilinear`, what
+/// [`gl_corner_read`] reads per level; diagnosis), alpha as
 /// [`emulate_custom`]'s.
 pub fn emulate_custom_gl_corners(
     inputs: &Grid,

@@ -265,9 +265,8 @@ pub fn set_alpha(path: &Path, p: &mut Payload, alpha: &CubeMips) -> Result<()> {
             "the alpha chain's shape is not the chain's",
         ));
     }
-    for (l, faces) in p.levels.iter_mut().enumerate() {
-        let (n, _) = p_level_dims(p.width, l);
-        let cube = &alpha.levels[l];
+    let sizes: Vec<usize> = (0..p.levels.len()).map(|l| p.level_dims(l).0).collect();
+    for ((faces, n), cube) in p.levels.iter_mut().zip(sizes).zip(&alpha.levels) {
         if cube.size != n {
             return Err(Error::invalid(
                 path,
@@ -289,11 +288,6 @@ pub fn set_alpha(path: &Path, p: &mut Payload, alpha: &CubeMips) -> Result<()> {
         }
     }
     Ok(())
-}
-
-fn p_level_dims(width: usize, l: usize) -> (usize, usize) {
-    let n = (width >> l).max(1);
-    (n, n)
 }
 
 /// The A channel of an RGBA cube chain (`rgba16f`, `rgba32f`) as a chain whose three channels
@@ -447,4 +441,74 @@ pub fn decode_image(bytes: &[u8], format: PixelFormat, width: usize, height: usi
         PixelFormat::Bc6h => super::bc6h::decode(bytes, &mut img),
     }
     img
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn chain(value: impl Fn(usize, usize, usize) -> f32) -> CubeMips {
+        let mut mips = CubeMips::build(Cubemap::constant(8, [0.5, 0.25, 0.125]), 4);
+        for (l, c) in mips.levels.iter_mut().enumerate() {
+            for (f, face) in c.faces.iter_mut().enumerate() {
+                for (p, t) in face.data.chunks_exact_mut(3).enumerate() {
+                    t.fill(value(l, f, p));
+                }
+            }
+        }
+        mips
+    }
+
+    /// The alpha written into an rgba16f / rgba32f payload comes back as written (signed, to the
+    /// format's precision), the RGB is untouched, and formats without alpha or a chain of
+    /// another shape are refused.
+    #[test]
+    fn alpha_round_trips_and_is_refused_where_it_cannot_be_held() {
+        let path = Path::new("chain.ktx2");
+        let rgb = CubeMips::build(Cubemap::constant(8, [0.5, 0.25, 0.125]), 4);
+        let alpha = chain(|l, f, p| (l as f32 - 0.5) * 0.1 + f as f32 * 1e-3 - p as f32 * 1e-4);
+        for format in [PixelFormat::Rgba16f, PixelFormat::Rgba32f] {
+            let (mut payload, _) = encode_chain(&rgb, format, Bc6hQuality::default());
+            assert!(decode_alpha(path, &payload).unwrap().is_some());
+            set_alpha(path, &mut payload, &alpha).unwrap();
+            let back = decode_alpha(path, &payload).unwrap().unwrap();
+            let tol = if format == PixelFormat::Rgba16f {
+                1e-3
+            } else {
+                0.0
+            };
+            for (a, b) in alpha.levels.iter().zip(&back.levels) {
+                for (x, y) in a.faces.iter().zip(&b.faces) {
+                    for (u, v) in x.data.iter().zip(&y.data) {
+                        assert!(
+                            (u - v).abs() <= tol * u.abs().max(1e-2),
+                            "{format:?}: {u} {v}"
+                        );
+                    }
+                }
+            }
+            assert!(back.levels[0].faces[0].data[0] < 0.0, "signed");
+            let rgb_back = decode_cube(path, &payload).unwrap();
+            assert_eq!(
+                rgb_back.levels[1].texel(crate::cube::Face::ALL[3], 1, 0),
+                [0.5, 0.25, 0.125]
+            );
+            // A chain of another shape.
+            let short = CubeMips {
+                levels: alpha.levels[..1].to_vec(),
+            };
+            let e = set_alpha(path, &mut payload, &short)
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("chain.ktx2") && e.contains("shape"), "{e}");
+        }
+        for format in [PixelFormat::Rgb9e5, PixelFormat::Bc6h] {
+            let (mut payload, _) = encode_chain(&rgb, format, Bc6hQuality::default());
+            assert!(decode_alpha(path, &payload).unwrap().is_none());
+            let e = set_alpha(path, &mut payload, &alpha)
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("no alpha channel") && !e.contains('\n'), "{e}");
+        }
+    }
 }
