@@ -857,9 +857,11 @@ fn custom_design(root: &Path) {
                     .iter()
                     .map(|e| format!("{:.1}", 100.0 * e))
                     .collect();
+                let (fine, fine_r, _) = fine_worst(&p, env, &chain);
                 println!(
-                    "custom N {n} a0 {a0} {name}: worst mean {:.2}% worst p99 {:.1}% r=1 {:.2}% levels r {:?} ({:.1} s)\n   {}",
+                    "custom N {n} a0 {a0} {name}: worst mean {:.2}% (r = 0.10, 0.11, …: {:.2}% at r {fine_r}) worst p99 {:.1}% r=1 {:.2}% levels r {:?} ({:.1} s)\n   {}",
                     100.0 * worst(&rt.mean_abs_rel),
+                    100.0 * fine,
                     100.0 * worst(&rt.p99_abs_rel),
                     100.0 * rt.mean_abs_rel.last().unwrap(),
                     chain.report.level_roughness.iter().map(|r| (r * 1000.0).round() / 1000.0).collect::<Vec<_>>(),
@@ -869,6 +871,57 @@ fn custom_design(root: &Path) {
             }
         }
     }
+}
+
+/// Every roughness r = 0.10, 0.11, …, 1.00: the goal's "every r ≥ 0.1" more finely than the
+/// report's 33 values k/32 (which skip r ∈ (0.094, 0.125), where the first interval was).
+fn fine_roughness() -> Vec<f32> {
+    (10..=100).map(|k| k as f32 / 100.0).collect()
+}
+
+/// Directions of [`fine_worst`].
+const FINE_DIRECTIONS: usize = 256;
+
+/// The custom chain's read ([`CustomLookup::read`](ibl_prefilter::custom::CustomLookup::read))
+/// against the exact kernel (the cell tree at the runtime report's knobs, on the source cube
+/// the bake filtered) at every [`fine_roughness`] and [`FINE_DIRECTIONS`] directions: (worst
+/// mean, its r, worst p99).
+fn fine_worst(
+    p: &Params,
+    env: &Environment,
+    chain: &ibl_prefilter::bake::Chain,
+) -> (f64, f32, f64) {
+    use ibl_prefilter::custom::CustomChain;
+    use ibl_prefilter::runtime::{abs_rel_stats_of, probe_directions, Reference};
+    let source = env.to_cube(
+        chain.report.source_size,
+        Filter::Area,
+        p.rotate,
+        &NoProgress,
+    );
+    let tree = ibl_prefilter::tree::CellTree::new(&source);
+    let reference = Reference::Tree {
+        tree: &tree,
+        source: &source,
+        params: ibl_prefilter::bake::RUNTIME_REFERENCE,
+    };
+    let lk = chain.report.custom_lookup.clone().expect("a custom chain");
+    let cc = CustomChain::new(&chain.mips, chain.correction.as_ref().unwrap());
+    let rs = fine_roughness();
+    let st = abs_rel_stats_of(
+        &|d, r| lk.read(&cc, d, r),
+        &rs,
+        &probe_directions(FINE_DIRECTIONS),
+        &reference,
+    );
+    let (mut worst, mut at, mut p99) = (0.0f64, 0.0f32, 0.0f64);
+    for (s, &r) in st.iter().zip(&rs) {
+        if s.mean > worst {
+            (worst, at) = (s.mean, r);
+        }
+        p99 = p99.max(s.p99);
+    }
+    (worst, at, p99)
 }
 
 /// Where [`custom_section`] starts in bench/runtime.md (everything after it is replaced).
@@ -922,7 +975,7 @@ fn custom_envs(root: &Path, quick: bool) -> Vec<(String, bool, Environment)> {
 /// A 10⁵ one-texel sun over a dim sky: the largest relative change of the lookup's power
 /// (∫ lookup dω by the midpoint rule on a 512² grid a face: twice the 256² level 0's
 /// resolution, so the read's kinks fall on cell edges; a 128² grid undersampled level 0) from
-/// the source's, over the 33 roughness values (each printed to stderr).
+/// the source's, over the 65 roughness values k/64 (each printed to stderr).
 fn sun_power_error(p: &Params) -> f64 {
     use ibl_core::bordered::BorderedMips;
     use ibl_core::cube::{texel_solid_angle, Cubemap, Face};
@@ -947,7 +1000,7 @@ fn sun_power_error(p: &Params) -> f64 {
     let m = p.lookup();
     let (levels, size) = (chain.mips.levels.len(), p.size);
     // The custom lookup reads its two taps and the alpha channel; the others one trilinear tap.
-    let custom = p.custom_lookup().map(|lk| {
+    let custom = chain.report.custom_lookup.clone().map(|lk| {
         let alpha = chain
             .correction
             .as_ref()
@@ -961,16 +1014,16 @@ fn sun_power_error(p: &Params) -> f64 {
         Some((lk, cc)) => lk.read(cc, d, r),
         None => b.sample(d, m.lod(r, levels, size)),
     };
-    let per_r = (0..=32)
+    let per_r = (0..=64)
         .into_par_iter()
         .map(|k| {
-            let r = k as f32 / 32.0;
+            let r = k as f32 / 64.0;
             let got = power(512, &|f, i, j| read(texel_direction(f, i, j, 512), r));
             (got - want) / want
         })
         .collect::<Vec<f64>>();
     eprintln!(
-        "sun power {} (% per r = k/32): {}",
+        "sun power {} (% per r = k/64): {}",
         p.target.name(),
         per_r
             .iter()
@@ -997,7 +1050,7 @@ fn custom_section(root: &Path, quick: bool) {
          Per fixture: the worst over r ∈ [0.1, 1] of the mean absolute relative error of luminance, and of its 99th percentile \
          over the directions (p99, the worst direction a mean hides). `custom`'s α₀ and level count were chosen on the design fixtures \
          ({}) only (`-- --custom-design` prints the sweep); the others are held out (hdri-damaged: negative texels set to 0). \
-         `sun power`: a one-texel 10⁵ sun on a dim sky, the largest change of the lookup's power (∫ lookup dω) from the source's over the 33 roughness values.\n",
+         `sun power`: a one-texel 10⁵ sun on a dim sky, the largest change of the lookup's power (∫ lookup dω) from the source's over the 65 roughness values k/64.\n",
         if quick { " --quick" } else { "" },
         ibl_prefilter::runtime::REPORT_DIRECTIONS,
         CUSTOM_DESIGN.join(", ")
@@ -1020,6 +1073,7 @@ fn custom_section(root: &Path, quick: bool) {
     )
     .unwrap();
     writeln!(md, "|---|---|---:|---:|---|---|---|---:|").unwrap();
+    let mut fine = Vec::new();
     for target in [
         Target::Gltf,
         Target::Filament,
@@ -1068,6 +1122,12 @@ fn custom_section(root: &Path, quick: bool) {
                 held = held.max(m);
             }
         }
+        if target == Target::Custom {
+            for (name, _, env) in &envs {
+                let chain = bake_chain(&p, env, &NoProgress).unwrap();
+                fine.push((name.clone(), fine_worst(&p, env, &chain)));
+            }
+        }
         let sun = sun_power_error(&p);
         let bytes: usize = (0..levels)
             .map(|l| 6 * 8 * (p.size >> l).max(1).pow(2))
@@ -1082,6 +1142,20 @@ fn custom_section(root: &Path, quick: bool) {
             100.0 * design,
             100.0 * held,
             100.0 * sun
+        )
+        .unwrap();
+    }
+    writeln!(
+        md,
+        "\n`custom` at every r = 0.10, 0.11, …, 1.00 ({FINE_DIRECTIONS} directions, the same reference; the table's 33 values k/32 skip r ∈ (0.094, 0.125)):\n\n| fixture | worst mean % | at r | worst p99 % |\n|---|---:|---:|---:|"
+    )
+    .unwrap();
+    for (name, (m, r, q)) in &fine {
+        writeln!(
+            md,
+            "| {name} | {:.2} | {r:.2} | {:.1} |",
+            100.0 * m,
+            100.0 * q
         )
         .unwrap();
     }

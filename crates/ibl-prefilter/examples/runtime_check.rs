@@ -61,7 +61,8 @@ fn run(source: &Path, chain: &Path, dirs: usize) -> Result<(), Box<dyn std::erro
         let a0 = field("custom_lookup")?["alpha0"]
             .as_f64()
             .ok_or("custom_lookup.alpha0")? as f32;
-        let lk = CustomLookup::new(a0, mips.levels.len(), mips.levels[0].size);
+        let mut lk = CustomLookup::new(a0, mips.levels.len(), mips.levels[0].size);
+        lk.power = serde_json::from_value(field("custom_lookup")?["power"].clone())?;
         evaluate_custom(&CustomChain::new(&mips, &alpha), &lk, dirs, &reference)
     } else {
         let mips = read_cube_chain(chain)?;

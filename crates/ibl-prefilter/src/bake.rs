@@ -437,7 +437,17 @@ impl Params {
         }
     }
 
-    /// With --target custom, the lookup's constants for this chain.
+    /// Largest level fitted to its bilinear read ([`crate::spatial`]), with --fit-lookup.
+    pub fn read_fit_max_size(&self) -> usize {
+        if self.target == Target::Custom {
+            spatial::CUSTOM_SPATIAL_MAX_SIZE
+        } else {
+            spatial::SPATIAL_MAX_SIZE
+        }
+    }
+
+    /// With --target custom, the lookup's constants for this chain (the power factors zero:
+    /// the bake fits them, `Chain::report.custom_lookup`).
     pub fn custom_lookup(&self) -> Option<CustomLookup> {
         match self.lookup() {
             LodMapping::Custom { alpha0 } => {
@@ -613,7 +623,7 @@ pub struct LevelReport {
     /// With --fit-lookup: the level stores the lookup's best fit, not the exact kernel at its
     /// roughness (see [`crate::fit`]), and this is how far it moved.
     pub fit: Option<fit::LevelFit>,
-    /// With --fit-lookup, on levels of at most [`spatial::SPATIAL_MAX_SIZE`]² texels a face:
+    /// With --fit-lookup, on levels of at most [`Params::read_fit_max_size`]² texels a face:
     /// the level is corrected so the engine's bilinear read between its texels matches the
     /// exact kernel (see [`crate::spatial`]), and the read's error before and after.
     pub read_fit: Option<spatial::ReadFit>,
@@ -1111,8 +1121,9 @@ fn bake_resampled(params: &Params, resampled: Resampled, progress: &dyn Progress
     // of a stock target stays the exact kernel's texels by definition, and so does its mirror
     // level ("the source box-reduced to --size", tests/stability.rs; only a chain of ≤ 32² has
     // a mirror this small).
+    let source_power = spatial::texel_power(&source);
     if params.target == Target::Custom || !params.reference {
-        let power = spatial::texel_power(&source);
+        let power = source_power;
         let skip = usize::from(params.target != Target::Custom);
         for level in levels.iter_mut().skip(skip) {
             if level.size <= spatial::READ_POWER_MAX_SIZE {
@@ -1122,10 +1133,10 @@ fn bake_resampled(params: &Params, resampled: Resampled, progress: &dyn Progress
         }
     }
     // The custom lookup's alpha channel: per interval, the kernel's luminance at its midpoint
-    // on the finer level's texels, less that level's own.
+    // on the finer level's texels, less that level's own (less the blend on the mirror).
     let tc = Instant::now();
-    let correction = params.custom_lookup().map(|lk| {
-        // Coarse to fine: each level's bounds read the level above's alpha.
+    let mut custom_lookup = params.custom_lookup();
+    let correction = custom_lookup.as_mut().map(|lk| {
         let top = levels.len() - 1;
         let mut alpha: Vec<Cubemap> = vec![custom::zero_alpha(&levels[top])];
         for l in (0..top).rev() {
@@ -1140,13 +1151,27 @@ fn bake_resampled(params: &Params, resampled: Resampled, progress: &dyn Progress
             )
             .remove(0);
             level_work[l] += w;
-            // The first and the last interval are read by the quadratic (CustomLookup::reads_quadratic).
-            let above = (l > 0 && l + 1 < top).then(|| &alpha[0]);
-            let mid = reduce_to(mid, n);
-            let m = custom::correction(&levels[l], &mid, &levels[l + 1], above, l == 0);
+            let mut mid = reduce_to(mid, n);
+            // As the levels: a small level's read keeps the source's power (the midpoint is a
+            // node of the read, and the log read has no balance to absorb a bias).
+            if l > 0 && n <= spatial::READ_POWER_MAX_SIZE {
+                spatial::keep_read_power(&mut mid, source_power, &spatial::read_weights(n));
+            }
+            let m = if l == 0 {
+                custom::correction(&levels[0], &mid, &levels[1])
+            } else {
+                custom::midpoint_alpha(&levels[l], &mid)
+            };
             alpha.insert(0, m);
         }
-        CubeMips { levels: alpha }
+        let alpha = CubeMips { levels: alpha };
+        lk.fit_power(&CustomChain::new(
+            &CubeMips {
+                levels: levels.clone(),
+            },
+            &alpha,
+        ));
+        alpha
     });
     fit_seconds += tc.elapsed().as_secs_f64();
     if correction.is_some() {
@@ -1198,7 +1223,7 @@ fn bake_resampled(params: &Params, resampled: Resampled, progress: &dyn Progress
         level: reports,
         encoding: None,
         runtime: None,
-        custom_lookup: params.custom_lookup(),
+        custom_lookup: custom_lookup.clone(),
     };
     let mips = CubeMips { levels };
     // The error the target's lookup sees, against the exact kernel (the cell tree at
@@ -1230,10 +1255,10 @@ fn bake_resampled(params: &Params, resampled: Resampled, progress: &dyn Progress
         )?)
     };
     let looked_up = decoded.as_ref().unwrap_or(&mips);
-    let mut runtime_report = match (&correction, params.custom_lookup()) {
+    let mut runtime_report = match (&correction, &custom_lookup) {
         (Some(alpha), Some(lk)) => runtime::evaluate_custom(
             &CustomChain::new(looked_up, alpha),
-            &lk,
+            lk,
             runtime::REPORT_DIRECTIONS,
             &reference,
         ),
@@ -1292,7 +1317,7 @@ fn fit_to_lookup(
     // read is linear in the texels).
     for (l, st) in stages.iter_mut().enumerate().skip(1) {
         let n = st.exact.size;
-        if n > spatial::SPATIAL_MAX_SIZE {
+        if n > params.read_fit_max_size() {
             continue;
         }
         let r = params.level_roughness(l);

@@ -31,6 +31,10 @@ use serde::Serialize;
 /// Levels whose faces have at most this many texels an edge are fitted to the bilinear read
 /// (a 16² level's read is already within 0.1–0.4% at r = 1: bench/runtime.md, 5 levels).
 pub const SPATIAL_MAX_SIZE: usize = 8;
+/// [`SPATIAL_MAX_SIZE`] of the `custom` target: its 16² level holds r ≈ 0.59, whose lobes
+/// still have detail a bilinear read of 16² texels blurs (studio 1.05 → 0.81%, city 0.64 →
+/// 0.52% worst mean over r ≥ 0.1; docs/notes/custom-log.md), for 0.6 s of a dense fit.
+pub const CUSTOM_SPATIAL_MAX_SIZE: usize = 16;
 
 /// Fit samples per texel edge: the exact kernel is evaluated on a grid this much finer.
 pub const SAMPLES_PER_EDGE: usize = 4;

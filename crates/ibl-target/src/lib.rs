@@ -338,7 +338,7 @@ impl Target {
                     sh: None,
                     cube: "cube",
                 },
-                note: "Custom lookup: prefilter.ktx2 is a KTX2 RGBA16F cube chain, our frame (as gltf), whose ALPHA channel is part of the data (upload RGBA16F as stored, never convert it to RGB or compress it). Read it with the function in lookup.glsl / lookup.hlsl / lookup.wgsl (written beside it): lod = clamp(s * log2(1 + r*r/a0), 0, N-1), then TWO textureLod taps, levels l = min(floor(lod), N-2) and l + 1, blended by t = lod - l and corrected by their alpha (the kernel at the intervals' midpoints; the sampler's filter must be linear). The constants s, a0, N are also in prefilter.json (\"custom_lookup\") and in the KTX2 key/value data (ibl.lookup.*); see docs/CUSTOM_LOOKUP.md. irradiance.ktx2 (irradiance --target custom) is the Lambertian cube (E/pi).",
+                note: "Custom lookup: prefilter.ktx2 is a KTX2 RGBA16F cube chain, our frame (as gltf), whose ALPHA channel is part of the data (upload RGBA16F as stored, never convert it to RGB or compress it). Read it with the function in lookup.glsl / lookup.hlsl / lookup.wgsl (written beside it): lod = clamp(s * log2(1 + r*r/a0), 0, N-1), then TWO textureLod taps, levels l = min(floor(lod), N-2) and l + 1, blended by t = lod - l and corrected by their alpha (the kernel at the intervals' midpoints; the sampler's filter must be linear). The constants s, a0, N and this chain's power factors (IBL_LOOKUP_POWER: per probe, a uniform if one function serves several probes) are also in prefilter.json (\"custom_lookup\") and in the KTX2 key/value data (ibl.lookup.*); see docs/CUSTOM_LOOKUP.md. irradiance.ktx2 (irradiance --target custom) is the Lambertian cube (E/pi).",
             },
         }
     }

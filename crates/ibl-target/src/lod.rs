@@ -65,13 +65,15 @@ pub fn custom_scale(alpha0: f32, levels: usize) -> f32 {
 
 /// Babylon's `lodGenerationScale` (hdrFiltering.ts, `_lodGenerationScale = 0.8`).
 pub(crate) const BABYLON_LOD_SCALE: f32 = 0.8;
-/// α₀ of the `custom` target's lookup, chosen on the design fixtures only (city_512,
-/// interior_256; `bench-ibl-prefilter -- --custom-design`): worst mean error over r ∈ [0.1, 1]
-/// of the two-tap lookup with its midpoint correction on 256² × 6 levels (last 8²), city /
-/// interior, α₀ = 0.005: 0.59 / 0.86%, 0.01: 0.46 / 0.61%, 0.02: 0.71 / 1.02%, 0.04: 1.01 /
-/// 1.25% (docs/notes/custom-quad.md; the one-tap lookup of 7 fitted levels before it chose
-/// 0.01 too: 1.5 / 2.5%). Overridden per bake by `prefilter --custom-alpha0`.
-pub const CUSTOM_ALPHA0: f32 = 0.01;
+/// α₀ of the `custom` target's lookup: level 1 of the default 6-level chain at r = 0.0998, so
+/// that every r ≥ 0.1 is read above the mirror's interval (which is read linearly, in
+/// luminance: 2.2% on studio at r = 0.1 with α₀ = 0.01). Chosen on the design fixtures only
+/// (city_512, interior_256), by the worst mean error over r ∈ [0.10, 1] in steps of 0.01, 256
+/// directions (docs/notes/custom-log.md): α₀ = 0.004: 0.65 / 0.77%, 0.0054: 0.52 / 0.64%,
+/// 0.007: 0.46 / 0.64%, 0.01: 0.52 / 0.88%. (The linear-cubic lookup before it chose 0.01 on
+/// the 33 roughness values k/32, which skip r ∈ (0.094, 0.125).) Overridden per bake by
+/// `prefilter --custom-alpha0`.
+pub const CUSTOM_ALPHA0: f32 = 0.0054;
 /// UNITY_SPECCUBE_LOD_STEPS (ImageBasedLighting.hlsl: "the last mip index, we generate 7 mips").
 pub(crate) const UNITY_LOD_STEPS: f32 = 6.0;
 

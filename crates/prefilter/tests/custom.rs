@@ -110,11 +110,41 @@ fn custom_target_writes_the_lookup_and_reads_within_its_bound() {
             .collect()
     };
     assert_eq!(luma.len(), 3);
+    // The log's floor and the chain's power factors, from the GLSL text too.
+    let floor = constant(&glsl, "IBL_LOOKUP_FLOOR");
+    let power: Vec<[f64; 2]> = {
+        let line = glsl
+            .lines()
+            .find(|l| l.contains("IBL_LOOKUP_POWER[") && l.contains('='))
+            .unwrap();
+        // `= vec2[n](vec2(c0, c1), …);`: every parenthesised pair.
+        line.split('=')
+            .nth(1)
+            .unwrap()
+            .split('(')
+            .filter_map(|piece| {
+                let v: Vec<f64> = piece
+                    .split(')')
+                    .next()?
+                    .split(',')
+                    .map(|x| x.trim().parse().ok())
+                    .collect::<Option<_>>()?;
+                (v.len() == 2).then(|| [v[0], v[1]])
+            })
+            .collect()
+    };
+    assert_eq!(power.len() as f64, max_lod);
+    assert_eq!(
+        power[0], [0.0; 2],
+        "the first interval's read keeps the power by itself"
+    );
 
     // The emulation: lod from the parsed constants; levels l = min(⌊lod⌋, N − 2) and l + 1
     // read bilinearly (luminance y_a, y_b, alpha m_a, m_b from the KTX2's alpha channel), and
-    // Lagrange's polynomial in t through (0, y_a), (½, y_a + m_a), (1, y_b) and, but on the first
-    // and the last interval, (3/2, y_b + m_b): the luminance the shader returns (its colour is the linear
+    // Lagrange's polynomial in t: on the first interval of the luminance through (0, y_a),
+    // (½, (y_a + y_b)/2 + m_a), (1, y_b); above it of g(y) = log2(y + e) through (0, y_a),
+    // (½, y_a + m_a), (1, y_b) and, but on the last interval, (3/2, y_b + m_b), exponentiated and
+    // scaled by the power factor: the luminance the shader returns (its colour is the linear
     // blend's, scaled to it). Written out here from the definition in docs/CUSTOM_LOOKUP.md.
     let alpha = ibl_core::envmap::read_cube_chain_alpha(&out.join("prefilter.ktx2"))
         .unwrap()
@@ -137,10 +167,17 @@ fn custom_target_writes_the_lookup_and_reads_within_its_bound() {
         // The midpoint: level l's alpha over the level, over the two levels' blend above the
         // mirror (l = 0).
         let mid = if l == 0 { 0.5 * (ya + yb) } else { ya } + m(l);
+        let e = floor * (ya.max(0.0) + yb.max(0.0)) + 1e-30;
+        let g = |y: f64| if l == 0 { y } else { (y.max(0.0) + e).log2() };
         let nodes: Vec<(f64, f64)> = if quadratic {
-            vec![(0.0, ya), (0.5, mid), (1.0, yb)]
+            vec![(0.0, g(ya)), (0.5, g(mid)), (1.0, g(yb))]
         } else {
-            vec![(0.0, ya), (0.5, mid), (1.0, yb), (1.5, yb + m(l + 1))]
+            vec![
+                (0.0, g(ya)),
+                (0.5, g(mid)),
+                (1.0, g(yb)),
+                (1.5, g(yb + m(l + 1))),
+            ]
         };
         let lagrange: f64 = nodes
             .iter()
@@ -155,6 +192,13 @@ fn custom_target_writes_the_lookup_and_reads_within_its_bound() {
                 w * yi
             })
             .sum();
+        let lagrange = if l == 0 {
+            lagrange
+        } else {
+            let [c0, c1] = power[l];
+            (lagrange.exp2() - e).max(0.0)
+                * (1.0 + t * (t - 0.5) * (t - 1.0) * (c0 + c1 * (t - 0.5)))
+        };
         let yc = (1.0 - t) * ya + t * yb;
         if yc > 0.0 {
             yc * (lagrange / yc).max(0.0)

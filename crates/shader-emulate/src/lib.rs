@@ -353,11 +353,28 @@ pub fn custom_lookup_from_sidecar(path: &Path, chain: &CubeMips) -> Result<Custo
             .and_then(|x| x.as_f64())
             .ok_or_else(|| invalid(path, format!("custom_lookup.{k} missing")))
     };
-    let lk = CustomLookup::new(
+    let mut lk = CustomLookup::new(
         num("alpha0")? as f32,
         chain.levels.len(),
         chain.levels[0].size,
     );
+    // The chain's power factors (fitted to its environment; the shader text carries them).
+    let power: Option<Vec<[f32; 2]>> = c
+        .get("power")
+        .and_then(|p| serde_json::from_value::<Vec<[f32; 2]>>(p.clone()).ok())
+        .filter(|p| p.iter().flatten().all(|x| x.is_finite()));
+    match power {
+        Some(p) if p.len() == lk.power.len() => lk.power = p,
+        _ => {
+            return Err(invalid(
+                path,
+                format!(
+                    "custom_lookup.power is missing or not {} finite pairs",
+                    lk.power.len()
+                ),
+            ))
+        }
+    }
     let stated = [num("scale")?, num("inv_alpha0")?, num("max_lod")?].map(|x| x as f32);
     if stated != [lk.scale, lk.inv_alpha0, lk.max_lod]
         || num("levels")? as usize != lk.levels

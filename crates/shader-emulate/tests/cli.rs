@@ -205,7 +205,7 @@ fn custom_emulation_checks_its_sidecar() {
     assert!(run(&sidecar).status.success());
     assert_eq!(Grid::read(&cpu).unwrap().count, (8 + 26) * 3);
     // A sidecar whose constants are not this chain's lookup is refused before any output.
-    let mut wrong = lk;
+    let mut wrong = lk.clone();
     wrong.scale *= 1.01;
     let bad = d.join("wrong.json");
     std::fs::write(
@@ -216,6 +216,23 @@ fn custom_emulation_checks_its_sidecar() {
     std::fs::remove_file(&cpu).unwrap();
     assert_one_line_error(&run(&bad), 2, "wrong.json");
     assert!(!cpu.exists());
+    // The power factors are the chain's: a sidecar without them, or with one pair too few, is
+    // refused too (the read would silently lose them).
+    for (name, power) in [
+        ("nopower.json", serde_json::Value::Null),
+        ("shortpower.json", serde_json::json!([[0.0, 0.0]])),
+        (
+            "nanpower.json",
+            serde_json::json!([[0.0, 0.0], ["NaN", 0.0]]),
+        ),
+    ] {
+        let mut v = serde_json::json!({ "custom_lookup": lk });
+        v["custom_lookup"]["power"] = power;
+        let bad = d.join(name);
+        std::fs::write(&bad, v.to_string()).unwrap();
+        assert_one_line_error(&run(&bad), 2, "power");
+        assert!(!cpu.exists(), "{name}");
+    }
     // A chain without an alpha channel (face images) cannot hold the correction: refused.
     let faces = d.join("faces");
     for (l, c) in mips.levels.iter().enumerate() {
