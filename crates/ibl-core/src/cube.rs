@@ -314,7 +314,7 @@ impl Cubemap {
     /// filtering seamless across edges; past two edges at once (the cube-corner texel) the
     /// mean of the three texels meeting at that corner, as GPUs do ([`ghost_indices`]).
     #[inline]
-    pub(crate) fn texel_wrapped(&self, face: Face, i: isize, j: isize) -> Rgb {
+    pub fn texel_wrapped(&self, face: Face, i: isize, j: isize) -> Rgb {
         let (texels, count) = ghost_indices(self.size, face, i, j);
         if count == 1 {
             let (f, i, j) = texels[0];

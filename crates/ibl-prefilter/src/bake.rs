@@ -1114,6 +1114,18 @@ fn bake_resampled(params: &Params, resampled: Resampled, progress: &dyn Progress
     }
     let mut levels: Vec<Cubemap> = stages.into_iter().map(Stage::into_stored).collect();
     release_freed_memory();
+    // The custom lookup reads its levels through its own bilinear taps: the levels too large
+    // for the read fit store v − k·δ²v, whose bilinear read follows the kernel between the
+    // centres (spatial::sharpen_for_bilinear; half the read's error). The stock targets' levels
+    // are fitted to their engine's blend instead, which a sharpening would undo.
+    if params.target == Target::Custom {
+        for (l, level) in levels.iter_mut().enumerate().skip(1) {
+            if level.size > params.read_fit_max_size() {
+                let f = footprint_factor(level.size, params.level_roughness(l));
+                spatial::sharpen_for_bilinear(level, spatial::sharpen_weight(f));
+            }
+        }
+    }
     // A sun's power at every roughness is the power of the read, which on a small level
     // differs from the texels' (crate::spatial::keep_read_power; 0.28% on the 4² last level
     // before). Each small level's read is given the source's power, for every engine target
@@ -1152,6 +1164,9 @@ fn bake_resampled(params: &Params, resampled: Resampled, progress: &dyn Progress
             .remove(0);
             level_work[l] += w;
             let mut mid = reduce_to(mid, n);
+            // The midpoint is a node of the read as the levels are: sharpened alike.
+            let f = footprint_factor(n, lk.mid_roughness(l));
+            spatial::sharpen_for_bilinear(&mut mid, spatial::sharpen_weight(f));
             // As the levels: a small level's read keeps the source's power (the midpoint is a
             // node of the read, and the log read has no balance to absorb a bias).
             if l > 0 && n <= spatial::READ_POWER_MAX_SIZE {
