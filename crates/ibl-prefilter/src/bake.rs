@@ -1179,15 +1179,17 @@ fn bake_resampled(params: &Params, resampled: Resampled, progress: &dyn Progress
             };
             alpha.insert(0, m);
         }
-        let alpha = CubeMips { levels: alpha };
-        lk.fit_power(&CustomChain::new(
-            &CubeMips {
-                levels: levels.clone(),
-            },
-            &alpha,
-        ));
-        alpha
+        CubeMips { levels: alpha }
     });
+    // The power factors, fitted on the chain as written (the levels lent to a CubeMips, not
+    // copied).
+    if let (Some(lk), Some(alpha)) = (custom_lookup.as_mut(), &correction) {
+        let mips = CubeMips {
+            levels: std::mem::take(&mut levels),
+        };
+        lk.fit_power(&CustomChain::new(&mips, alpha));
+        levels = mips.levels;
+    }
     fit_seconds += tc.elapsed().as_secs_f64();
     if correction.is_some() {
         cpu.stage("midpoints".into());
