@@ -102,8 +102,9 @@ pub enum Method {
         lod_bias: f32,
     },
     /// M3c: the shipped method (`crate::ship::shade`): the isotropic split sum at r_iso
-    /// mixed into `fis-N` by the fitted weight w(|η|) (w = 0 at η = 0: exactly the floor).
-    /// N pyramid taps + 1 chain tap (none of the N at η = 0).
+    /// mixed into `fis-N` by the fitted weight w(|η|, r_iso) (`crate::ship::fis_weight`; w = 0
+    /// at η = 0 below its roughness ramp: exactly the floor). N pyramid taps + 1 chain tap
+    /// (none of the N where w = 0).
     FisBlend {
         /// FIS taps.
         taps: usize,

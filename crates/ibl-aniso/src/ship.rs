@@ -15,10 +15,15 @@
 //! Why the blend (goal G2, "never worse than the isotropic floor at η = 0"): at η = 0 the
 //! anisotropic lobe *is* the isotropic one, and the prefiltered chain integrates it over the
 //! whole lobe where 16 FIS taps only estimate it (2.81× the floor's MSE under a small sun at
-//! r = 0.2). So the method reads the isotropic split sum at η = 0 (w = 0: exactly the floor,
+//! r = 0.2). So the method reads the isotropic split sum at η = 0 below r₀ (w = 0: exactly the floor,
 //! and no FIS tap is taken) and mixes in FIS as |η| grows: specular = iso + (fis − iso)·w,
-//! w = clamp(|η|/η₁, 0, 1)^p, (η₁, p) fitted on training environments and scored on held-out
-//! ones (`examples/fit_blend.rs`, bench/aniso-blend.md).
+//! w = max(clamp(|η|/η₁, 0, 1)^p, clamp((r_iso − r₀)/Δr, 0, 1)), (η₁, p, r₀, Δr) fitted on
+//! training environments and scored on held-out ones (`examples/fit_blend.rs`,
+//! bench/aniso-blend.md). The roughness ramp is there because the floor's own error changes
+//! with r: below r₀ a small source makes 16 taps noisier than the chain (the 2.8× above), but
+//! on rough lobes the split sum's read along the mirror direction (no off-specular shift, the
+//! lobe's shape at grazing views ignored) costs more than FIS's noise, even at η = 0: FIS has
+//! 0.02–0.6× the floor's MSE there on every training environment and view (r ≥ 0.6).
 //!
 //! FIS: Křivánek & Colbert 2008 (GPU Gems 3 ch. 20) filtered importance sampling with
 //! Heitz 2018's visible-normal sampling of anisotropic GGX: N Hammersley points (shifted by a
@@ -59,11 +64,17 @@ pub struct Shipped {
     /// Smallest α along either axis: α = 0 (r = 0) would make D(m) infinite.
     pub alpha_min: f32,
     /// |η| from which the method is pure FIS: below it the isotropic split sum is mixed in
-    /// with weight 1 − w, w = clamp(|η|/blend_eta, 0, 1)^blend_power ([`fis_weight`]).
-    /// Fitted on training environments by `examples/fit_blend.rs` (bench/aniso-blend.md).
+    /// with weight 1 − w, w = max(clamp(|η|/blend_eta, 0, 1)^blend_power, the roughness
+    /// ramp) ([`fis_weight`]). Fitted on training environments by `examples/fit_blend.rs`
+    /// (bench/aniso-blend.md).
     pub blend_eta: f32,
-    /// Exponent of the blend weight.
+    /// Exponent of the η term of the blend weight.
     pub blend_power: f32,
+    /// r_iso = √((α_t+α_b)/2) where the roughness ramp clamp((r_iso − r₀)/Δr, 0, 1) of the
+    /// blend weight starts: below it an isotropic lobe reads only the split sum.
+    pub blend_r0: f32,
+    /// The ramp's width Δr (FIS alone from r₀ + Δr, whatever η).
+    pub blend_r_width: f32,
 }
 
 /// The shipped method: `fisb-16` of `bench/aniso.md` (FIS at 16 taps and lod bias 0, blended
@@ -76,14 +87,19 @@ pub const SHIPPED: Shipped = Shipped {
     lod_bias: 0.0,
     schlick_power: 5.0,
     alpha_min: 1e-3,
-    // bench/aniso-blend.md: the training optimum over η₁ ∈ {0.1 … 2} × p ∈ {0.15 … 2} (an
-    // η₁(r) = a + b·r family was tried and lost the leave-one-environment-out comparison),
-    // refitted against FIS at the lod bias above. With that bias FIS beats the isotropic split
-    // sum for nearly every η ≠ 0, so the rule is almost a switch: w = 0.90 at |η| = 0.1, 1 from
-    // |η| = 0.2 (the score is flat within 0.5% towards p → 0). At η = 0 it stays exactly the
-    // floor, which FIS alone can exceed 2.8× (interior_256, r = 0.2: docs/notes/fis-bias.md).
-    blend_eta: 0.2,
+    // bench/aniso-blend.md: the training optimum over η₁ ∈ {0.1 … 2} × p ∈ {0.15 … 2} × the
+    // roughness ramps (r₀ ∈ {0.2 … 1}, Δr ∈ {0.1 … 0.4}, or none) among the rules that keep
+    // goal G2 on training (every gated η = 0 case at most 1.05× the floor's MSE); an
+    // η₁(r) = a + b·r family was tried and lost the leave-one-environment-out comparison.
+    // FIS at the lod bias above beats the isotropic split sum for nearly every η ≠ 0, so the
+    // η term is almost a switch: w = 0.85 at |η| = 0.1, 0.94 at 0.2, 1 from 0.3.
+    blend_eta: 0.3,
     blend_power: 0.15,
+    // The ramp: FIS from r = 0.45 whatever η; at η = 0 the split sum alone up to r = 0.25,
+    // where FIS alone exceeds the floor 2.8× (interior_256, r = 0.2: docs/notes/fis-bias.md)
+    // and a ramp starting at 0.2 breaks G2 on training (1.24× at r = 0.4).
+    blend_r0: 0.25,
+    blend_r_width: 0.2,
 };
 
 /// The steps, in the order every snippet defines them (GLSL/HLSL name, WGSL name): the
@@ -157,28 +173,33 @@ pub fn hammersley(i: u32, rotation: Vec2) -> Vec2 {
 }
 
 /// The blend weight of FIS against the isotropic split sum for the lobe (α_t, α_b):
-/// w = clamp(|η|/η₁, 0, 1)^p with the Kulla–Conty η = (α_t − α_b)/(α_t + α_b) (0 for α_t =
-/// α_b = 0) and (η₁, p) = [`SHIPPED`]`.blend_eta`, `.blend_power`.
+/// w = max(clamp(|η|/η₁, 0, 1)^p, clamp((r_iso − r₀)/Δr, 0, 1)) with the Kulla–Conty
+/// η = (α_t − α_b)/(α_t + α_b), r_iso = √((α_t+α_b)/2) (w = 0 for α_t = α_b = 0) and
+/// (η₁, p, r₀, Δr) = [`SHIPPED`]`.blend_eta`, `.blend_power`, `.blend_r0`, `.blend_r_width`.
 pub fn fis_weight(at: f32, ab: f32) -> f32 {
     let s = at + ab;
     if s.is_nan() || s <= 0.0 {
         return 0.0;
     }
+    // The roughness ramp: exactly 0 below r₀ (a clamp of a negative), so an isotropic lobe
+    // there reads the split sum alone.
+    let ramp = (((0.5 * s).sqrt() - SHIPPED.blend_r0) / SHIPPED.blend_r_width).clamp(0.0, 1.0);
     let eta = ((at - ab) / s).abs();
     // Exactly 0 at η = 0 without pow: a GPU's pow(0, p) is exp2(p·log2 0), which SwiftShader
     // returns as about 2e-7 at p = 0.15 (the browser check's η = 0 cases then missed the floor
     // by 6e-6 relative); the snippets test η the same way.
     if eta.is_nan() || eta <= 0.0 {
-        return 0.0;
+        return ramp;
     }
-    (eta / SHIPPED.blend_eta)
+    let w = (eta / SHIPPED.blend_eta)
         .clamp(0.0, 1.0)
-        .powf(SHIPPED.blend_power)
+        .powf(SHIPPED.blend_power);
+    w.max(ramp)
 }
 
 /// The shipped method at one pixel (`fisb-16`): iso + (fis − iso)·w per E0 and E1, w =
 /// [`fis_weight`], fis = [`shade_fis`], `iso` the engine's isotropic split sum at r_iso as
-/// (E0, E1). At w = 0 (η = 0) it returns `iso` untouched and takes no FIS tap.
+/// (E0, E1). At w = 0 (η = 0 and r_iso ≤ r₀) it returns `iso` untouched and takes no FIS tap.
 pub fn shade(
     pyr: &BorderedMips,
     frame: &Frame,
@@ -289,7 +310,7 @@ pub(crate) fn shade_n(
 
 /// The snippets' `anisoFisSpecular` step for step, at the level of the returned radiance:
 /// `iso_specular` (the engine's isotropic split sum F0·E0 + (1−F0)·E1 at r_iso, the snippets'
-/// `isoSpecular`) untouched when w = [`fis_weight`] is 0 (η = 0: bit for bit, no tap), else
+/// `isoSpecular`) untouched when w = [`fis_weight`] is 0 (η = 0, r_iso ≤ r₀: bit for bit, no tap), else
 /// iso + (fis − iso)·w with fis = [`specular`] of [`shade_fis`] (zeros below the horizon, as
 /// the snippet's `isoSpecular − isoSpecular·w`). Equal to [`specular`] of [`shade`] up to
 /// rounding (the blend is linear); this is the form the browser check compares with.
@@ -392,7 +413,9 @@ pub fn emit(lang: Lang) -> String {
             .replace("{PI}", &pi)
             .replace("{INV24}", &inv)
             .replace("{BETA}", &lit(c.blend_eta))
-            .replace("{BPOW}", &lit(c.blend_power)),
+            .replace("{BPOW}", &lit(c.blend_power))
+            .replace("{BR0}", &lit(c.blend_r0))
+            .replace("{BRW}", &lit(c.blend_r_width)),
     );
     s
 }
@@ -419,6 +442,8 @@ const float ANISO_FIS_PI = {PI};
 const float ANISO_FIS_INV_2_24 = {INV24};
 const float ANISO_FIS_BLEND_ETA = {BETA};
 const float ANISO_FIS_BLEND_POWER = {BPOW};
+const float ANISO_FIS_BLEND_R0 = {BR0};
+const float ANISO_FIS_BLEND_R_WIDTH = {BRW};
 
 float anisoFisLambda(vec3 w, float ax, float ay) {
     float a = (ax * ax * w.x * w.x + ay * ay * w.y * w.y) / (w.z * w.z);
@@ -471,9 +496,10 @@ vec2 anisoFisHammersley(uint i, vec2 rotation) {
 float anisoFisWeight(float alphaT, float alphaB) {
     float s = alphaT + alphaB;
     if (!(s > 0.0)) { return 0.0; }
+    float ramp = clamp((sqrt(0.5 * s) - ANISO_FIS_BLEND_R0) / ANISO_FIS_BLEND_R_WIDTH, 0.0, 1.0);
     float eta = abs((alphaT - alphaB) / s);
-    if (!(eta > 0.0)) { return 0.0; }
-    return pow(clamp(eta / ANISO_FIS_BLEND_ETA, 0.0, 1.0), ANISO_FIS_BLEND_POWER);
+    if (!(eta > 0.0)) { return ramp; }
+    return max(pow(clamp(eta / ANISO_FIS_BLEND_ETA, 0.0, 1.0), ANISO_FIS_BLEND_POWER), ramp);
 }
 
 vec3 anisoFisSpecular(samplerCube env, float log2TexelSolidAngle, float maxLod, vec3 n, vec3 t, vec3 b,
@@ -519,6 +545,8 @@ static const float ANISO_FIS_PI = {PI};
 static const float ANISO_FIS_INV_2_24 = {INV24};
 static const float ANISO_FIS_BLEND_ETA = {BETA};
 static const float ANISO_FIS_BLEND_POWER = {BPOW};
+static const float ANISO_FIS_BLEND_R0 = {BR0};
+static const float ANISO_FIS_BLEND_R_WIDTH = {BRW};
 
 float anisoFisLambda(float3 w, float ax, float ay) {
     float a = (ax * ax * w.x * w.x + ay * ay * w.y * w.y) / (w.z * w.z);
@@ -559,9 +587,10 @@ float2 anisoFisHammersley(uint i, float2 rotation) {
 float anisoFisWeight(float alphaT, float alphaB) {
     float s = alphaT + alphaB;
     if (!(s > 0.0)) { return 0.0; }
+    float ramp = saturate((sqrt(0.5 * s) - ANISO_FIS_BLEND_R0) / ANISO_FIS_BLEND_R_WIDTH);
     float eta = abs((alphaT - alphaB) / s);
-    if (!(eta > 0.0)) { return 0.0; }
-    return pow(saturate(eta / ANISO_FIS_BLEND_ETA), ANISO_FIS_BLEND_POWER);
+    if (!(eta > 0.0)) { return ramp; }
+    return max(pow(saturate(eta / ANISO_FIS_BLEND_ETA), ANISO_FIS_BLEND_POWER), ramp);
 }
 
 float3 anisoFisSpecular(TextureCube env, SamplerState samp, float log2TexelSolidAngle, float maxLod,
@@ -608,6 +637,8 @@ const ANISO_FIS_PI: f32 = {PI};
 const ANISO_FIS_INV_2_24: f32 = {INV24};
 const ANISO_FIS_BLEND_ETA: f32 = {BETA};
 const ANISO_FIS_BLEND_POWER: f32 = {BPOW};
+const ANISO_FIS_BLEND_R0: f32 = {BR0};
+const ANISO_FIS_BLEND_R_WIDTH: f32 = {BRW};
 
 fn aniso_fis_lambda(w: vec3<f32>, ax: f32, ay: f32) -> f32 {
     let a = (ax * ax * w.x * w.x + ay * ay * w.y * w.y) / (w.z * w.z);
@@ -648,9 +679,10 @@ fn aniso_fis_hammersley(i: u32, rotation: vec2<f32>) -> vec2<f32> {
 fn aniso_fis_weight(alpha_t: f32, alpha_b: f32) -> f32 {
     let s = alpha_t + alpha_b;
     if (!(s > 0.0)) { return 0.0; }
+    let ramp = clamp((sqrt(0.5 * s) - ANISO_FIS_BLEND_R0) / ANISO_FIS_BLEND_R_WIDTH, 0.0, 1.0);
     let eta = abs((alpha_t - alpha_b) / s);
-    if (!(eta > 0.0)) { return 0.0; }
-    return pow(clamp(eta / ANISO_FIS_BLEND_ETA, 0.0, 1.0), ANISO_FIS_BLEND_POWER);
+    if (!(eta > 0.0)) { return ramp; }
+    return max(pow(clamp(eta / ANISO_FIS_BLEND_ETA, 0.0, 1.0), ANISO_FIS_BLEND_POWER), ramp);
 }
 
 fn aniso_fis_specular(env: texture_cube<f32>, samp: sampler, log2_texel_solid_angle: f32, max_lod: f32,
@@ -727,6 +759,8 @@ mod tests {
                 ("ANISO_FIS_INV_2_24", INV_2_24),
                 ("ANISO_FIS_BLEND_ETA", SHIPPED.blend_eta),
                 ("ANISO_FIS_BLEND_POWER", SHIPPED.blend_power),
+                ("ANISO_FIS_BLEND_R0", SHIPPED.blend_r0),
+                ("ANISO_FIS_BLEND_R_WIDTH", SHIPPED.blend_r_width),
             ] {
                 let got: f32 = constant(&text, name).parse().unwrap();
                 assert_eq!(got.to_bits(), want.to_bits(), "{lang:?} {name}");
@@ -844,8 +878,8 @@ mod tests {
                 let got = evaluate(&blend, &inp, &frame, v, &mat, seed, &mut buf);
                 assert_eq!(got, shade(&pyr, &frame, v, at, ab, rot, iso));
                 let w = fis_weight(at, ab);
-                if eta == 0.0 {
-                    // Exactly the isotropic floor, bit for bit (goal G2 by construction).
+                if eta == 0.0 && r <= SHIPPED.blend_r0 {
+                    // Exactly the isotropic floor, bit for bit.
                     assert_eq!(w, 0.0);
                     assert_eq!(got, iso);
                 } else if w >= 1.0 {
@@ -871,7 +905,14 @@ mod tests {
             n,
         };
         let mut rng = Pcg32::new(5, 23);
-        for (r, eta) in [(0.3, 0.0), (0.02, 0.0), (1.0, 0.0), (0.6, 0.3), (0.9, -1.0)] {
+        for (r, eta) in [
+            (0.2, 0.0),
+            (0.02, 0.0),
+            (1.0, 0.0),
+            (0.35, 0.0),
+            (0.6, 0.3),
+            (0.9, -1.0),
+        ] {
             let (at, ab) = Material::ggx_kc(r, eta).ggx_alphas().unwrap();
             for view in [Vec3::new(0.4, 0.1, 0.7), Vec3::new(0.3, 0.2, -0.5)] {
                 let v = frame.to_world(view.normalize());
@@ -883,7 +924,8 @@ mod tests {
                 for f0 in [[1.0f32; 3], [0.04; 3]] {
                     let iso = specular(&iso_e, f0);
                     let got = shade_specular(&pyr, &frame, v, (at, ab), f0, rot, iso);
-                    if eta == 0.0 {
+                    if fis_weight(at, ab) == 0.0 {
+                        assert!(eta == 0.0 && r <= SHIPPED.blend_r0);
                         assert_eq!(got.map(f32::to_bits), iso.map(f32::to_bits), "{r}");
                         continue;
                     }
@@ -900,10 +942,12 @@ mod tests {
     }
 
     #[test]
-    fn blend_weight_is_the_kulla_conty_eta_rule() {
+    fn blend_weight_is_the_kulla_conty_eta_rule_and_the_roughness_ramp() {
         assert_eq!(fis_weight(0.0, 0.0), 0.0);
         assert_eq!(fis_weight(f32::NAN, 0.1), 0.0);
-        for r in [0.05f32, 0.3, 0.7, 1.0] {
+        let s = SHIPPED;
+        for r in [0.05f32, 0.2, 0.3, 0.4, 0.7, 1.0] {
+            let ramp = ((r - s.blend_r0) / s.blend_r_width).clamp(0.0, 1.0) as f64;
             let mut last = -1.0;
             for i in 0..=40 {
                 let eta = -1.0 + i as f32 / 20.0;
@@ -916,15 +960,20 @@ mod tests {
                 // The lobe's own η: at r = 0.05 and |η| near 1 the α floor makes it smaller
                 // than the nominal one (α_t = 10⁻³, α_b = 0.005: η 0.67).
                 let lobe = ((at as f64 - ab as f64) / (at as f64 + ab as f64)).abs();
-                if lobe >= SHIPPED.blend_eta as f64 + 1e-4 {
+                if lobe >= SHIPPED.blend_eta as f64 + 1e-4 || r >= s.blend_r0 + s.blend_r_width {
                     assert_eq!(w, 1.0, "{r} {eta}");
                 }
-                if eta == 0.0 {
-                    assert_eq!(w, 0.0, "{r}: exactly the floor at η = 0");
+                if eta == 0.0 && r <= s.blend_r0 {
+                    assert_eq!(w, 0.0, "{r}: exactly the floor at η = 0 below r₀");
                 }
-                let want = (lobe / SHIPPED.blend_eta as f64)
-                    .min(1.0)
-                    .powf(SHIPPED.blend_power as f64);
+                let want = if lobe > 0.0 {
+                    (lobe / SHIPPED.blend_eta as f64)
+                        .min(1.0)
+                        .powf(SHIPPED.blend_power as f64)
+                } else {
+                    0.0
+                }
+                .max(ramp);
                 assert!((w as f64 - want).abs() < 1e-4, "{r} {eta} {w} {want}");
                 if eta >= 0.0 {
                     assert!(w >= last - 1e-6);
