@@ -387,6 +387,54 @@ impl Cubemap {
         out
     }
 
+    /// A cube of twice the size whose texels are this cube's values interpolated at their
+    /// centres by the quadratic through the three nearest texels per axis (Lagrange, tensor
+    /// product; texels past a face edge as [`Self::texel_wrapped`] gives them, seamless), each
+    /// clamped at 0 (the quadratic overshoots next to a peak; light is never negative). A fine
+    /// centre sits a quarter of a coarse texel from the nearest coarse centre, so the weights
+    /// are fixed: (0.15625, 0.9375, −0.09375) and mirrored. Exact for a quadratic in the face
+    /// coordinates within a face, its error third order in the texel size: what a smooth field
+    /// sampled at half the resolution can give back (the lookup fit's node cubes,
+    /// `ibl_prefilter`).
+    pub fn upsample_quadratic(&self) -> Cubemap {
+        use rayon::prelude::*;
+        let n = self.size;
+        let m = 2 * n;
+        // Weights of the coarse texels c − 1, c, c + 1 at offset t = ∓¼ from centre c.
+        let w = |t: f32| [t * (t - 1.0) / 2.0, 1.0 - t * t, t * (t + 1.0) / 2.0];
+        let (lo, hi) = (w(-0.25), w(0.25));
+        let mut out = Cubemap::new(m);
+        out.faces
+            .par_iter_mut()
+            .zip(Face::ALL)
+            .for_each(|(dst, face)| {
+                for j in 0..m {
+                    let (cj, wy) = ((j / 2) as isize, if j % 2 == 0 { lo } else { hi });
+                    for i in 0..m {
+                        let (ci, wx) = ((i / 2) as isize, if i % 2 == 0 { lo } else { hi });
+                        let mut acc = [0.0f32; 3];
+                        for (b, wb) in wy.iter().enumerate() {
+                            for (a, wa) in wx.iter().enumerate() {
+                                let t = self.texel_wrapped(
+                                    face,
+                                    ci + a as isize - 1,
+                                    cj + b as isize - 1,
+                                );
+                                for k in 0..3 {
+                                    acc[k] += wa * wb * t[k];
+                                }
+                            }
+                        }
+                        let o = dst.texel_mut(i, j);
+                        for k in 0..3 {
+                            o[k] = acc[k].max(0.0);
+                        }
+                    }
+                }
+            });
+        out
+    }
+
     /// Mean radiance over the sphere (solid-angle weighted), in f64 for energy tests.
     pub fn mean_radiance(&self) -> [f64; 3] {
         let sa = solid_angle_table(self.size);
@@ -454,6 +502,67 @@ mod tests {
 
     fn close(a: Vec3, b: Vec3) -> bool {
         (a - b).length() < 1e-5
+    }
+
+    #[test]
+    fn quadratic_upsampling_is_exact_for_quadratics_and_close_for_smooth_fields() {
+        // A constant comes back exactly everywhere (corners and edges included).
+        let c = Cubemap::from_fn(4, |_| [2.0, 0.5, 0.0]);
+        let up = c.upsample_quadratic();
+        assert_eq!(up.size, 8);
+        assert!(up.faces.iter().all(|f| f
+            .data
+            .chunks(3)
+            .all(|t| (t[0] - 2.0).abs() < 1e-6 && (t[1] - 0.5).abs() < 1e-6 && t[2] == 0.0)));
+        // A quadratic in the face coordinates (s, t) of each texel centre, inside a face
+        // (fine texels whose three coarse neighbours per axis lie on the face): exact.
+        let n = 8;
+        let mut c = Cubemap::new(n);
+        let q = |s: f32, t: f32| 3.0 + 0.5 * s - 0.25 * t + 0.7 * s * s + 0.3 * s * t - 0.4 * t * t;
+        let centre = |k: usize, n: usize| (2 * k + 1) as f32 / n as f32 - 1.0;
+        for face in Face::ALL {
+            for j in 0..n {
+                for i in 0..n {
+                    let v = q(centre(i, n), centre(j, n)) + face as usize as f32;
+                    c.faces[face as usize]
+                        .texel_mut(i, j)
+                        .copy_from_slice(&[v, v, v]);
+                }
+            }
+        }
+        let up = c.upsample_quadratic();
+        for face in Face::ALL {
+            for j in 2..2 * n - 2 {
+                for i in 2..2 * n - 2 {
+                    let want = q(centre(i, 2 * n), centre(j, 2 * n)) + face as usize as f32;
+                    let got = up.texel(face, i, j)[0];
+                    assert!(
+                        (got - want).abs() < 2e-5,
+                        "{face:?} {i} {j}: {got} vs {want}"
+                    );
+                }
+            }
+        }
+        // A smooth lobe on the sphere, across edges and corners: within a fraction of the
+        // error of taking the nearest coarse texel
+        let f = |d: Vec3| {
+            let x = (2.5 * (d.normalize().dot(Vec3::new(0.6, 0.5, 0.62).normalize()) - 1.0)).exp();
+            [x, 1.0 - 0.5 * x, 0.25]
+        };
+        let (coarse, fine) = (Cubemap::from_fn(16, f), Cubemap::from_fn(32, f));
+        let up = coarse.upsample_quadratic();
+        let (mut err, mut nearest) = (0.0f64, 0.0f64);
+        for face in Face::ALL {
+            for j in 0..32 {
+                for i in 0..32 {
+                    let (a, b) = (up.texel(face, i, j)[0], fine.texel(face, i, j)[0]);
+                    err = err.max((a - b).abs() as f64);
+                    nearest = nearest.max((coarse.texel(face, i / 2, j / 2)[0] - b).abs() as f64);
+                }
+            }
+        }
+        // (measured: 0.0034 against 0.038, the worst at a cube corner, whose ghost is a mean.)
+        assert!(err < 0.1 * nearest, "{err} vs nearest {nearest}");
     }
 
     #[test]
