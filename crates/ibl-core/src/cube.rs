@@ -146,6 +146,12 @@ fn ghost_indices(n: usize, face: Face, i: isize, j: isize) -> ([(Face, usize, us
 /// fitting texels to what a read of them should give.
 pub fn bilinear_taps(n: usize, d: Vec3) -> [(usize, f32); 6] {
     let (face, sc, tc) = Face::from_direction(d);
+    bilinear_taps_at(n, face, sc, tc)
+}
+
+/// [`bilinear_taps`] of the point (sc, tc) ∈ [−1, 1]² of face `face` given by its face
+/// coordinates: for callers that walk a face's own grid, with no direction to re-project.
+pub fn bilinear_taps_at(n: usize, face: Face, sc: f32, tc: f32) -> [(usize, f32); 6] {
     let x = (sc + 1.0) * 0.5 * n as f32 - 0.5;
     let y = (tc + 1.0) * 0.5 * n as f32 - 0.5;
     let (x0, y0) = (floor(x), floor(y));
@@ -413,13 +419,18 @@ impl Cubemap {
                     for i in 0..m {
                         let (ci, wx) = ((i / 2) as isize, if i % 2 == 0 { lo } else { hi });
                         let mut acc = [0.0f32; 3];
+                        // Off the face's border row the nine texels are on the face: read
+                        // them directly (the seam rules only past the edge).
+                        let inner =
+                            ci >= 1 && cj >= 1 && ci + 1 < n as isize && cj + 1 < n as isize;
                         for (b, wb) in wy.iter().enumerate() {
                             for (a, wa) in wx.iter().enumerate() {
-                                let t = self.texel_wrapped(
-                                    face,
-                                    ci + a as isize - 1,
-                                    cj + b as isize - 1,
-                                );
+                                let (x, y) = (ci + a as isize - 1, cj + b as isize - 1);
+                                let t = if inner {
+                                    self.texel(face, x as usize, y as usize)
+                                } else {
+                                    self.texel_wrapped(face, x, y)
+                                };
                                 for k in 0..3 {
                                     acc[k] += wa * wb * t[k];
                                 }
