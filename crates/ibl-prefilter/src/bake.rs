@@ -1560,7 +1560,6 @@ fn convolve_points(
     }
 }
 
-/// Box-reduces `cube` to `n`×`n` faces (exact footprint means of its texels).
 /// Whether the lookup fit's node cube at roughness r for an n×n level is computed at n/2 and
 /// upsampled ([`Cubemap::upsample_quadratic`]) instead of at n: where the lobe spans at least
 /// [`NODE_HALF_LOBE_TEXELS`] half-size texels (α ≥ that many texel edges) and those texels
@@ -1585,6 +1584,7 @@ fn node_at_half_size(n: usize, roughness: f32) -> bool {
 /// Half-size texel edges the lobe's α must span for [`node_at_half_size`].
 const NODE_HALF_LOBE_TEXELS: f32 = 2.0;
 
+/// Box-reduces `cube` to `n`×`n` faces (exact footprint means of its texels).
 fn reduce_to(mut cube: Cubemap, n: usize) -> Cubemap {
     while cube.size > n {
         cube = cube.downsample();
