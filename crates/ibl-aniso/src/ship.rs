@@ -15,8 +15,9 @@
 //! Why the blend (goal G2, "never worse than the isotropic floor at η = 0"): at η = 0 the
 //! anisotropic lobe *is* the isotropic one, and the prefiltered chain integrates it over the
 //! whole lobe where 16 FIS taps only estimate it (2.81× the floor's MSE under a small sun at
-//! r = 0.2). So the method reads the isotropic split sum at η = 0 below r₀ (w = 0: exactly the floor,
-//! and no FIS tap is taken) and mixes in FIS as |η| grows: specular = iso + (fis − iso)·w,
+//! r = 0.2). So the method reads the isotropic split sum at η = 0 below r₀ (w = 0: exactly
+//! the floor, and no FIS tap is taken) and mixes in FIS as |η| or r grows:
+//! specular = iso + (fis − iso)·w,
 //! w = max(clamp(|η|/η₁, 0, 1)^p, clamp((r_iso − r₀)/Δr, 0, 1)), (η₁, p, r₀, Δr) fitted on
 //! training environments and scored on held-out ones (`examples/fit_blend.rs`,
 //! bench/aniso-blend.md). The roughness ramp is there because the floor's own error changes
@@ -310,7 +311,8 @@ pub(crate) fn shade_n(
 
 /// The snippets' `anisoFisSpecular` step for step, at the level of the returned radiance:
 /// `iso_specular` (the engine's isotropic split sum F0·E0 + (1−F0)·E1 at r_iso, the snippets'
-/// `isoSpecular`) untouched when w = [`fis_weight`] is 0 (η = 0, r_iso ≤ r₀: bit for bit, no tap), else
+/// `isoSpecular`) untouched when w = [`fis_weight`] is 0 (η = 0, r_iso ≤ r₀: bit for bit, no
+/// tap), else
 /// iso + (fis − iso)·w with fis = [`specular`] of [`shade_fis`] (zeros below the horizon, as
 /// the snippet's `isoSpecular − isoSpecular·w`). Equal to [`specular`] of [`shade`] up to
 /// rounding (the blend is linear); this is the form the browser check compares with.
