@@ -201,38 +201,61 @@ fn best(cases: &[&Data], rules: &[Rule]) -> (Rule, f64) {
         .expect("a family")
 }
 
-/// Cases of a `--dump` file (its two F0 rows per case, in `F0S` order).
-fn load_dump(path: &str) -> Vec<Data> {
-    let text = std::fs::read_to_string(path).expect("--load FILE");
+/// Cases of a `--dump` file: each case's rows at every F0 of [`F0S`], in that order, with the
+/// same env, azimuth, r and η. Anything else (a short or non-numeric row, a missing or
+/// out-of-order F0) is refused with the file and line, not filled in.
+fn load_dump(path: &str) -> Result<Vec<Data>, String> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{path}: {e}"))?;
     let mut out: Vec<Data> = Vec::new();
-    for line in text.lines().skip(1) {
-        let c: Vec<&str> = line.split('\t').collect();
-        let num = |k: usize| -> f64 { c[k].parse().expect("a number") };
-        let q = Quad {
-            uu: num(6),
-            uv: num(7),
-            vv: num(8),
-            bent: num(10),
-            kc: num(11),
-            truth: num(12),
-        };
-        let f = F0S
-            .iter()
-            .position(|&f0| f0 == num(4))
-            .expect("an F0 of F0S");
-        if f == 0 {
-            out.push(Data {
-                env: c[0].to_string(),
-                azimuth: num(1) as f32,
-                r: num(2) as f32,
-                eta: num(3) as f32,
-                q: [q, Quad::default()],
-            });
-        } else {
-            out.last_mut().expect("F0 = 1 first").q[f] = q;
+    let mut lines = text.lines().enumerate().skip(1).peekable();
+    while lines.peek().is_some() {
+        let mut case: Option<Data> = None;
+        for (f, &f0) in F0S.iter().enumerate() {
+            let (k, line) = lines
+                .next()
+                .ok_or_else(|| format!("{path}: ends inside a case (no F0 = {f0} row)"))?;
+            let at = format!("{path}:{}", k + 1);
+            let c: Vec<&str> = line.split('\t').collect();
+            if c.len() != 13 {
+                return Err(format!("{at}: {} columns, expected 13", c.len()));
+            }
+            let num = |k: usize| -> Result<f64, String> {
+                c[k].parse()
+                    .map_err(|_| format!("{at}: column {} is not a number: {:?}", k + 1, c[k]))
+            };
+            if num(4)? != f0 {
+                return Err(format!("{at}: F0 {} where {f0} was expected", c[4]));
+            }
+            let q = Quad {
+                uu: num(6)?,
+                uv: num(7)?,
+                vv: num(8)?,
+                bent: num(10)?,
+                kc: num(11)?,
+                truth: num(12)?,
+            };
+            let (azimuth, r, eta) = (num(1)? as f32, num(2)? as f32, num(3)? as f32);
+            match &mut case {
+                None => {
+                    case = Some(Data {
+                        env: c[0].to_string(),
+                        azimuth,
+                        r,
+                        eta,
+                        q: [q, Quad::default()],
+                    })
+                }
+                Some(d) => {
+                    if (d.env.as_str(), d.azimuth, d.r, d.eta) != (c[0], azimuth, r, eta) {
+                        return Err(format!("{at}: not the same case as the row before"));
+                    }
+                    d.q[f] = q;
+                }
+            }
         }
+        out.extend(case);
     }
-    out
+    Ok(out)
 }
 
 /// The per-pixel sums of one case at F0 `f0`.
@@ -336,7 +359,13 @@ fn main() {
     };
     let (parsed, preset) = params.validate().expect("fit parameters");
     let t_all = Instant::now();
-    let mut data: Vec<Data> = load.as_deref().map(load_dump).unwrap_or_default();
+    let mut data: Vec<Data> = match load.as_deref().map(load_dump).transpose() {
+        Ok(d) => d.unwrap_or_default(),
+        Err(e) => {
+            eprintln!("fit-ibl-aniso-blend: {e}");
+            std::process::exit(2);
+        }
+    };
     for name in train.iter().chain(test).filter(|_| load.is_none()) {
         let path = root.join(format!("fixtures/hdri/{name}.exr"));
         let loaded = load_environment(&path, false).expect("fixture");
@@ -459,7 +488,11 @@ fn main() {
          cases and F0 ∈ {{1, 0.04}} of MSE(rule) / MSE(fis); lower is better. fis = `{}`: VNDF \
          FIS at the shipped lod bias {} (`ibl_aniso::ship::SHIPPED`); `fis-16` is the published \
          FIS (Křivánek & Colbert's +1 bias), goal G3's baseline.\n",
-        if quick { " -- --quick" } else { "" },
+        match (quick, &load) {
+            (true, _) => " -- --quick".to_string(),
+            (false, Some(f)) => format!(" -- --load {f}` from the cases of an earlier `--dump"),
+            (false, None) => String::new(),
+        },
         t_all.elapsed().as_secs_f64(),
         std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
         params.sphere_size,

@@ -1041,9 +1041,9 @@ fn bake_resampled(params: &Params, resampled: Resampled, progress: &dyn Progress
             .flat_map(|p| p.nodes.iter().map(|q| q.roughness))
             .collect();
         // Nodes smooth at half the level's size are computed there and upsampled; the rest
-        // share the level's own cuts.
-        let (half, full): (Vec<usize>, Vec<usize>) =
-            (0..node_rs.len()).partition(|&k| node_at_half_size(n, node_rs[k]));
+        // share the level's own cuts. Not in a --reference bake, which approximates nothing.
+        let (half, full): (Vec<usize>, Vec<usize>) = (0..node_rs.len())
+            .partition(|&k| !params.reference && node_at_half_size(n, node_rs[k]));
         let mut rs = vec![r];
         rs.extend(full.iter().map(|&k| node_rs[k]));
         let mut cubes = convolve_level_many(&engine, &source, &texels, n, &rs, progress);
