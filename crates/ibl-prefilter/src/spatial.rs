@@ -246,36 +246,11 @@ pub fn read_weights(n: usize) -> Vec<f64> {
     let coord: Vec<f32> = (0..m)
         .map(|i| 2.0 * (i as f32 + 0.5) / m as f32 - 1.0)
         .collect();
-    // Per grid column: the first tap's texel and the fraction, as `bilinear_taps_at` takes
-    // them; the points whose four taps lie on the face (all but a band at the edges) are summed
-    // here, the rest through it (the seam rules).
-    let tap = |c: f32| {
-        let x = (c + 1.0) * 0.5 * n as f32 - 0.5;
-        let x0 = x.floor();
-        (x0 as isize, x - x0)
-    };
-    let taps: Vec<(isize, f32)> = coord.iter().map(|&c| tap(c)).collect();
-    let inside = |x0: isize| x0 >= 0 && x0 + 1 < n as isize;
     let mut w = vec![0.0f64; 6 * n * n];
     for face in Face::ALL {
-        let base = face as usize * n * n;
         for j in 0..m {
-            let (y0, fy) = taps[j];
             for i in 0..m {
                 let o = sa[j * m + i] as f64;
-                let (x0, fx) = taps[i];
-                if inside(x0) && inside(y0) {
-                    let p = base + y0 as usize * n + x0 as usize;
-                    for (q, wp) in [
-                        (p, (1.0 - fx) * (1.0 - fy)),
-                        (p + 1, fx * (1.0 - fy)),
-                        (p + n, (1.0 - fx) * fy),
-                        (p + n + 1, fx * fy),
-                    ] {
-                        w[q] += o * wp as f64;
-                    }
-                    continue;
-                }
                 for (p, wp) in bilinear_taps_at(n, face, coord[i], coord[j]) {
                     w[p] += o * wp as f64;
                 }
