@@ -224,6 +224,23 @@ fn renders_ashikhmin_shirley_lobes_through_the_thesis_route() {
             "as-weighted-16"
         ]
     );
+    // Only AS methods: the GGX lobes have nothing to score and get no case (nor truth).
+    let only_as: Vec<&str> = args
+        .iter()
+        .map(|a| {
+            if *a == "iso,as-thesis-16,as-weighted-16" {
+                "as-grid-16"
+            } else {
+                a
+            }
+        })
+        .collect();
+    let o = BIN.run(&only_as);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let rep = ibl_testkit::read_json(&out.join("report.json"));
+    let cases = rep["cases"].as_array().unwrap();
+    assert_eq!(cases.len(), 1, "{rep}");
+    assert_eq!(cases[0]["scores"][0]["method"], "as-grid-16");
     let r = BIN.run(&[
         env.to_str().unwrap(),
         "--as-lobes",

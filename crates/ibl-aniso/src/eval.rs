@@ -103,7 +103,9 @@ pub struct Params {
     /// Methods: iso, bent-lg18, bent-filament, bent-khr, major-N[-bBETA][-kK][-cC], fis-N[-bB]
     /// (Křivánek & Colbert's lod bias +1, or B),
     /// fisb-N (the shipped blend), cv-N; for --as-lobes as-thesis-N, as-weighted-N,
-    /// as-fis-N[-bB], as-strat-N.
+    /// as-fis-N[-bB], as-strat-N, as-grid[j]-N[-bB] (equal-mass cells shaped to the lobe),
+    /// as-quad-N[-bB][-kK] (equal-size cells, weighted). A lobe no listed method renders is
+    /// skipped.
     #[arg(
         long,
         value_delimiter = ',',
@@ -495,6 +497,10 @@ pub fn evaluate_with(
         materials.push((0.0, 0.0, Material::AshikhminShirley { nu, nv }));
     }
     for &(r0, eta0, mat) in &materials {
+        // A lobe no method renders has nothing to score: no truth for it.
+        if !methods.iter().any(|m| m.applies_to(&mat)) {
+            continue;
+        }
         {
             let as_tables = match mat {
                 Material::AshikhminShirley { nu, nv } => Some(AsTables::bake(nu, nv, 128)),

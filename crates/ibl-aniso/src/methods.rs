@@ -142,6 +142,36 @@ pub enum Method {
         /// reads the raw cube bilinearly (`as-strat-N`: the stratification alone).
         bias: Option<f32>,
     },
+    /// M4d: the weighted taps on a grid of equal-mass cells shaped to the lobe. The lobe is
+    /// a Gaussian in the plane g = (√(n_u+1)·x, √(n_v+1)·y) of the half vector's polar slope
+    /// (x, y) = θ(cos φ, sin φ) (exactly: the thesis's sampler at ξ1 = atan2(g_y, g_x)/2π,
+    /// ξ2 = 1 − exp(−|g|²/2) is p_h for g ~ N(0, I)), so an a × b grid of normal quantiles
+    /// with a/b = √((n_v+1)/(n_u+1)) cuts it into cells of 1/(ab) of the mass that are as
+    /// long as wide on the sphere. The isotropic lod of each tap's pdf (Křivánek & Colbert
+    /// eq. 13 + B) then fits its cell; the Hammersley set's polar cells are needles along a
+    /// thin lobe, which no isotropic lod fits.
+    AsGrid {
+        /// Tap budget N (a·b ≤ N taps are read).
+        taps: usize,
+        /// Added to the lod.
+        bias: f32,
+        /// Each pixel shifts the grid by a Cranley–Patterson rotation (else cell midpoints).
+        jitter: bool,
+    },
+    /// M4e: a quadrature with tap weights. The lobe's Gaussian plane (as [`Method::AsGrid`])
+    /// is cut into a × b cells of equal size over [−K, K]² (the outer cells take the mass
+    /// beyond), square on the sphere; each tap reads the pyramid at its cell's centre with a
+    /// filter of the cell's solid angle and is weighted by the cell's exact mass of p_h times
+    /// F(v·h)(n·l)/max(n·v, n·l). Equal-mass cells grow long in the lobe's tails, where
+    /// one isotropic read cannot cover them; equal-size cells are what a box filter fits.
+    AsQuad {
+        /// Tap budget N (a·b ≤ N taps are read).
+        taps: usize,
+        /// Added to the lod.
+        bias: f32,
+        /// Half-width K of the covered square, in standard deviations.
+        k: f32,
+    },
 }
 
 /// The Ashikhmin–Shirley tables a lobe's runtime reads, baked in memory by `ibl-lut` exactly
@@ -154,6 +184,8 @@ pub struct AsTables {
     /// p_h at h = n, √((n_u+1)(n_v+1))/2π: the LUT's A channel times it is p_h (a uniform
     /// of the shader).
     pub pdf_h_n: f64,
+    /// The lobe's exponents (n_u, n_v), uniforms of the shader.
+    pub exponents: (f64, f64),
 }
 
 impl AsTables {
@@ -167,6 +199,7 @@ impl AsTables {
             hv: ibl_lut::hv::hv_table(&a, hv_size, &p),
             size_bias: ibl_lut::as_size_bias::size_bias_table(&set, 64, &p),
             pdf_h_n: a.pdf_h_at_normal(),
+            exponents: (nu, nv),
         }
     }
 
@@ -232,14 +265,33 @@ impl Method {
                 Some(b) if *b == 1.0 => format!("as-fis-{taps}"),
                 Some(b) => format!("as-fis-{taps}-b{b}"),
             },
+            Method::AsQuad { taps, bias, k } => {
+                let mut s = format!("as-quad-{taps}");
+                if *bias != 0.0 {
+                    s += &format!("-b{bias}");
+                }
+                if *k != AS_QUAD_K {
+                    s += &format!("-k{k}");
+                }
+                s
+            }
+            Method::AsGrid { taps, bias, jitter } => {
+                let j = if *jitter { "j" } else { "" };
+                if *bias == 0.0 {
+                    format!("as-grid{j}-{taps}")
+                } else {
+                    format!("as-grid{j}-{taps}-b{bias}")
+                }
+            }
         }
     }
 
     /// Parses `iso`, `bent-lg18`, `bent-filament`, `bent-khr`, `major-N[-bBETA][-kK][-cC]`,
-    /// `fis-N[-bB]`, `fisb-N`, `cv-N`, `as-thesis-N`, `as-weighted-N`, `as-fis-N[-bB]`, `as-strat-N`.
+    /// `fis-N[-bB]`, `fisb-N`, `cv-N`, `as-thesis-N`, `as-weighted-N`, `as-fis-N[-bB]`, `as-strat-N`,
+    /// `as-grid-N[-bB]`, `as-gridj-N[-bB]`.
     pub fn parse(s: &str) -> Result<Method, String> {
         let bad = || {
-            format!("unknown method '{s}' (iso, bent-lg18, bent-filament, bent-khr, major-N[-bBETA][-kK][-cC], fis-N[-bB], fisb-N, cv-N, as-thesis-N, as-weighted-N, as-fis-N[-bB], as-strat-N)")
+            format!("unknown method '{s}' (iso, bent-lg18, bent-filament, bent-khr, major-N[-bBETA][-kK][-cC], fis-N[-bB], fisb-N, cv-N, as-thesis-N, as-weighted-N, as-fis-N[-bB], as-strat-N, as-grid[j]-N[-bB])")
         };
         let taps = |t: &str| -> Result<usize, String> {
             let n: usize = t.parse().map_err(|_| bad())?;
@@ -283,6 +335,51 @@ impl Method {
                         taps: taps(n)?,
                         bias: Some(bias),
                     });
+                }
+                if let Some(rest) = s.strip_prefix("as-quad-") {
+                    let (n, mut opts) = rest.split_at(rest.find('-').unwrap_or(rest.len()));
+                    let (mut bias, mut k) = (0.0, AS_QUAD_K);
+                    while let Some(o) = opts.strip_prefix('-') {
+                        let key = o.chars().next().ok_or_else(bad)?;
+                        let body = &o[1..];
+                        // A number, its own leading '-' included, up to the next '-'.
+                        let end = body
+                            .char_indices()
+                            .skip(1)
+                            .find(|&(_, c)| c == '-')
+                            .map_or(body.len(), |(i, _)| i);
+                        let (num, tail) = body.split_at(end);
+                        match key {
+                            'b' => bias = lod_bias(num).ok_or_else(bad)?,
+                            'k' => {
+                                k = num
+                                    .parse::<f32>()
+                                    .ok()
+                                    .filter(|x| x.is_finite() && (0.5..=6.0).contains(x))
+                                    .ok_or_else(bad)?
+                            }
+                            _ => return Err(bad()),
+                        }
+                        opts = tail;
+                    }
+                    return Ok(Method::AsQuad {
+                        taps: taps(n)?,
+                        bias,
+                        k,
+                    });
+                }
+                for (prefix, jitter) in [("as-grid-", false), ("as-gridj-", true)] {
+                    if let Some(rest) = s.strip_prefix(prefix) {
+                        let (n, bias) = match rest.split_once("-b") {
+                            Some((n, b)) => (n, lod_bias(b).ok_or_else(bad)?),
+                            None => (rest, 0.0),
+                        };
+                        return Ok(Method::AsGrid {
+                            taps: taps(n)?,
+                            bias,
+                            jitter,
+                        });
+                    }
                 }
                 if let Some(rest) = s.strip_prefix("as-strat-") {
                     return Ok(Method::AsFis {
@@ -331,6 +428,7 @@ impl Method {
             Method::FisBlend { taps } => (*taps + 1, 1),
             Method::AsThesis { taps } => (*taps, *taps + 1),
             Method::AsWeighted { taps } | Method::AsFis { taps, .. } => (*taps, *taps),
+            Method::AsGrid { taps, .. } | Method::AsQuad { taps, .. } => (*taps, *taps),
         }
     }
 
@@ -342,15 +440,19 @@ impl Method {
                 | Method::AsThesis { .. }
                 | Method::AsWeighted { .. }
                 | Method::AsFis { .. }
+                | Method::AsGrid { .. }
+                | Method::AsQuad { .. }
         )
     }
 
     /// Whether the method renders `mat` (the GGX methods GGX, the thesis route AS).
     pub fn applies_to(&self, mat: &Material) -> bool {
         match self {
-            Method::AsThesis { .. } | Method::AsWeighted { .. } | Method::AsFis { .. } => {
-                matches!(mat, Material::AshikhminShirley { .. })
-            }
+            Method::AsThesis { .. }
+            | Method::AsWeighted { .. }
+            | Method::AsFis { .. }
+            | Method::AsGrid { .. }
+            | Method::AsQuad { .. } => matches!(mat, Material::AshikhminShirley { .. }),
             _ => matches!(mat, Material::Ggx { .. }),
         }
     }
@@ -422,6 +524,13 @@ pub fn evaluate(
     if let (Method::AsFis { taps, bias }, Some(tab)) = (method, inp.as_tables) {
         let rot = fis_rotation(seed);
         return as_fis(inp.pyramid, tab, frame, v, *taps, *bias, rot);
+    }
+    if let (Method::AsGrid { taps, bias, jitter }, Some(tab)) = (method, inp.as_tables) {
+        let shift = jitter.then(|| fis_rotation(seed));
+        return as_grid(inp.pyramid, tab, frame, v, *taps, *bias, shift);
+    }
+    if let (Method::AsQuad { taps, bias, k }, Some(tab)) = (method, inp.as_tables) {
+        return as_quad(inp.pyramid, tab, frame, v, *taps, *bias, *k);
     }
     let Some((at, ab)) = mat.ggx_alphas() else {
         return ([0.0; 3], [0.0; 3]);
@@ -518,9 +627,11 @@ pub fn evaluate(
             };
             (cv(base.0, an.0, is.0), cv(base.1, an.1, is.1))
         }
-        Method::AsThesis { .. } | Method::AsWeighted { .. } | Method::AsFis { .. } => {
-            ([0.0; 3], [0.0; 3])
-        }
+        Method::AsThesis { .. }
+        | Method::AsWeighted { .. }
+        | Method::AsFis { .. }
+        | Method::AsGrid { .. }
+        | Method::AsQuad { .. } => ([0.0; 3], [0.0; 3]),
     }
 }
 
@@ -585,38 +696,258 @@ fn as_fis(
     rotation: glam::Vec2,
 ) -> E01 {
     let vl = frame.to_local(v).normalize();
-    let (mut e0, mut e1) = (Vec3::ZERO, Vec3::ZERO);
     if vl.z <= 0.0 || taps == 0 {
         return ([0.0; 3], [0.0; 3]);
     }
     let n = taps as u32;
-    let log2_sa = pyr.base_log2_texel_solid_angle();
-    let max_lod = pyr.max_lod() as f32;
+    let mut acc = AsTaps::new(pyr, tab, frame, vl, n, bias);
     for i in 0..n {
         let (x1, x2) = hammersley(i, n);
         let u = glam::Vec2::new(x1, x2) + rotation;
         let u = u - u.floor();
-        let (h, a) = ibl_lut::hv::lookup(&tab.hv, u.x as f64, u.y as f64);
+        acc.tap(u.x as f64, u.y as f64);
+    }
+    acc.finish()
+}
+
+/// `as-grid[j]-N[-bB]` ([`Method::AsGrid`]): the weighted, filtered taps of `as-fis` on an
+/// a × b grid of normal quantiles in the lobe's Gaussian plane (a along t), a/b =
+/// √((n_v+1)/(n_u+1)), a·b ≤ N; at the cell midpoints, or shifted per pixel by `shift`.
+fn as_grid(
+    pyr: &BorderedMips,
+    tab: &AsTables,
+    frame: &Frame,
+    v: Vec3,
+    taps: usize,
+    bias: f32,
+    shift: Option<glam::Vec2>,
+) -> E01 {
+    let vl = frame.to_local(v).normalize();
+    if vl.z <= 0.0 || taps == 0 {
+        return ([0.0; 3], [0.0; 3]);
+    }
+    let (a, b) = as_grid_shape(tab.exponents, taps);
+    let mut acc = AsTaps::new(pyr, tab, frame, vl, (a * b) as u32, Some(bias));
+    let s = shift.unwrap_or(glam::Vec2::splat(0.5));
+    for i in 0..a {
+        let gx = normal_quantile((i as f64 + s.x as f64) / a as f64);
+        for j in 0..b {
+            let gy = normal_quantile((j as f64 + s.y as f64) / b as f64);
+            let (xi1, xi2) = as_gaussian_to_xi(gx, gy);
+            acc.tap(xi1, xi2);
+        }
+    }
+    acc.finish()
+}
+
+/// The default half-width K of `as-quad-N`'s square, in standard deviations.
+pub const AS_QUAD_K: f32 = 2.5;
+
+/// `as-quad-N[-bB][-kK]` ([`Method::AsQuad`]).
+fn as_quad(
+    pyr: &BorderedMips,
+    tab: &AsTables,
+    frame: &Frame,
+    v: Vec3,
+    taps: usize,
+    bias: f32,
+    k: f32,
+) -> E01 {
+    let vl = frame.to_local(v).normalize();
+    if vl.z <= 0.0 || taps == 0 {
+        return ([0.0; 3], [0.0; 3]);
+    }
+    let (a, b) = as_grid_shape(tab.exponents, taps);
+    let cells_x = quad_cells(a, k as f64);
+    let cells_y = quad_cells(b, k as f64);
+    let log2_sa = pyr.base_log2_texel_solid_angle();
+    let max_lod = pyr.max_lod() as f32;
+    let (mut e0, mut e1) = (Vec3::ZERO, Vec3::ZERO);
+    for &(gx, dx, mx) in &cells_x {
+        for &(gy, dy, my) in &cells_y {
+            let (xi1, xi2) = as_gaussian_to_xi(gx, gy);
+            let (h, ratio) = ibl_lut::hv::lookup(&tab.hv, xi1, xi2);
+            let h = h.as_vec3().normalize();
+            let vh = vl.dot(h);
+            let l = 2.0 * vh * h - vl;
+            if vh <= 0.0 || l.z <= 0.0 || ratio <= 0.0 {
+                continue;
+            }
+            // dω_h/dg = p_g(g)/p_h(h); dω_l = 4 (v·h) dω_h.
+            let p_g = (-(gx * gx + gy * gy) * 0.5).exp() / std::f64::consts::TAU;
+            let p_h = ratio * tab.pdf_h_n;
+            let omega = (dx * dy * p_g / p_h) as f32 * 4.0 * vh;
+            let lod = (0.5 * (omega.log2() - log2_sa) + bias).clamp(0.0, max_lod);
+            let c = Vec3::from(pyr.sample(frame.to_world(l), lod));
+            let w = (mx * my) as f32 * l.z / vl.z.max(l.z);
+            let chi = (1.0 - vh.min(1.0)).powi(5);
+            e0 += w * c;
+            e1 += w * chi * c;
+        }
+    }
+    (e0.into(), e1.into())
+}
+
+/// `as-quad`'s cells along one axis of the Gaussian plane: m equal cells over [−K, K], each
+/// (centre, width, mass of N(0, 1)), the first and last also holding the tails beyond ±K.
+pub(crate) fn quad_cells(m: usize, k: f64) -> Vec<(f64, f64, f64)> {
+    let phi = |x: f64| 0.5 * ibl_brdf::special::erfc(-x * std::f64::consts::FRAC_1_SQRT_2);
+    let w = 2.0 * k / m as f64;
+    (0..m)
+        .map(|i| {
+            let lo = -k + i as f64 * w;
+            let hi = lo + w;
+            let p_lo = if i == 0 { 0.0 } else { phi(lo) };
+            let p_hi = if i + 1 == m { 1.0 } else { phi(hi) };
+            (lo + 0.5 * w, w, p_hi - p_lo)
+        })
+        .collect()
+}
+
+/// The grid (a, b) of `as-grid-N` for exponents (n_u, n_v): a·b ≤ N cells whose extents on
+/// the sphere, ∝ 1/(a√(n_u+1)) along t and 1/(b√(n_v+1)) along b, are as equal as N allows.
+/// The cost |ln((a/b)/ratio)| + 2 ln(N/(ab)) weighs a cell's aspect against unread taps
+/// (a 70 × 20000 lobe at N = 32 takes 32 × 1, not 23 × 1).
+pub(crate) fn as_grid_shape((nu, nv): (f64, f64), taps: usize) -> (usize, usize) {
+    let ratio = ((nv + 1.0) / (nu + 1.0)).sqrt();
+    let cost = |a: usize| {
+        let b = taps / a;
+        let aspect = (a as f64 / b as f64 / ratio).ln().abs();
+        aspect + 2.0 * (taps as f64 / (a * b) as f64).ln()
+    };
+    let a = (1..=taps)
+        .min_by(|&x, &y| cost(x).total_cmp(&cost(y)))
+        .unwrap_or(1);
+    (a, taps / a)
+}
+
+/// The thesis sampler's (ξ1, ξ2) of the point g of the lobe's Gaussian plane: ξ1 =
+/// atan2(g_y, g_x)/2π in [0, 1), ξ2 = 1 − exp(−|g|²/2). Uniform (ξ1, ξ2) for g ~ N(0, I)
+/// (the polar Box–Muller map read backwards), so p_h stays the exact tap pdf.
+pub(crate) fn as_gaussian_to_xi(gx: f64, gy: f64) -> (f64, f64) {
+    let xi1 = gy.atan2(gx) / std::f64::consts::TAU;
+    let xi1 = if xi1 < 0.0 { xi1 + 1.0 } else { xi1 };
+    let xi2 = -(-(gx * gx + gy * gy) * 0.5).exp_m1();
+    (xi1.min(1.0), xi2)
+}
+
+/// Φ⁻¹(p), the standard normal quantile (Acklam 2003, rational approximation, relative error
+/// < 1.2·10⁻⁹), for p in (0, 1).
+pub(crate) fn normal_quantile(p: f64) -> f64 {
+    const A: [f64; 6] = [
+        -3.969683028665376e1,
+        2.209460984245205e2,
+        -2.759285104469687e2,
+        1.38357751867269e2,
+        -3.066479806614716e1,
+        2.506628277459239,
+    ];
+    const B: [f64; 5] = [
+        -5.447609879822406e1,
+        1.615858368580409e2,
+        -1.556989798598866e2,
+        6.680131188771972e1,
+        -1.328068155288572e1,
+    ];
+    const C: [f64; 6] = [
+        -7.784894002430293e-3,
+        -3.223964580411365e-1,
+        -2.400758277161838,
+        -2.549732539343734,
+        4.374664141464968,
+        2.938163982698783,
+    ];
+    const D: [f64; 4] = [
+        7.784695709041462e-3,
+        3.224671290700398e-1,
+        2.445134137142996,
+        3.754408661907416,
+    ];
+    let p = p.clamp(1e-300, 1.0 - f64::EPSILON);
+    let tail = |q: f64| {
+        (((((C[0] * q + C[1]) * q + C[2]) * q + C[3]) * q + C[4]) * q + C[5])
+            / ((((D[0] * q + D[1]) * q + D[2]) * q + D[3]) * q + 1.0)
+    };
+    if p < 0.02425 {
+        tail((-2.0 * p.ln()).sqrt())
+    } else if p > 1.0 - 0.02425 {
+        -tail((-2.0 * (1.0 - p).ln()).sqrt())
+    } else {
+        let q = p - 0.5;
+        let r = q * q;
+        (((((A[0] * r + A[1]) * r + A[2]) * r + A[3]) * r + A[4]) * r + A[5]) * q
+            / (((((B[0] * r + B[1]) * r + B[2]) * r + B[3]) * r + B[4]) * r + 1.0)
+    }
+}
+
+/// The weighted, filtered Ashikhmin–Shirley taps of `as-fis` and `as-grid`: h from the LUT at
+/// (ξ1, ξ2), l = reflect(v, h), weight F(v·h)(n·l)/max(n·v, n·l) (exact p_h importance
+/// sampling), the box pyramid read at lod ½(log2(1/(N p_l)) − log2 Ω_texel) + B with
+/// p_l = A·p_h(n)/(4 v·h) (Křivánek & Colbert 2008 eq. 13), or the raw cube without a bias.
+struct AsTaps<'a> {
+    pyr: &'a BorderedMips,
+    tab: &'a AsTables,
+    frame: &'a Frame,
+    vl: Vec3,
+    n: u32,
+    bias: Option<f32>,
+    log2_sa: f32,
+    max_lod: f32,
+    e0: Vec3,
+    e1: Vec3,
+}
+
+impl<'a> AsTaps<'a> {
+    fn new(
+        pyr: &'a BorderedMips,
+        tab: &'a AsTables,
+        frame: &'a Frame,
+        vl: Vec3,
+        n: u32,
+        bias: Option<f32>,
+    ) -> Self {
+        AsTaps {
+            pyr,
+            tab,
+            frame,
+            vl,
+            n,
+            bias,
+            log2_sa: pyr.base_log2_texel_solid_angle(),
+            max_lod: pyr.max_lod() as f32,
+            e0: Vec3::ZERO,
+            e1: Vec3::ZERO,
+        }
+    }
+
+    fn tap(&mut self, xi1: f64, xi2: f64) {
+        let (h, a) = ibl_lut::hv::lookup(&self.tab.hv, xi1, xi2);
         let h = h.as_vec3().normalize();
+        let vl = self.vl;
         let vh = vl.dot(h);
         let l = 2.0 * vh * h - vl;
         if vh <= 0.0 || l.z <= 0.0 {
-            continue;
+            return;
         }
-        let pl = (a * tab.pdf_h_n) as f32 / (4.0 * vh);
-        let lod = match bias {
+        let pl = (a * self.tab.pdf_h_n) as f32 / (4.0 * vh);
+        let lod = match self.bias {
             None => 0.0,
-            Some(_) if pl <= 0.0 => max_lod,
-            Some(b) => (0.5 * (-(n as f32 * pl).log2() - log2_sa) + b).clamp(0.0, max_lod),
+            Some(_) if pl <= 0.0 => self.max_lod,
+            Some(b) => {
+                (0.5 * (-(self.n as f32 * pl).log2() - self.log2_sa) + b).clamp(0.0, self.max_lod)
+            }
         };
-        let c = Vec3::from(pyr.sample(frame.to_world(l), lod));
+        let c = Vec3::from(self.pyr.sample(self.frame.to_world(l), lod));
         let w = l.z / vl.z.max(l.z);
         let chi = (1.0 - vh.min(1.0)).powi(5);
-        e0 += w * c;
-        e1 += w * chi * c;
+        self.e0 += w * c;
+        self.e1 += w * chi * c;
     }
-    let inv = 1.0 / n as f32;
-    ((e0 * inv).into(), (e1 * inv).into())
+
+    fn finish(self) -> E01 {
+        let inv = 1.0 / self.n as f32;
+        ((self.e0 * inv).into(), (self.e1 * inv).into())
+    }
 }
 
 /// VNDF filtered importance sampling (`fis-N`): the shipped method's emulation
@@ -815,6 +1146,29 @@ mod tests {
             assert!((a.0[0] - b.0[0]).abs() < 0.01, "{a:?} {b:?}");
             // Stratified, filtered taps: the same estimator (the pyramid of a constant is
             // constant), so the same expectation.
+            // The lobe-shaped grids and the weighted quadrature: the same expectation at 32
+            // taps (a constant environment is the directional albedo), within the error of a
+            // 32-point rule in two dimensions.
+            for name in ["as-grid-32", "as-quad-32"] {
+                let g = evaluate(
+                    &Method::parse(name).unwrap(),
+                    &inp,
+                    &f,
+                    v,
+                    &mat,
+                    1,
+                    &mut buf,
+                );
+                assert!((g.0[0] - b.0[0]).abs() < 0.02, "{name}: {g:?} {b:?}");
+                assert!((g.1[0] - b.1[0]).abs() < 0.01, "{name}: {g:?} {b:?}");
+            }
+            // The shifted grid is unbiased: its mean over pixels' shifts.
+            let gj = Method::parse("as-gridj-32").unwrap();
+            let mean = (0..64)
+                .map(|seed| evaluate(&gj, &inp, &f, v, &mat, seed, &mut buf).0[0])
+                .sum::<f32>()
+                / 64.0;
+            assert!((mean - b.0[0]).abs() < 0.01, "as-gridj-32: {mean} {b:?}");
             let fis = Method::parse("as-fis-256").unwrap();
             let c = evaluate(&fis, &inp, &f, v, &mat, 1, &mut buf);
             assert!((c.0[0] - b.0[0]).abs() < 0.01, "{c:?} {b:?}");
@@ -902,6 +1256,68 @@ mod tests {
             let iso = evaluate(&Method::Iso, &inp, &f, v, &mat, 5, &mut buf);
             let cv = evaluate(&Method::Cv { taps: 8 }, &inp, &f, v, &mat, 5, &mut buf);
             assert_ne!(iso, cv, "r {r}");
+        }
+    }
+    #[test]
+    fn normal_quantile_inverts_the_normal_cdf_and_is_odd() {
+        let phi = |x: f64| 0.5 * ibl_brdf::special::erfc(-x * std::f64::consts::FRAC_1_SQRT_2);
+        for k in 1..2000 {
+            let p = k as f64 / 2000.0;
+            let x = normal_quantile(p);
+            // erfc's own fractional error is 1.2e-7.
+            assert!(
+                (phi(x) - p).abs() < 2e-7 * p.min(1.0 - p).max(1e-3),
+                "{p}: {x}"
+            );
+            assert!((x + normal_quantile(1.0 - p)).abs() < 1e-8, "{p}");
+        }
+        for p in [1e-12, 1e-6, 1e-3] {
+            let x = normal_quantile(p);
+            assert!(((phi(x) - p) / p).abs() < 1e-5, "{p}: {x}");
+        }
+        assert!(normal_quantile(0.0).is_finite() && normal_quantile(1.0).is_finite());
+    }
+
+    #[test]
+    fn gaussian_plane_to_xi_maps_the_standard_normal_to_the_uniform_square() {
+        // χ² of (ξ1, ξ2) over 8 × 8 bins for g from independent normal quantiles of a
+        // seeded generator: 63 degrees of freedom, p ≈ 1e-4 at 110.
+        let mut rng = Pcg32::new(7, 3);
+        let n = 64_000;
+        let mut bins = [0u32; 64];
+        for _ in 0..n {
+            let gx = normal_quantile(rng.next_f32() as f64 * 0.999_999 + 5e-7);
+            let gy = normal_quantile(rng.next_f32() as f64 * 0.999_999 + 5e-7);
+            let (x1, x2) = as_gaussian_to_xi(gx, gy);
+            assert!((0.0..=1.0).contains(&x1) && (0.0..=1.0).contains(&x2));
+            let (i, j) = (((x1 * 8.0) as usize).min(7), ((x2 * 8.0) as usize).min(7));
+            bins[j * 8 + i] += 1;
+        }
+        let e = n as f64 / 64.0;
+        let chi2: f64 = bins.iter().map(|&c| (c as f64 - e).powi(2) / e).sum();
+        assert!(chi2 < 110.0, "χ² {chi2}: {bins:?}");
+    }
+
+    #[test]
+    fn grid_shapes_fit_the_lobe_and_quadrature_cells_hold_all_the_mass() {
+        assert_eq!(as_grid_shape((100.0, 100.0), 32), (5, 6));
+        assert_eq!(as_grid_shape((100.0, 100.0), 16), (4, 4));
+        assert_eq!(as_grid_shape((20000.0, 70.0), 32), (1, 32));
+        assert_eq!(as_grid_shape((70.0, 20000.0), 32), (32, 1));
+        assert_eq!(as_grid_shape((1e6, 1.0), 7), (1, 7));
+        for n in 1..=64 {
+            for lobe in [(1.0, 1.0), (100.0, 10.0), (10.0, 1e4), (1e6, 1e6)] {
+                let (a, b) = as_grid_shape(lobe, n);
+                assert!(a * b <= n && a * b * 4 >= n * 3, "{lobe:?} {n}: {a} × {b}");
+            }
+        }
+        for m in [1, 2, 5, 32] {
+            let cells = quad_cells(m, 2.5);
+            let mass: f64 = cells.iter().map(|c| c.2).sum();
+            assert!((mass - 1.0).abs() < 1e-12, "{m}: {mass}");
+            for (c, d) in cells.iter().zip(cells.iter().rev()) {
+                assert!((c.0 + d.0).abs() < 1e-12 && (c.2 - d.2).abs() < 1e-6);
+            }
         }
     }
 }

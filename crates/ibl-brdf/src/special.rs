@@ -2,7 +2,7 @@
 
 /// erfc(x) with fractional error below 1.2e-7 everywhere (Numerical Recipes, 2nd ed., §6.2,
 /// `erfcc`: a Chebyshev fit of exp(−x²) erfc), finite for all x (2 at −∞, 0 at +∞).
-pub(crate) fn erfc(x: f64) -> f64 {
+pub fn erfc(x: f64) -> f64 {
     let z = x.abs();
     let t = 1.0 / (1.0 + 0.5 * z);
     let poly = -z * z - 1.26551223
