@@ -12,7 +12,10 @@
 #           with generateMipmap's chain, 24 normals × 3 views × 7 r × 5 η, F0 1 and 0.04;
 #           isoSpecular (the renderer's isotropic split sum: the custom chain above read at
 #           r_iso × (F0·A + B)) computed on the CPU and fed to both sides; the η = 0 cases
-#           (and r = 0.02, where α_t = α_b) must return it bit for bit.
+#           (and r = 0.02, where α_t = α_b) must return it bit for bit;
+#   as:     aniso-eval --emit-shader's aniso_as.glsl reading the same cube and an `hv-lut`
+#           table (float EXR, uploaded RGBA32F, bilinear), for a needle lobe (20000 × 70) and
+#           a wide one (100 × 10): 24 normals × 5 views (two near grazing), F0 1 and 0.04.
 # Then a negative control: each emitted file with one constant mutated must FAIL the same gate.
 # Outputs in target/conformance/shader-check.
 set -euo pipefail
@@ -37,6 +40,11 @@ mkdir -p "$W"
 "$BIN/shader-emulate" inputs aniso --iso-chain "$W/custom/prefilter.ktx2" --iso-sidecar "$W/custom/prefilter.json" -o "$W/aniso-inputs.json"
 "$BIN/shader-emulate" emulate "$W/custom-inputs.json" --chain "$W/custom/prefilter.ktx2" --sidecar "$W/custom/prefilter.json" -o "$W/custom-cpu.json"
 "$BIN/shader-emulate" emulate "$W/aniso-inputs.json" --chain "$W/aniso-env/cube.ktx2" -o "$W/aniso-cpu.json"
+for lobe in 20000x70 100x10; do
+	"$BIN/hv-lut" --nu "${lobe%x*}" --nv "${lobe#*x}" --size 128 -o "$W/hv-$lobe.exr" -q
+	"$BIN/shader-emulate" inputs as --lut "$W/hv-$lobe.exr" -o "$W/as-$lobe-inputs.json"
+	"$BIN/shader-emulate" emulate "$W/as-$lobe-inputs.json" --chain "$W/aniso-env/cube.ktx2" -o "$W/as-$lobe-cpu.json"
+done
 t1=$(date +%s)
 
 # Gates, measured November 2026 on Chromium's SwiftShader (docs/notes/shaders-browser.md,
@@ -71,13 +79,20 @@ t1=$(date +%s)
 #   gate is 3e-2 (the +0.25-level mutation still fails both groups: p99 5.4e-2 and 1.9e-1).
 custom_gates=(--max-mean 1e-6 --max-p99 1e-5 --corner-max-mean 2e-5 --corner-max-p99 1e-4)
 aniso_gates=(--max-mean 2e-3 --max-p99 1.5e-2 --corner-max-mean 2e-3 --corner-max-p99 3e-2)
+# as (as-grid-32, 2026-11-27): the taps come from Φ⁻¹, atan2 and exp on the GPU and from the
+#   LUT's bilinear filter (SwiftShader's filter weights against the emulation's f64 ones), no
+#   sin/cos and no VNDF rim: measured on the needle (20000 × 70) mean 1.5e-5, p99 6.2e-5 (119
+#   cases; 1 corner case 2.3e-5), on the wide lobe (100 × 10) mean 7.2e-5, p99 1.9e-4 (83) and
+#   on reads touching a corner texel mean 8.9e-5, p99 3.3e-4 (37). Gates at 3-6x; the lod bias
+#   + 0.25 mutation measured mean 3.5e-3, p99 4.8e-2 on the needle.
+as_gates=(--max-mean 3e-4 --max-p99 1e-3 --corner-max-mean 5e-4 --corner-max-p99 2e-3)
 
 fail=0
-check() { # kind glsl cube label gates...
+check() { # kind glsl cube label gates... (inputs and emulation: $W/<label>-inputs.json, -cpu.json)
 	local kind=$1 glsl=$2 cube=$3 label=$4
 	shift 4
-	node "$R/shader-check.mjs" "$kind" "$glsl" "$cube" "$W/$kind-inputs.json" "$W/$label-gpu.json" &&
-		"$BIN/shader-emulate" compare "$W/$kind-cpu.json" "$W/$label-gpu.json" --label "$label" --inputs "$W/$kind-inputs.json" "$@"
+	node "$R/shader-check.mjs" "$kind" "$glsl" "$cube" "$W/$label-inputs.json" "$W/$label-gpu.json" &&
+		"$BIN/shader-emulate" compare "$W/$label-cpu.json" "$W/$label-gpu.json" --label "$label" --inputs "$W/$label-inputs.json" "$@"
 }
 check custom "$W/custom/lookup.glsl" "$W/custom/prefilter.ktx2" custom "${custom_gates[@]}" --json "$W/custom-stats.json" || fail=1
 # Diagnosis, not a gate: the same GPU outputs against a GPU model written apart from ibl-core
@@ -86,6 +101,9 @@ check custom "$W/custom/lookup.glsl" "$W/custom/prefilter.ktx2" custom "${custom
 "$BIN/shader-emulate" emulate "$W/custom-inputs.json" --chain "$W/custom/prefilter.ktx2" --sidecar "$W/custom/prefilter.json" --gl-corners -o "$W/custom-glmodel.json"
 "$BIN/shader-emulate" compare "$W/custom-glmodel.json" "$W/custom-gpu.json" --label "custom (GPU model, corner = mean of 3)" || true
 check aniso "$W/aniso-shader/aniso_fis.glsl" "$W/aniso-env/cube.ktx2" aniso "${aniso_gates[@]}" --json "$W/aniso-stats.json" || fail=1
+for lobe in 20000x70 100x10; do
+	check as "$W/aniso-shader/aniso_as.glsl" "$W/aniso-env/cube.ktx2" "as-$lobe" "${as_gates[@]}" --json "$W/as-$lobe-stats.json" || fail=1
+done
 
 # Negative control: a wrong constant must fail. The custom lookup's scale +2% (lod off by at
 # most 0.08 of a level) and its midpoint correction dropped (the alpha channel unread: what a
@@ -125,10 +143,28 @@ for k in custom custom-noalpha aniso; do
 		fail=1
 	fi
 done
+# The as snippet's lod bias + 0.25 of a level, on the needle lobe, must fail too.
+sed -E 's/^(const float ANISO_AS_LOD_BIAS = )([0-9.e+-]+);/\1(\2 + 0.25);/' "$W/aniso-shader/aniso_as.glsl" > "$W/as-mutated.glsl"
+if cmp -s "$W/as-mutated.glsl" "$W/aniso-shader/aniso_as.glsl"; then
+	echo "shader-check: the as mutation did not apply (the emitted text changed?)" >&2
+	fail=1
+elif ! node "$R/shader-check.mjs" as "$W/as-mutated.glsl" "$W/aniso-env/cube.ktx2" "$W/as-20000x70-inputs.json" "$W/as-mutated-gpu.json"; then
+	echo "shader-check: the mutated as shader did not run" >&2
+	fail=1
+else
+	rc=0
+	"$BIN/shader-emulate" compare "$W/as-20000x70-cpu.json" "$W/as-mutated-gpu.json" --label as-mutated "${as_gates[@]}" || rc=$?
+	if [ "$rc" = 1 ]; then
+		echo "shader-check: the mutated as shader fails the gate, as it must"
+	else
+		echo "shader-check: the mutated as shader was not refused by the gate (exit $rc)" >&2
+		fail=1
+	fi
+fi
 t2=$(date +%s)
 echo "conformance/render/shader-check: bake+emulate $((t1 - t0)) s, browser+compare $((t2 - t1)) s"
 if [ "$fail" != 0 ]; then
 	echo "conformance/render/shader-check: an emitted shader and its CPU emulation disagree (see above)" >&2
 	exit 1
 fi
-echo "conformance/render/shader-check: lookup.glsl and aniso_fis.glsl run in WebGL2 and match their CPU emulation"
+echo "conformance/render/shader-check: lookup.glsl, aniso_fis.glsl and aniso_as.glsl run in WebGL2 and match their CPU emulation"

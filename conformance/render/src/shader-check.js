@@ -5,7 +5,7 @@
 //! renders into an RGBA32F target and hands the floats back. No engine, no bundler: plain
 //! WebGL2, so what runs is the emitted text and the GPU's (here SwiftShader's) sampler.
 //!
-//! ?p={"kind":"custom"|"aniso","glsl":URL,"cube":URL (KTX2),"inputs":URL (grid JSON),
+//! ?p={"kind":"custom"|"aniso"|"as","glsl":URL,"cube":URL (KTX2),"inputs":URL (grid JSON),
 //!     "mips":"generate"|"box32" (aniso; box32, for diagnosis: the 2x2 box chain computed here
 //!     in float32 and uploaded as RGBA32F, the emulation's pyramid, instead of generateMipmap)}
 
@@ -82,6 +82,15 @@ const CALL = {
     body: `vec4 n = field(0), t = field(1), b = field(2), v = field(3), rot = field(4), iso = field(5);
   o = vec4(anisoFisSpecular(u_cube, u_log2TexelSolidAngle, u_maxLod, n.xyz, t.xyz, b.xyz, v.xyz, n.w, t.w, vec3(b.w), rot.xy, iso.rgb), 1.0);`,
   },
+  // anisoAsSpecular(env, hvLut, pdfHN, gridA, gridB, log2TexelSolidAngle, maxLod, n, t, b, v,
+  // f0): the hv-lut table travels in the input grid ("lut") and is uploaded as an RGBA32F 2D
+  // texture, bilinear, clamped to the edge, no mips (the snippet's header).
+  as: {
+    fields: 4,
+    prelude: "uniform sampler2D u_lut;",
+    body: `vec4 n = field(0), t = field(1), b = field(2), v = field(3);
+  o = vec4(anisoAsSpecular(u_cube, u_lut, n.w, int(t.w), int(b.w), u_log2TexelSolidAngle, u_maxLod, n.xyz, t.xyz, b.xyz, v.xyz, vec3(v.w)), 1.0);`,
+  },
 };
 
 function fragmentSource(kind, emitted) {
@@ -153,7 +162,7 @@ async function main() {
   // custom: every level of the chain, the lod clamped to its last level (TEXTURE_MAX_LEVEL,
   // else a chain that stops above 1x1 is incomplete). aniso: level 0 and generateMipmap, the
   // full box chain the snippet's header asks for.
-  const box32 = kind === "aniso" && params.mips === "box32";
+  const box32 = kind !== "custom" && params.mips === "box32";
   const upload = kind === "custom" ? cubeData.levels : box32 ? boxChain(cubeData) : cubeData.levels.slice(0, 1);
   if (box32 && !gl.getExtension("OES_texture_float_linear")) throw new Error("no OES_texture_float_linear");
   upload.forEach((faces, l) => {
@@ -191,6 +200,21 @@ async function main() {
   gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA32F, ROW, rows * c.fields, 0, gl.RGBA, gl.FLOAT, inData);
   gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, gl.NEAREST);
   gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MAG_FILTER, gl.NEAREST);
+  if (kind === "as") {
+    const lut = grid.lut;
+    if (!lut || lut.data.length !== lut.width * lut.height * 4) throw new Error(`${inputs}: as inputs without a width x height RGBA "lut"`);
+    if (!gl.getExtension("OES_texture_float_linear")) throw new Error("no OES_texture_float_linear (the hv-lut table is RGBA32F, filtered)");
+    const lutTex = gl.createTexture();
+    gl.activeTexture(gl.TEXTURE2);
+    gl.bindTexture(gl.TEXTURE_2D, lutTex);
+    gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA32F, lut.width, lut.height, 0, gl.RGBA, gl.FLOAT, Float32Array.from(lut.data));
+    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, gl.LINEAR);
+    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MAG_FILTER, gl.LINEAR);
+    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_S, gl.CLAMP_TO_EDGE);
+    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_T, gl.CLAMP_TO_EDGE);
+    // Unit 2 keeps the table: what follows binds on unit 0, as before.
+    gl.activeTexture(gl.TEXTURE0);
+  }
 
   const prog = gl.createProgram();
   gl.attachShader(prog, compile(gl, gl.VERTEX_SHADER, `#version 300 es
@@ -201,6 +225,7 @@ void main() { vec2 p = vec2(float((gl_VertexID & 1) << 2) - 1.0, float((gl_Verte
   gl.useProgram(prog);
   gl.uniform1i(gl.getUniformLocation(prog, "u_inputs"), 0);
   gl.uniform1i(gl.getUniformLocation(prog, "u_cube"), 1);
+  if (kind === "as") gl.uniform1i(gl.getUniformLocation(prog, "u_lut"), 2);
   gl.uniform1i(gl.getUniformLocation(prog, "u_count"), grid.count);
   // log2 of the base texel's solid angle, 4 pi / (6 size^2), as the snippet's header defines it.
   gl.uniform1f(gl.getUniformLocation(prog, "u_log2TexelSolidAngle"), Math.log2((4 * Math.PI) / (6 * cubeData.size * cubeData.size)));

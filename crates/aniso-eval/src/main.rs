@@ -20,10 +20,12 @@ struct Cli {
     /// Input environments (.exr/.hdr equirect or cross, face folders, .ktx2/.ktx/.dds cubes).
     #[arg(required_unless_present = "emit_shader")]
     inputs: Vec<PathBuf>,
-    /// Write the shipped method (VNDF filtered importance sampling, 16 taps, blended into the
-    /// engine's isotropic split sum as the anisotropy vanishes) as aniso_fis.glsl,
-    /// aniso_fis.hlsl and aniso_fis.wgsl into this folder and exit: the same constants and
-    /// steps as the fisb-16 method of the evaluator.
+    /// Write the shipped methods into this folder and exit: anisotropic GGX (VNDF filtered
+    /// importance sampling, 16 taps, blended into the engine's isotropic split sum as the
+    /// anisotropy vanishes) as aniso_fis.glsl, .hlsl, .wgsl, the same constants and steps as
+    /// the evaluator's fisb-16; Ashikhmin–Shirley (the `hv-lut` table read on a grid of
+    /// equal-mass cells shaped to the lobe, ≤ 32 taps) as aniso_as.glsl, .hlsl, .wgsl, the
+    /// evaluator's as-grid-32.
     #[arg(long, value_name = "DIR", conflicts_with = "inputs")]
     emit_shader: Option<PathBuf>,
     /// Prefiltered chain (a folder of m{l}_<face> images or a .ktx2/.ktx/.dds) written by `prefilter`
@@ -46,15 +48,27 @@ fn main() {
             ibl_cli::check_output(dir, ibl_cli::OutputKind::Folder)?;
             let files: Vec<(PathBuf, Vec<u8>)> = ibl_aniso::ship::Lang::ALL
                 .iter()
-                .map(|(lang, ext)| {
-                    (
-                        dir.join(format!("aniso_fis.{ext}")),
-                        ibl_aniso::ship::emit(*lang).into_bytes(),
-                    )
+                .flat_map(|(lang, ext)| {
+                    [
+                        (
+                            dir.join(format!("aniso_fis.{ext}")),
+                            ibl_aniso::ship::emit(*lang).into_bytes(),
+                        ),
+                        (
+                            dir.join(format!("aniso_as.{ext}")),
+                            ibl_aniso::ship_as::emit(*lang).into_bytes(),
+                        ),
+                    ]
                 })
                 .collect();
             let outputs = ibl_cli::write_outputs(&files)?;
-            let details = serde_json::json!({ "shipped": ibl_aniso::ship::SHIPPED });
+            let details = serde_json::json!({
+                "shipped": ibl_aniso::ship::SHIPPED,
+                "shipped_as": {
+                    "taps": ibl_aniso::ship_as::SHIPPED_AS.taps,
+                    "lod_bias": ibl_aniso::ship_as::SHIPPED_AS.lod_bias,
+                },
+            });
             return Ok::<_, ibl_aniso::Error>((outputs, details));
         }
         let (methods, preset) = cli.params.validate()?;

@@ -333,6 +333,8 @@ fn emits_the_shipped_shader_in_three_languages() {
             if ext == "wgsl" { ": u32" } else { "" },
             ibl_aniso::ship::SHIPPED.taps
         )));
+        let text = std::fs::read_to_string(out.join(format!("aniso_as.{ext}"))).unwrap();
+        assert_eq!(text, ibl_aniso::ship_as::emit(lang), "{ext}");
     }
     // A file in the way of the folder, and a mix with inputs: one-line errors, nothing written.
     let file = dir.path().join("file");

@@ -4,8 +4,8 @@
 //! ([`scene`]), materials and their engine parameterisations ([`material`]), the runtime methods
 //! that read our baked chain and DFG table as shaders do ([`methods`]: isotropic split-sum,
 //! the LG18/HDRP, Filament and KHR bent normals, Cocco et al. 2024's major-axis sampling in
-//! [`major_axis`], VNDF filtered importance sampling), the shipped method and its GLSL/HLSL/WGSL snippets
-//! ([`ship`]) and the evaluator ([`eval`]) behind
+//! [`major_axis`], VNDF filtered importance sampling), the shipped methods and their GLSL/HLSL/WGSL
+//! snippets ([`ship`] for anisotropic GGX, [`ship_as`] for Ashikhmin–Shirley) and the evaluator ([`eval`]) behind
 //! `aniso-eval`. Conventions: docs/ANISOTROPY.md.
 
 #![warn(missing_docs)]
@@ -17,6 +17,7 @@ pub mod material;
 pub mod methods;
 pub mod scene;
 pub mod ship;
+pub mod ship_as;
 pub mod truth;
 
 use ibl_core::error::{Classify, ErrorClass};

@@ -710,9 +710,8 @@ fn as_fis(
     acc.finish()
 }
 
-/// `as-grid[j]-N[-bB]` ([`Method::AsGrid`]): the weighted, filtered taps of `as-fis` on an
-/// a × b grid of normal quantiles in the lobe's Gaussian plane (a along t), a/b =
-/// √((n_v+1)/(n_u+1)), a·b ≤ N; at the cell midpoints, or shifted per pixel by `shift`.
+/// `as-grid[j]-N[-bB]` ([`Method::AsGrid`]): the shipped steps ([`crate::ship_as::shade`])
+/// on the grid [`crate::ship_as::grid_shape`] gives for the lobe and N.
 fn as_grid(
     pyr: &BorderedMips,
     tab: &AsTables,
@@ -722,22 +721,13 @@ fn as_grid(
     bias: f32,
     shift: Option<glam::Vec2>,
 ) -> E01 {
-    let vl = frame.to_local(v).normalize();
-    if vl.z <= 0.0 || taps == 0 {
-        return ([0.0; 3], [0.0; 3]);
-    }
-    let (a, b) = as_grid_shape(tab.exponents, taps);
-    let mut acc = AsTaps::new(pyr, tab, frame, vl, (a * b) as u32, Some(bias));
-    let s = shift.unwrap_or(glam::Vec2::splat(0.5));
-    for i in 0..a {
-        let gx = normal_quantile((i as f64 + s.x as f64) / a as f64);
-        for j in 0..b {
-            let gy = normal_quantile((j as f64 + s.y as f64) / b as f64);
-            let (xi1, xi2) = as_gaussian_to_xi(gx, gy);
-            acc.tap(xi1, xi2);
-        }
-    }
-    acc.finish()
+    let (nu, nv) = tab.exponents;
+    let lobe = crate::ship_as::Lobe {
+        lut: &tab.hv,
+        pdf_h_n: tab.pdf_h_n as f32,
+        grid: crate::ship_as::grid_shape(nu, nv, taps),
+    };
+    crate::ship_as::shade(pyr, &lobe, frame, v, bias, shift)
 }
 
 /// The default half-width K of `as-quad-N`'s square, in standard deviations.
@@ -757,7 +747,7 @@ fn as_quad(
     if vl.z <= 0.0 || taps == 0 {
         return ([0.0; 3], [0.0; 3]);
     }
-    let (a, b) = as_grid_shape(tab.exponents, taps);
+    let (a, b) = crate::ship_as::grid_shape(tab.exponents.0, tab.exponents.1, taps);
     let cells_x = quad_cells(a, k as f64);
     let cells_y = quad_cells(b, k as f64);
     let log2_sa = pyr.base_log2_texel_solid_angle();
@@ -765,8 +755,8 @@ fn as_quad(
     let (mut e0, mut e1) = (Vec3::ZERO, Vec3::ZERO);
     for &(gx, dx, mx) in &cells_x {
         for &(gy, dy, my) in &cells_y {
-            let (xi1, xi2) = as_gaussian_to_xi(gx, gy);
-            let (h, ratio) = ibl_lut::hv::lookup(&tab.hv, xi1, xi2);
+            let (xi1, xi2) = crate::ship_as::gaussian_to_xi(gx as f32, gy as f32);
+            let (h, ratio) = ibl_lut::hv::lookup(&tab.hv, xi1 as f64, xi2 as f64);
             let h = h.as_vec3().normalize();
             let vh = vl.dot(h);
             let l = 2.0 * vh * h - vl;
@@ -804,83 +794,7 @@ pub(crate) fn quad_cells(m: usize, k: f64) -> Vec<(f64, f64, f64)> {
         .collect()
 }
 
-/// The grid (a, b) of `as-grid-N` for exponents (n_u, n_v): a·b ≤ N cells whose extents on
-/// the sphere, ∝ 1/(a√(n_u+1)) along t and 1/(b√(n_v+1)) along b, are as equal as N allows.
-/// The cost |ln((a/b)/ratio)| + 2 ln(N/(ab)) weighs a cell's aspect against unread taps
-/// (a 70 × 20000 lobe at N = 32 takes 32 × 1, not 23 × 1).
-pub(crate) fn as_grid_shape((nu, nv): (f64, f64), taps: usize) -> (usize, usize) {
-    let ratio = ((nv + 1.0) / (nu + 1.0)).sqrt();
-    let cost = |a: usize| {
-        let b = taps / a;
-        let aspect = (a as f64 / b as f64 / ratio).ln().abs();
-        aspect + 2.0 * (taps as f64 / (a * b) as f64).ln()
-    };
-    let a = (1..=taps)
-        .min_by(|&x, &y| cost(x).total_cmp(&cost(y)))
-        .unwrap_or(1);
-    (a, taps / a)
-}
-
-/// The thesis sampler's (ξ1, ξ2) of the point g of the lobe's Gaussian plane: ξ1 =
-/// atan2(g_y, g_x)/2π in [0, 1), ξ2 = 1 − exp(−|g|²/2). Uniform (ξ1, ξ2) for g ~ N(0, I)
-/// (the polar Box–Muller map read backwards), so p_h stays the exact tap pdf.
-pub(crate) fn as_gaussian_to_xi(gx: f64, gy: f64) -> (f64, f64) {
-    let xi1 = gy.atan2(gx) / std::f64::consts::TAU;
-    let xi1 = if xi1 < 0.0 { xi1 + 1.0 } else { xi1 };
-    let xi2 = -(-(gx * gx + gy * gy) * 0.5).exp_m1();
-    (xi1.min(1.0), xi2)
-}
-
-/// Φ⁻¹(p), the standard normal quantile (Acklam 2003, rational approximation, relative error
-/// < 1.2·10⁻⁹), for p in (0, 1).
-pub(crate) fn normal_quantile(p: f64) -> f64 {
-    const A: [f64; 6] = [
-        -3.969683028665376e1,
-        2.209460984245205e2,
-        -2.759285104469687e2,
-        1.38357751867269e2,
-        -3.066479806614716e1,
-        2.506628277459239,
-    ];
-    const B: [f64; 5] = [
-        -5.447609879822406e1,
-        1.615858368580409e2,
-        -1.556989798598866e2,
-        6.680131188771972e1,
-        -1.328068155288572e1,
-    ];
-    const C: [f64; 6] = [
-        -7.784894002430293e-3,
-        -3.223964580411365e-1,
-        -2.400758277161838,
-        -2.549732539343734,
-        4.374664141464968,
-        2.938163982698783,
-    ];
-    const D: [f64; 4] = [
-        7.784695709041462e-3,
-        3.224671290700398e-1,
-        2.445134137142996,
-        3.754408661907416,
-    ];
-    let p = p.clamp(1e-300, 1.0 - f64::EPSILON);
-    let tail = |q: f64| {
-        (((((C[0] * q + C[1]) * q + C[2]) * q + C[3]) * q + C[4]) * q + C[5])
-            / ((((D[0] * q + D[1]) * q + D[2]) * q + D[3]) * q + 1.0)
-    };
-    if p < 0.02425 {
-        tail((-2.0 * p.ln()).sqrt())
-    } else if p > 1.0 - 0.02425 {
-        -tail((-2.0 * (1.0 - p).ln()).sqrt())
-    } else {
-        let q = p - 0.5;
-        let r = q * q;
-        (((((A[0] * r + A[1]) * r + A[2]) * r + A[3]) * r + A[4]) * r + A[5]) * q
-            / (((((B[0] * r + B[1]) * r + B[2]) * r + B[3]) * r + B[4]) * r + 1.0)
-    }
-}
-
-/// The weighted, filtered Ashikhmin–Shirley taps of `as-fis` and `as-grid`: h from the LUT at
+/// The weighted, filtered Ashikhmin–Shirley taps of `as-fis`: h from the LUT at
 /// (ξ1, ξ2), l = reflect(v, h), weight F(v·h)(n·l)/max(n·v, n·l) (exact p_h importance
 /// sampling), the box pyramid read at lod ½(log2(1/(N p_l)) − log2 Ω_texel) + B with
 /// p_l = A·p_h(n)/(4 v·h) (Křivánek & Colbert 2008 eq. 13), or the raw cube without a bias.
@@ -1259,58 +1173,7 @@ mod tests {
         }
     }
     #[test]
-    fn normal_quantile_inverts_the_normal_cdf_and_is_odd() {
-        let phi = |x: f64| 0.5 * ibl_brdf::special::erfc(-x * std::f64::consts::FRAC_1_SQRT_2);
-        for k in 1..2000 {
-            let p = k as f64 / 2000.0;
-            let x = normal_quantile(p);
-            // erfc's own fractional error is 1.2e-7.
-            assert!(
-                (phi(x) - p).abs() < 2e-7 * p.min(1.0 - p).max(1e-3),
-                "{p}: {x}"
-            );
-            assert!((x + normal_quantile(1.0 - p)).abs() < 1e-8, "{p}");
-        }
-        for p in [1e-12, 1e-6, 1e-3] {
-            let x = normal_quantile(p);
-            assert!(((phi(x) - p) / p).abs() < 1e-5, "{p}: {x}");
-        }
-        assert!(normal_quantile(0.0).is_finite() && normal_quantile(1.0).is_finite());
-    }
-
-    #[test]
-    fn gaussian_plane_to_xi_maps_the_standard_normal_to_the_uniform_square() {
-        // χ² of (ξ1, ξ2) over 8 × 8 bins for g from independent normal quantiles of a
-        // seeded generator: 63 degrees of freedom, p ≈ 1e-4 at 110.
-        let mut rng = Pcg32::new(7, 3);
-        let n = 64_000;
-        let mut bins = [0u32; 64];
-        for _ in 0..n {
-            let gx = normal_quantile(rng.next_f32() as f64 * 0.999_999 + 5e-7);
-            let gy = normal_quantile(rng.next_f32() as f64 * 0.999_999 + 5e-7);
-            let (x1, x2) = as_gaussian_to_xi(gx, gy);
-            assert!((0.0..=1.0).contains(&x1) && (0.0..=1.0).contains(&x2));
-            let (i, j) = (((x1 * 8.0) as usize).min(7), ((x2 * 8.0) as usize).min(7));
-            bins[j * 8 + i] += 1;
-        }
-        let e = n as f64 / 64.0;
-        let chi2: f64 = bins.iter().map(|&c| (c as f64 - e).powi(2) / e).sum();
-        assert!(chi2 < 110.0, "χ² {chi2}: {bins:?}");
-    }
-
-    #[test]
-    fn grid_shapes_fit_the_lobe_and_quadrature_cells_hold_all_the_mass() {
-        assert_eq!(as_grid_shape((100.0, 100.0), 32), (5, 6));
-        assert_eq!(as_grid_shape((100.0, 100.0), 16), (4, 4));
-        assert_eq!(as_grid_shape((20000.0, 70.0), 32), (1, 32));
-        assert_eq!(as_grid_shape((70.0, 20000.0), 32), (32, 1));
-        assert_eq!(as_grid_shape((1e6, 1.0), 7), (1, 7));
-        for n in 1..=64 {
-            for lobe in [(1.0, 1.0), (100.0, 10.0), (10.0, 1e4), (1e6, 1e6)] {
-                let (a, b) = as_grid_shape(lobe, n);
-                assert!(a * b <= n && a * b * 4 >= n * 3, "{lobe:?} {n}: {a} × {b}");
-            }
-        }
+    fn quadrature_cells_hold_all_the_mass() {
         for m in [1, 2, 5, 32] {
             let cells = quad_cells(m, 2.5);
             let mass: f64 = cells.iter().map(|c| c.2).sum();

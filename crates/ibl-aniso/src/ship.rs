@@ -339,7 +339,7 @@ pub fn specular(e: &E01, f0: [f32; 3]) -> [f32; 3] {
 }
 
 /// A float literal GLSL, HLSL and WGSL all read back to the same f32.
-fn lit(v: f32) -> String {
+pub(crate) fn lit(v: f32) -> String {
     let s = format!("{v:?}");
     if s.contains('.') || s.contains('e') {
         s
@@ -723,7 +723,7 @@ fn aniso_fis_specular(env: texture_cube<f32>, samp: sampler, log2_texel_solid_an
 "#;
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::material::Material;
     use crate::methods::{evaluate, Inputs, Lookup, Method};
@@ -1031,7 +1031,7 @@ mod tests {
             .ok()
     }
 
-    fn assert_compiles(tool: &str, args: &[&str], file: &std::path::Path) {
+    pub(crate) fn assert_compiles(tool: &str, args: &[&str], file: &std::path::Path) {
         match run_tool(tool, args, file) {
             // CI installs both (.ci/run runs scripts/setup-shader-validators.sh), so there a
             // missing tool is a failure, never a silent pass.

@@ -65,6 +65,9 @@ pub enum Kind {
     /// (v, 0), (rotation.xy, 0, 0), (isoSpecular.rgb, 0) — the last the isotropic split sum
     /// computed on the CPU ([`IsoSplitSum`]) and fed to both sides.
     Aniso,
+    /// `anisoAsSpecular(...)` of aniso_as.glsl: four fields (n, p_h(n)), (t, grid a),
+    /// (b, grid b), (v, F0), and the lobe's `hv-lut` table carried in the grid ([`Grid::lut`]).
+    As,
 }
 
 impl Kind {
@@ -73,6 +76,7 @@ impl Kind {
         match self {
             Kind::Custom => 1,
             Kind::Aniso => 6,
+            Kind::As => 4,
         }
     }
 }
@@ -102,6 +106,20 @@ pub struct Grid {
     pub count: usize,
     /// count · fields · 4 floats.
     pub data: Vec<f32>,
+    /// The 2D table the shader reads besides the cube ([`Kind::As`]'s half-vector LUT).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lut: Option<Lut>,
+}
+
+/// An RGBA float table, row 0 first (uploaded as an RGBA32F 2D texture, bilinear, clamped).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Lut {
+    /// Width in texels.
+    pub width: usize,
+    /// Height in texels.
+    pub height: usize,
+    /// width · height · 4 floats.
+    pub data: Vec<f32>,
 }
 
 impl Grid {
@@ -118,6 +136,7 @@ impl Grid {
             fields,
             count: data.len() / (4 * fields),
             data,
+            lut: None,
         }
     }
 
@@ -161,6 +180,29 @@ impl Grid {
         }
         if self.role == Role::Inputs && self.data.iter().any(|v| !v.is_finite()) {
             return Err(invalid(path, "non-finite input value"));
+        }
+        match (
+            &self.lut,
+            self.kind == Kind::As && self.role == Role::Inputs,
+        ) {
+            (None, true) => return Err(invalid(path, "as inputs carry no \"lut\"")),
+            (Some(l), _)
+                if l.width == 0
+                    || l.height == 0
+                    || l.data.len() != l.width * l.height * 4
+                    || l.data.iter().any(|v| !v.is_finite()) =>
+            {
+                return Err(invalid(
+                    path,
+                    format!(
+                        "lut: {} floats for {}x{} RGBA, or a non-finite value",
+                        l.data.len(),
+                        l.width,
+                        l.height
+                    ),
+                ))
+            }
+            _ => {}
         }
         Ok(())
     }
@@ -257,27 +299,40 @@ impl IsoSplitSum<'_> {
     }
 }
 
+/// The frames of the anisotropic inputs: normals of [`directions`], each tangent turned about
+/// its normal by a helper direction (any orthonormal one where the helper is near the normal).
+fn input_frames(normals: usize) -> Vec<Frame> {
+    let helpers = directions(normals + 7);
+    directions(normals)
+        .into_iter()
+        .take(normals)
+        .enumerate()
+        .map(|(k, n)| {
+            let h = helpers[(k * 5 + 3) % normals.max(1)];
+            let h = if h.cross(n).length() < 0.2 {
+                n.any_orthonormal_vector()
+            } else {
+                h
+            };
+            let t = (h - n * n.dot(h)).normalize();
+            Frame {
+                t,
+                b: n.cross(t),
+                n,
+            }
+        })
+        .collect()
+}
+
 /// The anisotropic method's inputs: `normals` frames (normal of [`directions`], tangent turned
 /// about it) × [`ANISO_VIEW_POLAR`] views × the (r, η) grid (Kulla–Conty α_t, α_b through
 /// `ibl_aniso::material::Material::ggx_kc`, the evaluator's conversion), F0 alternating 1 and
 /// 0.04, a per-case rotation of the Hammersley set, and `iso`'s isotropic split sum.
 pub fn aniso_inputs(normals: usize, iso: &IsoSplitSum) -> Grid {
     let mut data = Vec::new();
-    let helpers = directions(normals + 7);
     let mut case = 0u64;
-    for (k, n) in directions(normals).into_iter().take(normals).enumerate() {
-        let h = helpers[(k * 5 + 3) % normals.max(1)];
-        let h = if h.cross(n).length() < 0.2 {
-            n.any_orthonormal_vector()
-        } else {
-            h
-        };
-        let t = (h - n * n.dot(h)).normalize();
-        let frame = Frame {
-            t,
-            b: n.cross(t),
-            n,
-        };
+    for (k, frame) in input_frames(normals).into_iter().enumerate() {
+        let (n, t) = (frame.n, frame.t);
         for (j, theta) in ANISO_VIEW_POLAR.into_iter().enumerate() {
             let phi = 2.4 * k as f32 + 1.7 * j as f32;
             let v = frame.to_world(Vec3::new(
@@ -306,6 +361,113 @@ pub fn aniso_inputs(normals: usize, iso: &IsoSplitSum) -> Grid {
     Grid::new(Kind::Aniso, Role::Inputs, data)
 }
 
+/// The Ashikhmin–Shirley method's inputs for the lobe of the `hv-lut` table `lut` (its
+/// sidecar beside it, `stem.json`, gives n_u, n_v and p_h(n)): `normals` frames × the views of
+/// [`ANISO_VIEW_POLAR`] and two more near grazing, F0 alternating 1 and 0.04, the grid
+/// [`ibl_aniso::ship_as::grid_shape`] gives for the lobe at the shipped budget.
+pub fn as_inputs(normals: usize, lut: &Path) -> Result<Grid> {
+    let img = ibl_core::io::read_image(lut, ibl_core::io::ColorSpace::Linear)?;
+    if img.channels != 4 {
+        return Err(invalid(
+            lut,
+            format!("{} channels, an hv-lut table has 4", img.channels),
+        ));
+    }
+    let sidecar = lut.with_extension("json");
+    let text = std::fs::read_to_string(&sidecar).map_err(|e| invalid(&sidecar, e.to_string()))?;
+    let sc: ibl_lut::hv::Sidecar =
+        serde_json::from_str(&text).map_err(|e| invalid(&sidecar, e.to_string()))?;
+    if sc.size != img.width || sc.size != img.height {
+        return Err(invalid(
+            &sidecar,
+            format!(
+                "size {} but the table is {}x{}",
+                sc.size, img.width, img.height
+            ),
+        ));
+    }
+    let (a, b) = ibl_aniso::ship_as::grid_shape(sc.nu, sc.nv, ibl_aniso::ship_as::SHIPPED_AS.taps);
+    let mut data = Vec::new();
+    let mut case = 0u64;
+    for (k, frame) in input_frames(normals).into_iter().enumerate() {
+        let (n, t) = (frame.n, frame.t);
+        for (j, theta) in ANISO_VIEW_POLAR.into_iter().chain([1.45, 1.55]).enumerate() {
+            let phi = 2.4 * k as f32 + 1.7 * j as f32;
+            let v = frame.to_world(Vec3::new(
+                theta.sin() * phi.cos(),
+                theta.sin() * phi.sin(),
+                theta.cos(),
+            ));
+            let f0 = if case.is_multiple_of(2) { 1.0 } else { 0.04 };
+            data.extend([n.x, n.y, n.z, sc.p_h_n as f32]);
+            data.extend([t.x, t.y, t.z, a as f32]);
+            data.extend([frame.b.x, frame.b.y, frame.b.z, b as f32]);
+            data.extend([v.x, v.y, v.z, f0]);
+            case += 1;
+        }
+    }
+    let mut g = Grid::new(Kind::As, Role::Inputs, data);
+    g.lut = Some(Lut {
+        width: img.width,
+        height: img.height,
+        data: img.data,
+    });
+    Ok(g)
+}
+
+/// The shipped Ashikhmin–Shirley method's CPU emulation (`ibl_aniso::ship_as::shade`, the
+/// snippet's steps) at every input case, alpha the most special read among its taps.
+pub fn emulate_as(inputs: &Grid, pyramid: &BorderedMips) -> Result<Grid> {
+    let lut = inputs.lut.as_ref().ok_or_else(|| Error::Invalid {
+        path: "inputs".into(),
+        msg: "as inputs carry no lut".into(),
+    })?;
+    let mut img = ibl_core::Image::new(lut.width, lut.height, 4);
+    img.data.copy_from_slice(&lut.data);
+    let bias = ibl_aniso::ship_as::SHIPPED_AS.lod_bias;
+    let sizes = pyramid.sizes();
+    let (log2_sa, max_lod) = (
+        pyramid.base_log2_texel_solid_angle(),
+        pyramid.max_lod() as f32,
+    );
+    let mut data = Vec::with_capacity(inputs.count * 4);
+    for i in 0..inputs.count {
+        let c = inputs.case(i);
+        let v3 = |k: usize| Vec3::new(c[4 * k], c[4 * k + 1], c[4 * k + 2]);
+        let frame = Frame {
+            n: v3(0),
+            t: v3(1),
+            b: v3(2),
+        };
+        let lobe = ibl_aniso::ship_as::Lobe {
+            lut: &img,
+            pdf_h_n: c[3],
+            grid: (c[7] as usize, c[11] as usize),
+        };
+        let f0 = c[15];
+        let e = ibl_aniso::ship_as::shade(pyramid, &lobe, &frame, v3(3), bias, None);
+        let rgb = ship::specular(&e, [f0; 3]);
+        let vl = frame.to_local(v3(3)).normalize();
+        let mut class = ReadClass::Exact;
+        if vl.z > 0.0 {
+            ibl_aniso::ship_as::for_each_tap(
+                &lobe,
+                vl,
+                log2_sa,
+                max_lod,
+                bias,
+                None,
+                |l, _, lod| {
+                    let w = frame.to_world(l);
+                    class = class.max(ReadClass::of(w, read_touches_corner(&sizes, w, lod)));
+                },
+            );
+        }
+        data.extend([rgb[0], rgb[1], rgb[2], class.alpha()]);
+    }
+    Ok(Grid::new(Kind::As, Role::Outputs, data))
+}
+
 /// The grid with every input moved by a relative `eps` (uniform in ±eps, seeded): for
 /// diagnosis, how much the emulation itself moves under perturbations of the size of float
 /// rounding (the conditioning a GPU's differently rounded arithmetic meets). Materials (α, F0)
@@ -315,6 +477,7 @@ pub fn jitter(inputs: &Grid, eps: f32, seed: u64) -> Grid {
     let keep: &[usize] = match g.kind {
         Kind::Custom => &[3],
         Kind::Aniso => &[3, 7, 11, 15, 18, 19, 23],
+        Kind::As => &[3, 7, 11, 15],
     };
     let n = 4 * g.fields;
     let mut rng = Pcg32::new(seed, 99);
@@ -1051,5 +1214,55 @@ mod tests {
         assert!(!corner_footprint(4, 0.9, 0.0));
         assert!(corner_footprint(1, 0.0, 0.0));
         assert!(!corner_footprint(64, 0.97, 0.97));
+    }
+
+    #[test]
+    fn as_inputs_read_a_real_hv_lut_and_refuse_a_missing_sidecar() {
+        let dir = tempfile::tempdir().unwrap();
+        let lut = dir.path().join("hv.exr");
+        let params = ibl_lut::hv::Params {
+            nu: Some(1000.0),
+            nv: Some(20.0),
+            ..Default::default()
+        };
+        let baked = ibl_lut::hv::run(&params, &lut, &ibl_core::progress::NoProgress).unwrap();
+        for (path, bytes) in &baked.files {
+            std::fs::write(path, bytes).unwrap();
+        }
+        let g = as_inputs(2, &lut).unwrap();
+        assert_eq!((g.kind, g.fields, g.count), (Kind::As, 4, 10));
+        let l = g.lut.as_ref().unwrap();
+        assert_eq!(l.data.len(), l.width * l.height * 4);
+        // The grid of the lobe, p_h(n) from the sidecar.
+        let c = g.case(0);
+        let want = ibl_aniso::ship_as::grid_shape(1000.0, 20.0, 32);
+        assert_eq!((c[7] as usize, c[11] as usize), want);
+        let pdf = ibl_brdf_pdf(1000.0, 20.0);
+        assert!((c[3] as f64 - pdf).abs() < 1e-3 * pdf, "{} {pdf}", c[3]);
+        // JSON round trip keeps the table; a grid without it is refused by name.
+        let path = dir.path().join("in.json");
+        g.write(&path).unwrap();
+        assert_eq!(Grid::read(&path).unwrap(), g);
+        let mut bare = g.clone();
+        bare.lut = None;
+        bare.write(&path).unwrap();
+        let e = Grid::read(&path).unwrap_err().to_string();
+        assert!(e.contains("in.json") && e.contains("lut"), "{e}");
+        // Under a constant sky every case is F0 × a directional albedo in (0, 1].
+        let out = emulate_as(&g, &aniso_pyramid(Cubemap::constant(8, [2.0; 3]))).unwrap();
+        for i in 0..out.count {
+            let o = out.case(i);
+            assert!(
+                o[0] > 0.0 && o[0] <= 2.0 && o[0] == o[1] && o[1] == o[2],
+                "{o:?}"
+            );
+        }
+        std::fs::remove_file(dir.path().join("hv.json")).unwrap();
+        let e = as_inputs(2, &lut).unwrap_err().to_string();
+        assert!(e.contains("hv.json"), "{e}");
+    }
+
+    fn ibl_brdf_pdf(nu: f64, nv: f64) -> f64 {
+        ((nu + 1.0) * (nv + 1.0)).sqrt() / (2.0 * std::f64::consts::PI)
     }
 }

@@ -3,8 +3,8 @@
 
 use clap::{Parser, Subcommand};
 use shader_emulate::{
-    aniso_inputs, aniso_pyramid, compare, custom_inputs, custom_lookup_from_sidecar, emulate_aniso,
-    emulate_custom, Grid, IsoSplitSum, Kind, Result,
+    aniso_inputs, aniso_pyramid, as_inputs, compare, custom_inputs, custom_lookup_from_sidecar,
+    emulate_aniso, emulate_as, emulate_custom, Grid, IsoSplitSum, Kind, Result,
 };
 use std::path::PathBuf;
 
@@ -39,6 +39,9 @@ enum Cmd {
         /// aniso: that chain's prefilter.json (its custom lookup constants).
         #[arg(long)]
         iso_sidecar: Option<PathBuf>,
+        /// as: the lobe's `hv-lut` table (.exr, float), its sidecar beside it (.json).
+        #[arg(long)]
+        lut: Option<PathBuf>,
         /// Output JSON.
         #[arg(short, long)]
         output: PathBuf,
@@ -47,8 +50,8 @@ enum Cmd {
     Emulate {
         /// Input grid (from `inputs`).
         inputs: PathBuf,
-        /// Custom: the chain (prefilter.ktx2). Aniso: the environment cube (its level 0 is
-        /// read, and box-mipped down to 1×1 as generateMipmap does).
+        /// Custom: the chain (prefilter.ktx2). Aniso and as: the environment cube (its level 0
+        /// is read, and box-mipped down to 1×1 as generateMipmap does).
         #[arg(long)]
         chain: PathBuf,
         /// Custom: the bake's prefilter.json (its "custom_lookup").
@@ -107,10 +110,20 @@ fn run(cli: Cli) -> Result<bool> {
             normals,
             iso_chain,
             iso_sidecar,
+            lut,
             output,
         } => {
             let g = match kind {
                 Kind::Custom => custom_inputs(dirs, roughness),
+                Kind::As => {
+                    let Some(lut) = lut else {
+                        return Err(shader_emulate::Error::Invalid {
+                            path: output.display().to_string(),
+                            msg: "as inputs need --lut hv.exr (an hv-lut table)".into(),
+                        });
+                    };
+                    as_inputs(normals, &lut)?
+                }
                 Kind::Aniso => {
                     let (Some(chain), Some(sc)) = (iso_chain, iso_sidecar) else {
                         return Err(shader_emulate::Error::Invalid {
@@ -175,6 +188,10 @@ fn run(cli: Cli) -> Result<bool> {
                     &inp,
                     &aniso_pyramid(mips.levels.into_iter().next().unwrap()),
                 ),
+                Kind::As => emulate_as(
+                    &inp,
+                    &aniso_pyramid(mips.levels.into_iter().next().unwrap()),
+                )?,
             };
             out.write(&output)?;
             Ok(true)
