@@ -82,7 +82,10 @@ fn one() -> f32 {
 pub enum Model {
     /// Isotropic GGX.
     Ggx,
-    /// Anisotropic Ashikhmin-Shirley with exponents (n_u, n_v).
+    /// Anisotropic Ashikhmin-Shirley with exponents (n_u, n_v). Derives the lobe's `hv-lut`
+    /// table (and its size/bias table, the thesis's route): what the shipped
+    /// `aniso_as.{glsl,hlsl,wgsl}` snippet (`aniso-eval --emit-shader`) reads with the probe's
+    /// cube.
     AshikhminShirley {
         /// Exponent along the tangent.
         n_u: f64,
