@@ -181,6 +181,20 @@ impl Grid {
         if self.role == Role::Inputs && self.data.iter().any(|v| !v.is_finite()) {
             return Err(invalid(path, "non-finite input value"));
         }
+        if self.kind == Kind::As && self.role == Role::Inputs {
+            // The tap grid (a, b) of each case: whole numbers, at most the shipped budget.
+            let max = ibl_aniso::ship_as::SHIPPED_AS.taps as f32;
+            for i in 0..self.count {
+                let c = self.case(i);
+                let (a, b) = (c[7], c[11]);
+                if a.fract() != 0.0 || b.fract() != 0.0 || a < 1.0 || b < 1.0 || a * b > max {
+                    return Err(invalid(
+                        path,
+                        format!("case {i}: tap grid {a} x {b} is not whole numbers with 1 <= a·b <= {max}"),
+                    ));
+                }
+            }
+        }
         match (
             &self.lut,
             self.kind == Kind::As && self.role == Role::Inputs,
@@ -1243,6 +1257,11 @@ mod tests {
         let path = dir.path().join("in.json");
         g.write(&path).unwrap();
         assert_eq!(Grid::read(&path).unwrap(), g);
+        let mut big = g.clone();
+        big.data[7] = 1e9;
+        big.write(&path).unwrap();
+        let e = Grid::read(&path).unwrap_err().to_string();
+        assert!(e.contains("in.json") && e.contains("tap grid"), "{e}");
         let mut bare = g.clone();
         bare.lut = None;
         bare.write(&path).unwrap();
