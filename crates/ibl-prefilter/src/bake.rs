@@ -1072,11 +1072,16 @@ fn bake_resampled(params: &Params, resampled: Resampled, progress: &dyn Progress
         let estimated_error = (!params.reference).then(|| match &engine {
             Engine::Tree(tree, _) => estimate_error(
                 &fine_cube,
-                &|d, a| tree.brute_convolve(d, a),
+                &|d, a| tree.brute_convolve_many(d, a),
                 tree.texel_count(),
                 r,
             ),
-            _ => estimate_error(&fine_cube, &|d, a| texels.convolve(d, a), texels.len(), r),
+            _ => estimate_error(
+                &fine_cube,
+                &|d, a| d.iter().map(|&d| texels.convolve(d, a)).collect(),
+                texels.len(),
+                r,
+            ),
         });
         estimate_seconds += te.elapsed().as_secs_f64();
         estimate_cpu += cpu.lap();
@@ -1639,7 +1644,7 @@ const ESTIMATE_BUDGET: usize = 10_000_000;
 /// over every source texel.
 pub(crate) fn estimate_error(
     level: &Cubemap,
-    brute: &(dyn Fn(glam::Vec3, f32) -> ibl_core::Rgb + Sync),
+    brute: &(dyn Fn(&[glam::Vec3], f32) -> Vec<ibl_core::Rgb> + Sync),
     source_texels: usize,
     roughness: f32,
 ) -> EstimatedError {
@@ -1648,11 +1653,26 @@ pub(crate) fn estimate_error(
     let g = ((per_face as f64).sqrt() as usize).clamp(1, 4);
     let probes = probe_texels(level.size, g);
     let alpha = roughness * roughness;
+    // One group of probes a thread, each group one pass over the source
+    // (`CellTree::brute_convolve_many`: a pass per probe was bound by reading the source, not
+    // by the kernel; the estimate's CPU halved). Each probe's sum is its own, so the grouping,
+    // hence the thread count, leaves the bits as they are.
+    let group = probes.len().div_ceil(rayon::current_num_threads()).max(1);
     let pairs: Vec<(f64, f64)> = probes
-        .par_iter()
-        .map(|&(f, i, j)| {
-            let r = brute(texel_direction(f, i, j, level.size), alpha);
-            (luminance(level.texel(f, i, j)) as f64, luminance(r) as f64)
+        .par_chunks(group)
+        .flat_map_iter(|group| {
+            let dirs: Vec<glam::Vec3> = group
+                .iter()
+                .map(|&(f, i, j)| texel_direction(f, i, j, level.size))
+                .collect();
+            let values = brute(&dirs, alpha);
+            group
+                .iter()
+                .zip(values)
+                .map(|(&(f, i, j), r)| {
+                    (luminance(level.texel(f, i, j)) as f64, luminance(r) as f64)
+                })
+                .collect::<Vec<_>>()
         })
         .collect();
     let s = ErrorStats::from_pairs(pairs);
