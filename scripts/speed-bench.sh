@@ -16,6 +16,12 @@ full=""
 [ "${1:-}" = "--full" ] && full=1
 work=/tmp/ibl-speed-bench
 mkdir -p "$work"
+# numpy makes the procedural sources and measures the bandwidth floor (a fresh machine may lack
+# it until `make ray-test` has installed Ray, which pulls it in).
+if ! python3 -c 'import numpy' >/dev/null 2>&1; then
+	echo "speed-bench: installing numpy from PyPI (once)"
+	python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ignore numpy
+fi
 # The base commit, built once outside the repository (git archive: no worktree metadata).
 basedir=/tmp/ibl-base-$base
 if [ ! -x "$basedir/target/release/prefilter" ]; then
