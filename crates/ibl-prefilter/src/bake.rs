@@ -286,6 +286,12 @@ pub const RUNTIME_REFERENCE: TreeParams = TreeParams {
     horizon: 0.12,
 };
 
+#[cfg(test)]
+thread_local! {
+    /// Bakes on this thread whose runtime report read level 0 in place of the source.
+    static SOURCE_LET_GO: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
+}
+
 /// Largest level-0 face accepted.
 pub const MAX_SIZE: usize = 4096;
 /// Largest sample count accepted per texel.
@@ -1262,15 +1268,14 @@ fn bake_resampled(params: &Params, resampled: Resampled, progress: &dyn Progress
         runtime: None,
         custom_lookup: custom_lookup.clone(),
     };
-    // When level 0 is the source itself (same size; the fit leaves the mirror alone and a
-    // stock target's read-power step skips it), the chain's level 0 is a copy of it, bit for
-    // bit: the report reads the chain's, and the source goes before the report's bordered copy
-    // of the chain (12 bytes a texel: 19 MB of the 512² bake's peak, which the report set).
-    let source = if source.size == size
-        && params.target != Target::Custom
-        && matches!(engine, Engine::Tree(..))
-        && levels[0] == source
-    {
+    // Where level 0 is the source itself (same size, and nothing after the fit changed it:
+    // the stock targets' read-power step and the custom sharpening skip the mirror), the
+    // chain's level 0 is a copy of it, bit for bit: the report reads the chain's, and the
+    // source goes before the report's bordered copy of the chain (12 bytes a texel: 19 MB of
+    // the 512² bake's peak, which the report set). The comparison is the whole condition.
+    let source = if levels[0] == source {
+        #[cfg(test)]
+        SOURCE_LET_GO.with(|c| c.set(c.get() + 1));
         drop(source);
         release_freed_memory();
         None
@@ -2106,6 +2111,32 @@ mod tests {
         }
         let (ra, rb) = (one.report.runtime.unwrap(), three.report.runtime.unwrap());
         assert_eq!(ra.mean_abs_rel, rb.mean_abs_rel);
+    }
+
+    #[test]
+    fn the_report_reads_level_0_in_place_of_an_equal_source_only() {
+        // studio_256.exr (256×128) holds about 64² texels a face. At --size 64 the source cube
+        // is 64², level 0 is the source, which goes before the report, and the report reads
+        // level 0 (bit-identical: the goldens' runtime blocks did not move when this came in).
+        // At --size 32 the source is 64² and level 0 its box reduction: the source is kept.
+        use ibl_core::envmap::load_environment;
+        let path = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+            .join("../../fixtures/hdri/studio_256.exr");
+        let d = tempfile::tempdir().unwrap();
+        let np = &ibl_core::progress::NoProgress;
+        for (size, let_go) in [(64, 1), (32, 0)] {
+            let before = SOURCE_LET_GO.with(|c| c.get());
+            let params = Params {
+                size,
+                levels: Some(4),
+                ..Default::default()
+            };
+            let out = d.path().join(size.to_string());
+            let baked = run(&params, load_environment(&path, false).unwrap(), &out, np).unwrap();
+            assert!(baked.chain.report.runtime.is_some());
+            let after = SOURCE_LET_GO.with(|c| c.get());
+            assert_eq!(after - before, let_go, "--size {size}");
+        }
     }
 
     #[test]
