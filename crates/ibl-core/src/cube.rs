@@ -172,21 +172,41 @@ pub fn bilinear_taps_at(n: usize, face: Face, sc: f32, tc: f32) -> [(usize, f32)
         ]);
         return taps;
     }
+    let weights = [
+        (1.0 - fx) * (1.0 - fy),
+        fx * (1.0 - fy),
+        (1.0 - fx) * fy,
+        fx * fy,
+    ];
     let mut k = 0;
-    for (i, j, w) in [
-        (x0, y0, (1.0 - fx) * (1.0 - fy)),
-        (x0 + 1, y0, fx * (1.0 - fy)),
-        (x0, y0 + 1, (1.0 - fx) * fy),
-        (x0 + 1, y0 + 1, fx * fy),
-    ] {
-        let (texels, count) = ghost_indices(n, face, i, j);
-        for &(f, i, j) in &texels[..count] {
+    for ((texels, count), w) in bilinear_cell_taps(n, face, x0, y0).into_iter().zip(weights) {
+        for &p in &texels[..count] {
             // A 2×2 footprint holds at most one cube-corner texel (4 + 2 entries).
-            taps[k] = (f as usize * n * n + j * n + i, w / count as f32);
+            taps[k] = (p, w / count as f32);
             k += 1;
         }
     }
     taps
+}
+
+/// The texels of the four taps of the bilinear cell whose first texel is (x0, y0) of face
+/// `face` (−1 ≤ x0, y0 ≤ n − 1), in the order of [`bilinear_taps_at`]'s weights: each as up to
+/// three indices face·n² + j·n + i and their count (a tap past an edge re-projected from the
+/// neighbour face, a cube-corner tap the three texels meeting there, [`ghost_indices`]). What
+/// [`bilinear_taps_at`] blends, for callers that read many points of one cell.
+pub fn bilinear_cell_taps(n: usize, face: Face, x0: isize, y0: isize) -> [([usize; 3], usize); 4] {
+    let mut out = [([0usize; 3], 0usize); 4];
+    for (k, (i, j)) in [(x0, y0), (x0 + 1, y0), (x0, y0 + 1), (x0 + 1, y0 + 1)]
+        .into_iter()
+        .enumerate()
+    {
+        let (texels, count) = ghost_indices(n, face, i, j);
+        for (e, &(f, i, j)) in texels[..count].iter().enumerate() {
+            out[k].0[e] = f as usize * n * n + j * n + i;
+        }
+        out[k].1 = count;
+    }
+    out
 }
 
 /// Face coordinate of the centre of texel `i` on an `n`-texel edge: 2(i+0.5)/n − 1.

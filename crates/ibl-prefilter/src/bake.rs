@@ -1163,12 +1163,18 @@ fn bake_resampled(params: &Params, resampled: Resampled, progress: &dyn Progress
     if params.target == Target::Custom || !params.reference {
         let power = source_power;
         let skip = usize::from(params.target != Target::Custom);
-        for level in levels.iter_mut().skip(skip) {
-            if level.size <= spatial::READ_POWER_MAX_SIZE {
+        use rayon::prelude::*;
+        // One level a job: each level's weights are summed in their own fixed order (the same
+        // bits for any thread count), and the small levels' integrations (29 ms apiece, 115 ms
+        // of the gltf default's 7 levels) no longer run one after the other on one core.
+        levels
+            .par_iter_mut()
+            .skip(skip)
+            .filter(|level| level.size <= spatial::READ_POWER_MAX_SIZE)
+            .for_each(|level| {
                 let w = spatial::read_weights(level.size);
                 spatial::keep_read_power(level, power, &w);
-            }
-        }
+            });
     }
     // The custom lookup's alpha channel: per interval, the kernel's luminance at its midpoint
     // on the finer level's texels, less that level's own (less the blend on the mirror).

@@ -605,7 +605,7 @@ pub fn correction(lo: &Cubemap, mid: &Cubemap, hi: &Cubemap) -> Cubemap {
         }
     }
     let w: Vec<f64> = if n <= spatial::READ_POWER_MAX_SIZE {
-        spatial::read_weights(n)
+        spatial::read_weights(n).to_vec()
     } else {
         let sa = solid_angle_table(n);
         (0..6).flat_map(|_| sa.iter().map(|&s| s as f64)).collect()
