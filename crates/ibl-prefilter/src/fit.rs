@@ -78,23 +78,28 @@ pub enum Coarser {
 /// [`Cubemap::sample_bilinear`], whose weights there are these to f32 round-off (through the
 /// normalised direction); the sampler on every texel was 10–25% of the fit's time.
 pub fn read_at_texels(level: &Cubemap, n: usize) -> Cubemap {
+    use rayon::prelude::*;
     let m = level.size;
     let lerp = |a: f32, b: f32, t: f32| a + (b - a) * t;
+    // A face a job: every texel is its own read (the same bits for any thread count).
     if m == 2 * n {
         let mut out = Cubemap::new(n);
-        for (o, src) in out.faces.iter_mut().zip(&level.faces) {
-            for j in 0..n {
-                for i in 0..n {
-                    let (a, b) = (src.texel(2 * i, 2 * j), src.texel(2 * i + 1, 2 * j));
-                    let (c, e) = (src.texel(2 * i, 2 * j + 1), src.texel(2 * i + 1, 2 * j + 1));
-                    let t = o.texel_mut(i, j);
-                    for k in 0..3 {
-                        let (top, bot) = (lerp(a[k], b[k], 0.5), lerp(c[k], e[k], 0.5));
-                        t[k] = lerp(top, bot, 0.5);
+        out.faces
+            .par_iter_mut()
+            .zip(&level.faces)
+            .for_each(|(o, src)| {
+                for j in 0..n {
+                    for i in 0..n {
+                        let (a, b) = (src.texel(2 * i, 2 * j), src.texel(2 * i + 1, 2 * j));
+                        let (c, e) = (src.texel(2 * i, 2 * j + 1), src.texel(2 * i + 1, 2 * j + 1));
+                        let t = o.texel_mut(i, j);
+                        for k in 0..3 {
+                            let (top, bot) = (lerp(a[k], b[k], 0.5), lerp(c[k], e[k], 0.5));
+                            t[k] = lerp(top, bot, 0.5);
+                        }
                     }
                 }
-            }
-        }
+            });
         return out;
     }
     if n == 2 * m && m >= 2 {
@@ -108,7 +113,8 @@ pub fn read_at_texels(level: &Cubemap, n: usize) -> Cubemap {
                 ((i - 1) / 2, 0.25)
             }
         };
-        for (fi, (o, src)) in out.faces.iter_mut().zip(&level.faces).enumerate() {
+        let faces = out.faces.par_iter_mut().zip(&level.faces).enumerate();
+        faces.for_each(|(fi, (o, src))| {
             let face = ibl_core::cube::Face::from_index(fi);
             for j in 0..n {
                 for i in 0..n {
@@ -127,7 +133,7 @@ pub fn read_at_texels(level: &Cubemap, n: usize) -> Cubemap {
                     }
                 }
             }
-        }
+        });
         return out;
     }
     Cubemap::from_fn(n, |d| level.sample_bilinear(d))
@@ -332,11 +338,10 @@ fn power_kept_steps<'a>(hulls: &'a Hulls, omega: impl Fn(usize) -> f64 + Sync) -
     }
     // Too much power (change > 0): prices rise, texels step left; too little: right.
     let left = change > 0.0;
-    // Texel t's steps that way, (price to reach, texel, vertex moved to), in order of rising
-    // price (its hull is convex with strict corners). Left: vertices i−1 … 0; right: i+1 …
-    // and past the last vertex, where g rises along its steepest piece without end (a step,
-    // marked by the vertex count, that can take any amount).
-    let events_of = |(t, c, u): (usize, &'a HullChunk, usize)| steps_of(c, u, t, left);
+    // Texel t's steps that way ([`steps_of`]), (price to reach, texel, vertex moved to), in
+    // order of rising price (its hull is convex with strict corners). Left: vertices i−1 … 0;
+    // right: i+1 … and past the last vertex, where g rises along its steepest piece without
+    // end (a step, marked by the vertex count, that can take any amount).
     let vertex = |t: usize, j: usize| hulls.get(t).0.get(j).map(|v| v.0);
     // Power moved by one step (from the adjacent vertex; infinite for the unbounded one).
     let moved = |&(_, t, j): &(f64, u32, u32)| -> f64 {
@@ -369,10 +374,24 @@ fn power_kept_steps<'a>(hulls: &'a Hulls, omega: impl Fn(usize) -> f64 + Sync) -
         let k = if (k as i64) < 0 { !k } else { k | (1 << 63) };
         (k >> (64 - PRICE_BUCKET_BITS)) as usize
     };
+    // The events of a group of chunks in parallel (their slopes and the hulls they read are
+    // most of the cost), then added in texel order: the same sums, bits, as one pass.
+    use rayon::prelude::*;
     let mut sums = vec![0.0f64; 1 << PRICE_BUCKET_BITS];
-    for texel in texels() {
-        for e in events_of(texel) {
-            sums[bucket(e.0)] += moved(&e);
+    let per_chunk = |(k, c): (usize, &'a HullChunk)| -> Vec<(u32, f64)> {
+        (0..c.len())
+            .flat_map(|u| steps_of(c, u, k * HULL_CHUNK + u, left))
+            .map(|e| (bucket(e.0) as u32, moved(&e)))
+            .collect()
+    };
+    for (g, group) in hulls.chunks.chunks(EVENT_GROUP).enumerate() {
+        let group: Vec<Vec<(u32, f64)>> = group
+            .par_iter()
+            .enumerate()
+            .map(|(k, c)| per_chunk((g * EVENT_GROUP + k, c)))
+            .collect();
+        for (b, m) in group.into_iter().flatten() {
+            sums[b as usize] += m;
         }
     }
     let mut left_over = change;
@@ -388,20 +407,31 @@ fn power_kept_steps<'a>(hulls: &'a Hulls, omega: impl Fn(usize) -> f64 + Sync) -
         left_over += sum;
     }
     drop(sums);
-    let mut events: Vec<(f64, u32, u32)> = Vec::new();
-    for texel in texels() {
-        let (t, c, u) = texel;
-        for e in events_of(texel) {
-            let b = bucket(e.0);
-            if b < crossing {
-                steps[t] = c.get(u).0[e.2 as usize].0;
-            } else if b == crossing {
-                events.push(e);
-            } else {
-                break;
+    // Each texel's steps are its own: a chunk a job, the crossing range's events collected in
+    // texel order (the walk below sums them in the order they come).
+    let mut events: Vec<(f64, u32, u32)> = hulls
+        .chunks
+        .par_iter()
+        .zip(steps.par_chunks_mut(HULL_CHUNK))
+        .enumerate()
+        .map(|(k, (c, st))| {
+            let mut inside = Vec::new();
+            for (u, step) in st.iter_mut().enumerate() {
+                for e in steps_of(c, u, k * HULL_CHUNK + u, left) {
+                    let b = bucket(e.0);
+                    if b < crossing {
+                        *step = c.get(u).0[e.2 as usize].0;
+                    } else if b == crossing {
+                        inside.push(e);
+                    } else {
+                        break;
+                    }
+                }
             }
-        }
-    }
+            inside
+        })
+        .collect::<Vec<_>>()
+        .concat();
     // Inside the crossing range: split at the median (deterministic introselect), take the
     // cheaper half whole when the change does not cross 0 inside it, else look inside it;
     // small ranges are sorted and walked one step at a time.
@@ -479,6 +509,9 @@ fn steps_of(
 /// Leading bits of a price that name its range in [`power_kept_steps`]'s radix select
 /// (sign, exponent and 4 bits of mantissa: ranges a sixteenth of a binade wide).
 const PRICE_BUCKET_BITS: u32 = 16;
+
+/// Chunks of [`Hulls`] whose events [`power_kept_steps`] lists at once (about 100 KB each).
+const EVENT_GROUP: usize = 8;
 
 /// Texels a chunk of [`Hulls`] holds: the unit of the parallel build, fixed so that the
 /// result does not depend on the thread count.
