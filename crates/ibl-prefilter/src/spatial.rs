@@ -239,8 +239,8 @@ pub const READ_POWER_MAX_SIZE: usize = 32;
 /// exact up to the solid angle's curvature within a cell. Sequential sums: deterministic.
 ///
 /// A pure function of n, integrated once a process for each n up to [`READ_POWER_MAX_SIZE`]
-/// (about 29 ms apiece, 393 216 points whatever n): a bake's small levels, the runner's
-/// probes and the custom lookup's midpoints ask for the same few sizes again and again.
+/// (393 216 points whatever n, 5–7 ms apiece): a bake's small levels, the runner's probes and
+/// the custom lookup's midpoints ask for the same few sizes again and again.
 pub fn read_weights(n: usize) -> Arc<[f64]> {
     /// The weights integrated so far, by size.
     type Held = Mutex<Vec<(usize, Arc<[f64]>)>>;
