@@ -152,11 +152,8 @@ pub fn bilinear_taps(n: usize, d: Vec3) -> [(usize, f32); 6] {
 /// [`bilinear_taps`] of the point (sc, tc) ∈ [−1, 1]² of face `face` given by its face
 /// coordinates: for callers that walk a face's own grid, with no direction to re-project.
 pub fn bilinear_taps_at(n: usize, face: Face, sc: f32, tc: f32) -> [(usize, f32); 6] {
-    let x = (sc + 1.0) * 0.5 * n as f32 - 0.5;
-    let y = (tc + 1.0) * 0.5 * n as f32 - 0.5;
-    let (x0, y0) = (floor(x), floor(y));
-    let (fx, fy) = (x - x0, y - y0);
-    let (x0, y0) = (x0 as isize, y0 as isize);
+    let ((x0, fx), (y0, fy)) = (bilinear_cell(n, sc), bilinear_cell(n, tc));
+    let weights = bilinear_weights(fx, fy);
     let mut taps = [(0usize, 0.0f32); 6];
     // All four taps on the face (all but a band one texel wide at its edges): their indices
     // directly, the same entries the seam rules below give them (a third of the cost of a read
@@ -165,19 +162,13 @@ pub fn bilinear_taps_at(n: usize, face: Face, sc: f32, tc: f32) -> [(usize, f32)
     if x0 >= 0 && y0 >= 0 && x0 + 1 < m && y0 + 1 < m {
         let p = face as usize * n * n + y0 as usize * n + x0 as usize;
         taps[..4].copy_from_slice(&[
-            (p, (1.0 - fx) * (1.0 - fy)),
-            (p + 1, fx * (1.0 - fy)),
-            (p + n, (1.0 - fx) * fy),
-            (p + n + 1, fx * fy),
+            (p, weights[0]),
+            (p + 1, weights[1]),
+            (p + n, weights[2]),
+            (p + n + 1, weights[3]),
         ]);
         return taps;
     }
-    let weights = [
-        (1.0 - fx) * (1.0 - fy),
-        fx * (1.0 - fy),
-        (1.0 - fx) * fy,
-        fx * fy,
-    ];
     let mut k = 0;
     for ((texels, count), w) in bilinear_cell_taps(n, face, x0, y0).into_iter().zip(weights) {
         for &p in &texels[..count] {
@@ -187,6 +178,29 @@ pub fn bilinear_taps_at(n: usize, face: Face, sc: f32, tc: f32) -> [(usize, f32)
         }
     }
     taps
+}
+
+/// The bilinear cell of face coordinate `c` ∈ [−1, 1] along an n-texel edge: its first texel
+/// (−1 before the first texel centre, n − 1 past the last: the seam band) and the fraction of
+/// the way to the next centre. Per axis, so that callers walking a grid compute it once a row
+/// or column ([`bilinear_taps_at`] is these on both axes).
+#[inline]
+pub fn bilinear_cell(n: usize, c: f32) -> (isize, f32) {
+    let x = (c + 1.0) * 0.5 * n as f32 - 0.5;
+    let x0 = floor(x);
+    (x0 as isize, x - x0)
+}
+
+/// The weights of a bilinear cell's four taps at fractions (fx, fy), in the order of
+/// [`bilinear_cell_taps`]: (x0, y0), (x0 + 1, y0), (x0, y0 + 1), (x0 + 1, y0 + 1).
+#[inline]
+pub fn bilinear_weights(fx: f32, fy: f32) -> [f32; 4] {
+    [
+        (1.0 - fx) * (1.0 - fy),
+        fx * (1.0 - fy),
+        (1.0 - fx) * fy,
+        fx * fy,
+    ]
 }
 
 /// The texels of the four taps of the bilinear cell whose first texel is (x0, y0) of face

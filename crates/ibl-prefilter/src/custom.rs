@@ -604,14 +604,14 @@ pub fn correction(lo: &Cubemap, mid: &Cubemap, hi: &Cubemap) -> Cubemap {
             });
         }
     }
-    let w: Vec<f64> = if n <= spatial::READ_POWER_MAX_SIZE {
-        spatial::read_weights(n).to_vec()
+    let w: std::sync::Arc<[f64]> = if n <= spatial::READ_POWER_MAX_SIZE {
+        spatial::read_weights(n)
     } else {
         let sa = solid_angle_table(n);
         (0..6).flat_map(|_| sa.iter().map(|&s| s as f64)).collect()
     };
     let (mut sum, mut slack) = (0.0f64, 0.0f64);
-    for (&(v, bound), wp) in mb.iter().zip(&w) {
+    for (&(v, bound), wp) in mb.iter().zip(w.iter()) {
         sum += wp * v;
         slack += wp * (v - bound);
     }

@@ -24,7 +24,8 @@
 //! v = A⁻¹(b − μΩ), μ = (Ωᵀ A⁻¹ b − P) / (Ωᵀ A⁻¹ Ω).
 
 use ibl_core::cube::{
-    bilinear_cell_taps, bilinear_taps, solid_angle_table, texel_direction, Cubemap, Face,
+    bilinear_cell, bilinear_cell_taps, bilinear_taps, bilinear_weights, solid_angle_table,
+    texel_direction, Cubemap, Face,
 };
 use ibl_core::linalg::Cholesky;
 use ibl_core::luminance;
@@ -275,8 +276,8 @@ fn integrate_read_weights(n: usize) -> Vec<f64> {
     let coord: Vec<f32> = (0..m)
         .map(|i| 2.0 * (i as f32 + 0.5) / m as f32 - 1.0)
         .collect();
-    // Each coordinate's bilinear cell (first texel x0 ∈ −1 ..= n − 1, fraction) by the
-    // operations `bilinear_taps_at` does on it, once an axis rather than once a point, and each
+    // Each coordinate's bilinear cell (first texel x0 ∈ −1 ..= n − 1, fraction) as
+    // `bilinear_taps_at` computes it, once an axis rather than once a point, and each
     // cell's taps once a face rather than once a point (the seam rules were most of the cost
     // on small levels, where most points lie in the band past the outer texel centres). The
     // same taps with the same f32 weights, added in the same order: the same bits as summing
@@ -284,9 +285,8 @@ fn integrate_read_weights(n: usize) -> Vec<f64> {
     let cell: Vec<(usize, f32)> = coord
         .iter()
         .map(|&c| {
-            let x = (c + 1.0) * 0.5 * n as f32 - 0.5;
-            let x0 = x.floor();
-            ((x0 as isize + 1) as usize, x - x0)
+            let (x0, f) = bilinear_cell(n, c);
+            ((x0 + 1) as usize, f)
         })
         .collect();
     let mut w = vec![0.0f64; 6 * n * n];
@@ -304,12 +304,7 @@ fn integrate_read_weights(n: usize) -> Vec<f64> {
             for i in 0..m {
                 let o = row[i] as f64;
                 let (cx, fx) = cell[i];
-                let weights = [
-                    (1.0 - fx) * (1.0 - fy),
-                    fx * (1.0 - fy),
-                    (1.0 - fx) * fy,
-                    fx * fy,
-                ];
+                let weights = bilinear_weights(fx, fy);
                 for ((texels, count), wt) in taps[cy * (n + 1) + cx].iter().zip(weights) {
                     if *count == 1 {
                         w[texels[0]] += o * wt as f64;
