@@ -70,7 +70,13 @@ def test_example_pipelines_are_byte_identical_to_bake_run(cluster, work, bin_dir
     ran = [s for s in report["stages"] if s["status"] == "ran"]
     assert ran and report["tasks_submitted"] == len(ran)
     assert all(s["node"] in report["nodes"] for s in ran)
-    if len(ran) >= 3:
+    # SPREAD is a request Ray honours for work that outlasts its scheduling: a task that ends
+    # before the next one's lease is granted hands its leased worker on, so the materials
+    # pipeline's three 0.03 s tasks once ran on one node in CI. The spread is checked on the
+    # pipelines of five tasks or more (probe: 5, anisotropic-scene: 16), which keep a worker
+    # busy long enough for Ray to lease the other node's.
+    assert len(ran) >= 5 or name == "materials", "the spread check must not go vacuous"
+    if len(ran) >= 5:
         assert len({s["node"] for s in ran}) >= 2, "tasks ran on one node only: %s" % ran
 
     # A second run has nothing to do and submits no task; `bake run` agrees.
