@@ -656,6 +656,18 @@ fn geometry(block: &CellBlock, o: usize, start: usize, n: Vec3, dq: &mut [f32], 
     }
 }
 
+/// Adds the f32 lanes `l` to the f64 lanes `a` lane by lane, and clears them: a vector
+/// conversion and add. (A sum across the lanes at every flush made the compiler keep each lane
+/// in a scalar register of its own and rebuild the vectors with shuffles at every step of the
+/// loop, a third of the sum's time.)
+#[inline(always)]
+fn flush(a: &mut [f64; LANES], l: &mut [f32; LANES]) {
+    for (a, l) in a.iter_mut().zip(l.iter()) {
+        *a += *l as f64;
+    }
+    *l = [0.0; LANES];
+}
+
 /// Cells summed per pass of [`accumulate`]: their columns and scratch (30 × 4 bytes a cell,
 /// 30 KB) stay in the L1 cache while every roughness reads them, where a whole cut (~700
 /// cells) streamed from L2 once per roughness and bound the sum. A multiple of the 64-cell
@@ -663,14 +675,16 @@ fn geometry(block: &CellBlock, o: usize, start: usize, n: Vec3, dq: &mut [f32], 
 const CELLS_PER_PASS: usize = 256;
 
 /// Σ over a block of (W_num·E_rgb, W_den·Ω) for every α² of `a2s` (into `acc`, one entry
-/// each), in 8 f32 lanes flushed to f64 every 64 cells. The geometry is computed once for all
-/// of them; only the kernel's radial profile is evaluated per roughness.
+/// each), in 8 f32 lanes flushed every 64 cells into 8 f64 lanes (`scratch`), summed across
+/// at the end. The geometry is computed once for all of them; only the kernel's radial profile
+/// is evaluated per roughness. `NUM` and `DEN` pick the sums made (the numerator's three, the
+/// normalisation's one); each has the same bits alone as with the other.
 #[inline(always)]
-fn accumulate<const HORIZON: bool>(
+fn accumulate<const HORIZON: bool, const NUM: bool, const DEN: bool>(
     block: &CellBlock,
     n: Vec3,
     a2s: &[f32],
-    scratch: &mut Vec<f32>,
+    scratch: &mut SumScratch,
     acc: &mut [[f64; 4]],
 ) {
     const L: usize = LANES;
@@ -681,19 +695,26 @@ fn accumulate<const HORIZON: bool>(
         return;
     }
     let pass = CELLS_PER_PASS.min(len);
-    scratch.resize(6 * pass, 0.0);
-    let (dm, rest) = scratch.split_at_mut(pass);
+    let SumScratch { cells, lanes } = scratch;
+    cells.resize(6 * pass, 0.0);
+    lanes.clear();
+    lanes.resize(a2s.len(), [[0.0; L]; 4]);
+    let (dm, rest) = cells.split_at_mut(pass);
     let (vm, rest) = rest.split_at_mut(pass);
     let (dg, rest) = rest.split_at_mut(pass);
     let (vg, rest) = rest.split_at_mut(pass);
     let (wm, wg) = rest.split_at_mut(pass);
     for start in (0..len).step_by(pass) {
         let m = pass.min(len - start);
-        geometry(block, 0, start, n, &mut dm[..m], vm);
-        geometry(block, 10, start, n, &mut dg[..m], vg);
+        if NUM {
+            geometry(block, 0, start, n, &mut dm[..m], vm);
+        }
+        if DEN {
+            geometry(block, 10, start, n, &mut dg[..m], vg);
+        }
         let col = |k: usize| &block.cols[k][start..start + m];
         let (er, eg, eb, om) = (col(20), col(21), col(22), col(23));
-        for (&a2, acc) in a2s.iter().zip(acc.iter_mut()) {
+        for (&a2, wide) in a2s.iter().zip(lanes.iter_mut()) {
             let b = 1.0 - a2;
             // The weights over the pass's cells (a loop the compiler vectorises; its scalar
             // tail never runs, blocks being padded to whole lanes), then their sums in whole
@@ -703,9 +724,17 @@ fn accumulate<const HORIZON: bool>(
             let (dm, vm, dg, vg) = (&dm[..m], &vm[..m], &dg[..m], &vg[..m]);
             let (wm, wg) = (&mut wm[..m], &mut wg[..m]);
             for k in 0..m {
-                wm[k] = weight_at::<HORIZON>(dm[k], vm[k], a2, b);
-                wg[k] = weight_at::<HORIZON>(dg[k], vg[k], a2, b);
+                if NUM {
+                    wm[k] = weight_at::<HORIZON>(dm[k], vm[k], a2, b);
+                }
+                if DEN {
+                    wg[k] = weight_at::<HORIZON>(dg[k], vg[k], a2, b);
+                }
             }
+            // All four lanes updated whatever NUM and DEN (the unused ones discarded): with
+            // only some of them, the compiler kept each lane in a scalar register of its own
+            // and rebuilt the vectors with shuffles at every step (the numerator alone was
+            // slower than both).
             let mut lanes = [[0.0f32; L]; 4];
             let chunks = wm
                 .chunks_exact(L)
@@ -715,65 +744,76 @@ fn accumulate<const HORIZON: bool>(
                 .zip(eb.chunks_exact(L))
                 .zip(om.chunks_exact(L));
             for (q, (((((wm8, wg8), er8), eg8), eb8), om8)) in chunks.enumerate() {
+                let (wn8, wd8) = match (NUM, DEN) {
+                    (true, true) => (wm8, wg8),
+                    (true, false) => (wm8, wm8),
+                    _ => (wg8, wg8),
+                };
                 for k in 0..L {
-                    lanes[0][k] += wm8[k] * er8[k];
-                    lanes[1][k] += wm8[k] * eg8[k];
-                    lanes[2][k] += wm8[k] * eb8[k];
-                    lanes[3][k] += wg8[k] * om8[k];
+                    lanes[0][k] += wn8[k] * er8[k];
+                    lanes[1][k] += wn8[k] * eg8[k];
+                    lanes[2][k] += wn8[k] * eb8[k];
+                    lanes[3][k] += wd8[k] * om8[k];
                 }
                 let i = start + (q + 1) * L;
                 if i.is_multiple_of(64) || i == len {
-                    for c in 0..4 {
-                        acc[c] += lanes[c].iter().map(|v| *v as f64).sum::<f64>();
-                        lanes[c] = [0.0; L];
+                    for (w, l) in wide.iter_mut().zip(lanes.iter_mut()) {
+                        flush(w, l);
                     }
                 }
             }
         }
     }
+    for (acc, wide) in acc.iter_mut().zip(lanes.iter()) {
+        for (c, (a, w)) in acc.iter_mut().zip(wide).enumerate() {
+            if (c < 3 && NUM) || (c == 3 && DEN) {
+                *a += w.iter().sum::<f64>();
+            }
+        }
+    }
 }
 
-/// Both blocks of a cut, for every α² of `a2s`. Compiled twice on x86-64: for AVX2 (8 lanes
-/// in one register) and for the SSE2 baseline. Neither allows fused multiply-add, so both give
-/// the same bits.
+/// Both blocks of a cut, for every α² of `a2s` (the sums `NUM` and `DEN` pick, the others
+/// left 0). Compiled twice on x86-64: for AVX2 (8 lanes in one register) and for the SSE2
+/// baseline. Neither allows fused multiply-add, so both give the same bits.
 #[inline(always)]
-fn accumulate_cut_multi(
+fn accumulate_cut_multi<const NUM: bool, const DEN: bool>(
     cut: &CutList,
     n: Vec3,
     a2s: &[f32],
-    scratch: &mut Vec<f32>,
+    scratch: &mut SumScratch,
     acc: &mut [[f64; 4]],
 ) {
     acc.iter_mut().for_each(|a| *a = [0.0; 4]);
-    accumulate::<false>(&cut.smooth, n, a2s, scratch, acc);
-    accumulate::<true>(&cut.horizon, n, a2s, scratch, acc);
+    accumulate::<false, NUM, DEN>(&cut.smooth, n, a2s, scratch, acc);
+    accumulate::<true, NUM, DEN>(&cut.horizon, n, a2s, scratch, acc);
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn accumulate_cut_multi_avx2(
+fn accumulate_cut_multi_avx2<const NUM: bool, const DEN: bool>(
     cut: &CutList,
     n: Vec3,
     a2s: &[f32],
-    scratch: &mut Vec<f32>,
+    scratch: &mut SumScratch,
     acc: &mut [[f64; 4]],
 ) {
-    accumulate_cut_multi(cut, n, a2s, scratch, acc)
+    accumulate_cut_multi::<NUM, DEN>(cut, n, a2s, scratch, acc)
 }
 
 /// One roughness of [`accumulate_cut_multi`].
 #[cfg(test)]
-fn accumulate_cut(cut: &CutList, n: Vec3, a2: f32, scratch: &mut Vec<f32>) -> [f64; 4] {
+fn accumulate_cut(cut: &CutList, n: Vec3, a2: f32, scratch: &mut SumScratch) -> [f64; 4] {
     let mut acc = [[0.0f64; 4]];
-    accumulate_cut_multi(cut, n, &[a2], scratch, &mut acc);
+    accumulate_cut_multi::<true, true>(cut, n, &[a2], scratch, &mut acc);
     acc[0]
 }
 
 #[cfg(all(test, target_arch = "x86_64"))]
-fn accumulate_cut_avx2(cut: &CutList, n: Vec3, a2: f32, scratch: &mut Vec<f32>) -> [f64; 4] {
+fn accumulate_cut_avx2(cut: &CutList, n: Vec3, a2: f32, scratch: &mut SumScratch) -> [f64; 4] {
     let mut acc = [[0.0f64; 4]];
     // SAFETY: only called by the test after checking for AVX2.
-    unsafe { accumulate_cut_multi_avx2(cut, n, &[a2], scratch, &mut acc) };
+    unsafe { accumulate_cut_multi_avx2::<true, true>(cut, n, &[a2], scratch, &mut acc) };
     acc[0]
 }
 
@@ -809,11 +849,31 @@ impl CutList {
     /// Σ_cells W_num E / Σ_cells W_den Ω with each W the cell sum of the kernel (see
     /// [`CellLevel`]); the normalisation comes from the same cells, so a constant environment
     /// comes back exactly.
-    pub fn convolve(&self, n: Vec3, alpha: f32, scratch: &mut Vec<f32>) -> Rgb {
+    pub fn convolve(&self, n: Vec3, alpha: f32, scratch: &mut SumScratch) -> Rgb {
         let mut acc = [[0.0f64; 4]];
         let mut out = [[0.0f32; 3]];
         self.convolve_multi(n, &[alpha * alpha], scratch, &mut acc, &mut out);
         out[0]
+    }
+
+    /// The cut's sums for every α² of `a2s` (into `acc`): W_num·E_rgb if `NUM`, W_den·Ω if
+    /// `DEN`, the others 0.
+    fn sums<const NUM: bool, const DEN: bool>(
+        &self,
+        n: Vec3,
+        a2s: &[f32],
+        scratch: &mut SumScratch,
+        acc: &mut [[f64; 4]],
+    ) {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has just been checked for AVX2.
+            unsafe { accumulate_cut_multi_avx2::<NUM, DEN>(self, n, a2s, scratch, acc) }
+        } else {
+            accumulate_cut_multi::<NUM, DEN>(self, n, a2s, scratch, acc)
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        accumulate_cut_multi::<NUM, DEN>(self, n, a2s, scratch, acc);
     }
 
     /// [`Self::convolve`] at every α² of `a2s` at once (into `out`, `acc` as scratch): the
@@ -822,31 +882,109 @@ impl CutList {
         &self,
         n: Vec3,
         a2s: &[f32],
-        scratch: &mut Vec<f32>,
+        scratch: &mut SumScratch,
         acc: &mut [[f64; 4]],
         out: &mut [Rgb],
     ) {
-        #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU has just been checked for AVX2.
-            unsafe { accumulate_cut_multi_avx2(self, n, a2s, scratch, acc) }
-        } else {
-            accumulate_cut_multi(self, n, a2s, scratch, acc)
-        }
-        #[cfg(not(target_arch = "x86_64"))]
-        accumulate_cut_multi(self, n, a2s, scratch, acc);
+        self.sums::<true, true>(n, a2s, scratch, acc);
         for (o, acc) in out.iter_mut().zip(acc.iter()) {
-            *o = if acc[3] <= 0.0 {
-                [0.0; 3]
-            } else {
-                [
-                    (acc[0] / acc[3]) as f32,
-                    (acc[1] / acc[3]) as f32,
-                    (acc[2] / acc[3]) as f32,
-                ]
-            };
+            *o = ratio(acc, acc[3]);
         }
     }
+}
+
+/// The numerator sums `acc[0..3]` over the normalisation `den` (black where it vanishes).
+#[inline]
+fn ratio(acc: &[f64; 4], den: f64) -> Rgb {
+    if den <= 0.0 {
+        [0.0; 3]
+    } else {
+        [
+            (acc[0] / den) as f32,
+            (acc[1] / den) as f32,
+            (acc[2] / den) as f32,
+        ]
+    }
+}
+
+/// The cut of the w×h tile of an n×n face whose first texel is (i0, j0), into `buf.cut`.
+fn tile_cut(
+    tree: &CellTree,
+    n: usize,
+    face: Face,
+    (i0, j0, w, h): (usize, usize, usize, usize),
+    spec: &CutSpec,
+    buf: &mut TreeBuffers,
+) {
+    let coord = |k: usize| (2.0 * k.min(n) as f32 / n as f32) - 1.0;
+    let (s0, s1, t0, t1) = (coord(i0), coord(i0 + w), coord(j0), coord(j0 + h));
+    let centre = face.direction(0.5 * (s0 + s1), 0.5 * (t0 + t1)).normalize();
+    let radius = cone_radius(face, centre, s0, s1, t0, t1);
+    tree.cut(centre, radius, spec, &mut buf.cut, &mut buf.stack);
+}
+
+/// Index within the quadrant [n/2, n) of texel index `k`'s mirror image across the face's
+/// centre line (itself when it is in that half).
+#[inline]
+fn fold(k: usize, n: usize) -> usize {
+    k.max(n - 1 - k) - n / 2
+}
+
+/// The normalisation Σ W_den·Ω of a level's every texel, for every α² of `a2s`, from one
+/// quadrant of one face: `[(j' · n/2 + i') · a2s.len() + k]` for the texel (n/2 + i', n/2 + j')
+/// of +X. None where the tile grid is not symmetric (n not a multiple of 2t).
+///
+/// The normalisation does not depend on the environment: its moments are the cells' solid
+/// angle ones, and the cut (cones of solid-angle axes, tile by tile) is geometry too. The cube
+/// of cells, the texel grid and a tile grid that divides each half face are all invariant under
+/// the cube's 48 symmetries (signed permutations of x, y, z), and the kernel depends only on
+/// n·l. Every face's direction is a signed permutation of (1, s, t) (`Face::direction`), so
+/// texel (i, j) of any face is the image of texel (i, j) of +X, and mirroring s or t maps +X's
+/// quadrants onto each other: the sum over a texel's cut is that of its image in the quadrant
+/// (to rounding, and to an opening decision that rounding tips, which moves a cell's share
+/// between its model and its children's). Computed once for a 24th of the texels, the
+/// normalisation is half the cell sum's work of the other 23.
+fn normalisation_quadrant(
+    tree: &CellTree,
+    n: usize,
+    t: usize,
+    spec: &CutSpec,
+    a2s: &[f32],
+) -> Option<Vec<f64>> {
+    use rayon::prelude::*;
+    let h = n / 2;
+    if n < 2 * t || !n.is_multiple_of(2 * t) {
+        return None;
+    }
+    let count = a2s.len();
+    let tiles = h / t;
+    // A job per row of tiles, concatenated in order: the same bits for any thread count.
+    let rows: Vec<Vec<f64>> = (0..tiles)
+        .into_par_iter()
+        .map_init(
+            || (TreeBuffers::default(), vec![[0.0f64; 4]; count]),
+            |(buf, acc), ty| {
+                let j0 = h + ty * t;
+                let mut rows = vec![0.0f64; t * h * count];
+                for tx in 0..tiles {
+                    let i0 = h + tx * t;
+                    tile_cut(tree, n, Face::Px, (i0, j0, t, t), spec, buf);
+                    for jj in 0..t {
+                        for ii in 0..t {
+                            let d = texel_direction(Face::Px, i0 + ii, j0 + jj, n);
+                            buf.cut.sums::<false, true>(d, a2s, &mut buf.scratch, acc);
+                            let q = (jj * h + tx * t + ii) * count;
+                            for (k, a) in acc.iter().enumerate() {
+                                rows[q + k] = a[3];
+                            }
+                        }
+                    }
+                }
+                rows
+            },
+        )
+        .collect();
+    Some(rows.concat())
 }
 
 /// Output texels per tile edge: tiles share one cut, so they must stay small next to the
@@ -934,12 +1072,19 @@ pub(crate) fn tree_convolve_many(
     }
 }
 
+/// Scratch of the cell sum: the per-cell terms of a pass, and each roughness's f64 lanes.
+#[derive(Default)]
+pub struct SumScratch {
+    cells: Vec<f32>,
+    lanes: Vec<[[f64; LANES]; 4]>,
+}
+
 /// Reusable buffers of [`tree_convolve`].
 #[derive(Default)]
 pub struct TreeBuffers {
     cut: CutList,
     stack: Vec<(usize, usize)>,
-    scratch: Vec<f32>,
+    scratch: SumScratch,
 }
 
 /// One level of the chain by the hierarchical sum: an n×n cube at roughness r > 0.
@@ -1029,8 +1174,8 @@ fn tree_levels_one_cut(
     };
     let t = tile_size(n);
     let (work, cuts) = (AtomicU64::new(0), AtomicU64::new(0));
-    let coord = |k: usize| (2.0 * k.min(n) as f32 / n as f32) - 1.0;
     let count = roughness.len();
+    let den = normalisation_quadrant(tree, n, t, &spec, &a2s);
     let cubes = map_cube_tiles_with(
         n,
         t,
@@ -1044,19 +1189,28 @@ fn tree_levels_one_cut(
             )
         },
         |(buf, acc, texel), face, i0, j0, w, h, out| {
-            let (s0, s1, t0, t1) = (coord(i0), coord(i0 + w), coord(j0), coord(j0 + h));
-            let centre = face.direction(0.5 * (s0 + s1), 0.5 * (t0 + t1)).normalize();
-            let radius = cone_radius(face, centre, s0, s1, t0, t1);
-            tree.cut(centre, radius, &spec, &mut buf.cut, &mut buf.stack);
+            tile_cut(tree, n, face, (i0, j0, w, h), &spec, buf);
             cuts.fetch_add(1, Ordering::Relaxed);
             work.fetch_add((w * h * buf.cut.len()) as u64, Ordering::Relaxed);
             for jj in 0..h {
                 for ii in 0..w {
-                    let d = texel_direction(face, i0 + ii, j0 + jj, n);
-                    buf.cut
-                        .convolve_multi(d, &a2s, &mut buf.scratch, acc, texel);
-                    for (c, v) in texel.iter().enumerate() {
-                        out[(c * h + jj) * w + ii] = *v;
+                    let (i, j) = (i0 + ii, j0 + jj);
+                    let d = texel_direction(face, i, j, n);
+                    match &den {
+                        Some(den) => {
+                            buf.cut.sums::<true, false>(d, &a2s, &mut buf.scratch, acc);
+                            let q = (fold(j, n) * (n / 2) + fold(i, n)) * count;
+                            for (c, (acc, &dv)) in acc.iter().zip(&den[q..q + count]).enumerate() {
+                                out[(c * h + jj) * w + ii] = ratio(acc, dv);
+                            }
+                        }
+                        None => {
+                            buf.cut
+                                .convolve_multi(d, &a2s, &mut buf.scratch, acc, texel);
+                            for (c, v) in texel.iter().enumerate() {
+                                out[(c * h + jj) * w + ii] = *v;
+                            }
+                        }
                     }
                 }
             }
@@ -1117,7 +1271,7 @@ mod tests {
         let lv = &tree.levels[li];
         let k = n / lv.size;
         let mut rng = Pcg32::new(8, 8);
-        let mut scratch = Vec::new();
+        let mut scratch = SumScratch::default();
         // (second order, centroid only) far; (kink, plain) at the horizon.
         let (mut far, mut horizon) = (Vec::new(), Vec::new());
         for c in 0..lv.axis.len() {
@@ -1160,22 +1314,23 @@ mod tests {
                             (1.0 - 2.0 * s2).max(0.0) / (t * t) * *e as f64
                         })
                         .sum();
-                    let model = |straddles: bool, drop_covariance: bool, scratch: &mut Vec<f32>| {
-                        let mut cut = CutList::default();
-                        cut.push(lv, c, straddles);
-                        cut.finish();
-                        if drop_covariance {
-                            let block = if straddles {
-                                &mut cut.horizon
-                            } else {
-                                &mut cut.smooth
-                            };
-                            block.cols[4..10]
-                                .iter_mut()
-                                .for_each(|col| col.iter_mut().for_each(|v| *v = 0.0));
-                        }
-                        accumulate_cut(&cut, nd, a2, scratch)[0]
-                    };
+                    let model =
+                        |straddles: bool, drop_covariance: bool, scratch: &mut SumScratch| {
+                            let mut cut = CutList::default();
+                            cut.push(lv, c, straddles);
+                            cut.finish();
+                            if drop_covariance {
+                                let block = if straddles {
+                                    &mut cut.horizon
+                                } else {
+                                    &mut cut.smooth
+                                };
+                                block.cols[4..10]
+                                    .iter_mut()
+                                    .for_each(|col| col.iter_mut().for_each(|v| *v = 0.0));
+                            }
+                            accumulate_cut(&cut, nd, a2, scratch)[0]
+                        };
                     if kind == 0 {
                         let e2 = (model(false, false, &mut scratch) - exact).abs() / exact;
                         let e1 = (model(false, true, &mut scratch) - exact).abs() / exact;
@@ -1232,7 +1387,8 @@ mod tests {
             theta: p.theta,
             horizon: p.horizon_at(0.5),
         };
-        let (mut cut, mut stack, mut scratch) = (CutList::default(), Vec::new(), Vec::new());
+        let (mut cut, mut stack, mut scratch) =
+            (CutList::default(), Vec::new(), SumScratch::default());
         let centre = Vec3::new(0.3, 0.5, -0.8).normalize();
         tree.cut(centre, 0.2, &spec, &mut cut, &mut stack);
         assert!(!cut.smooth.cols[0].is_empty() && !cut.horizon.cols[0].is_empty());
@@ -1256,6 +1412,55 @@ mod tests {
     /// Several roughness values from one cut per tile (the lookup fit's nodes) against each
     /// alone: the shared cut is the finest any of them asks for, so they agree to the tree's
     /// accuracy, and a roughness alone is what `tree_level` gives, bit for bit.
+    /// The quadrant's normalisation against every texel's own (its own tile's cut, summed
+    /// where it is): the cube's symmetries hold to rounding at every face, quadrant and size
+    /// the bake folds, with the horizon split and several roughness values; and sizes whose tile
+    /// grid is not symmetric are not folded.
+    #[test]
+    fn every_texels_normalisation_is_its_image_in_the_quadrant() {
+        let tree = CellTree::new(&random_cube(64, 3));
+        let p = TreeParams {
+            theta: 0.7,
+            kappa: 4.0,
+            horizon: 0.12,
+        };
+        let rs = [0.1f32, 0.3, 0.6, 1.0];
+        let a2s: Vec<f32> = rs.iter().map(|r| (r * r) * (r * r)).collect();
+        let spec = CutSpec {
+            leaf: tree.leaf_level(rs[0] * rs[0], p.kappa),
+            theta: p.theta,
+            horizon: p.horizon_at(rs[rs.len() - 1]),
+        };
+        for n in [8usize, 16, 32, 64] {
+            let t = tile_size(n);
+            let den = normalisation_quadrant(&tree, n, t, &spec, &a2s).expect("a folded size");
+            let (mut buf, mut acc) = (TreeBuffers::default(), vec![[0.0f64; 4]; a2s.len()]);
+            let mut worst = 0.0f64;
+            for face in Face::ALL {
+                for (j0, i0) in (0..n)
+                    .step_by(t)
+                    .flat_map(|j| (0..n).step_by(t).map(move |i| (j, i)))
+                {
+                    tile_cut(&tree, n, face, (i0, j0, t, t), &spec, &mut buf);
+                    for (j, i) in (j0..j0 + t).flat_map(|j| (i0..i0 + t).map(move |i| (j, i))) {
+                        let d = texel_direction(face, i, j, n);
+                        buf.cut
+                            .sums::<false, true>(d, &a2s, &mut buf.scratch, &mut acc);
+                        let q = (fold(j, n) * (n / 2) + fold(i, n)) * a2s.len();
+                        for (k, a) in acc.iter().enumerate() {
+                            assert!(a[3] > 0.0);
+                            worst = worst.max((den[q + k] / a[3] - 1.0).abs());
+                        }
+                    }
+                }
+            }
+            eprintln!("n {n}: worst relative difference {worst:.1e}");
+            assert!(worst < 1e-6, "n {n}: {worst}");
+        }
+        assert!(normalisation_quadrant(&tree, 4, tile_size(4), &spec, &a2s).is_none());
+        assert!(normalisation_quadrant(&tree, 20, tile_size(20), &spec, &a2s).is_none());
+    }
+
     #[test]
     fn shared_cuts_agree_with_separate_levels() {
         let cube = random_cube(32, 5);
