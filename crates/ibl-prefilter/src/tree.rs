@@ -486,8 +486,10 @@ impl CellTree {
             leaf,
             theta,
             horizon,
+            numerator_only,
         } = *spec;
         out.clear();
+        out.numerator_only = numerator_only;
         stack.clear();
         let finest = self.levels.len() - 1;
         stack.extend((0..self.levels[0].axis.len()).rev().map(|c| (0, c)));
@@ -506,7 +508,7 @@ impl CellTree {
             let straddles = ang + tile_radius + rc + FAST_ACOS_ERROR > FRAC_PI_2;
             let small = li >= leaf || 2.0 * rc <= theta * dmin;
             if li == finest || (small && (!straddles || 2.0 * rc <= horizon)) {
-                out.push(lv, c, straddles);
+                out.push(lv, li, c, straddles);
                 continue;
             }
             let (s, child) = (lv.size, &self.levels[li + 1]);
@@ -527,6 +529,8 @@ struct CutSpec {
     leaf: usize,
     theta: f32,
     horizon: f32,
+    /// The cut's cells carry only the numerator's columns (see [`CutList::numerator_only`]).
+    numerator_only: bool,
 }
 
 /// Cells of a cut as structure-of-arrays for the summation loop: for the numerator and the
@@ -544,26 +548,37 @@ const COLS: usize = 24;
 /// Lanes of the summation loop (one AVX register, two SSE ones).
 const LANES: usize = 8;
 
+/// The normalisation's columns of [`CellBlock::cols`] (its moments and Ω): left empty in a
+/// cut that sums only the numerator.
+fn normalisation_column(k: usize) -> bool {
+    (10..20).contains(&k) || k == 23
+}
+
 impl CellBlock {
-    fn push(&mut self, lv: &CellLevel, c: usize) {
+    fn push(&mut self, lv: &CellLevel, c: usize, numerator_only: bool) {
         let (lum, area) = match lv.moments.get(c) {
             Some(m) => (m.lum, m.area),
             None => ((lv.axis[c], 0.0, [0.0; 6]), (lv.axis[c], 0.0, [0.0; 6])),
         };
         let e = lv.energy[c];
         let mut row = [0.0f32; COLS];
-        for (k, (m, q, cov)) in [lum, area].into_iter().enumerate() {
-            let o = k * 10;
-            row[o..o + 4].copy_from_slice(&[m.x, m.y, m.z, q]);
-            row[o + 4..o + 10].copy_from_slice(&cov);
+        let (m, q, cov) = lum;
+        row[0..4].copy_from_slice(&[m.x, m.y, m.z, q]);
+        row[4..10].copy_from_slice(&cov);
+        row[20..23].copy_from_slice(&e);
+        if !numerator_only {
+            let (m, q, cov) = area;
+            row[10..14].copy_from_slice(&[m.x, m.y, m.z, q]);
+            row[14..20].copy_from_slice(&cov);
+            row[23] = lv.omega(c);
         }
-        row[20..24].copy_from_slice(&[e[0], e[1], e[2], lv.omega(c)]);
         self.rows.push(row);
     }
 
     /// Pads to a whole number of lanes with empty cells (zero energy and solid angle), and
-    /// turns the rows into columns.
-    fn pad(&mut self) {
+    /// turns the rows into columns (the normalisation's only if `!numerator_only`: a fifth of
+    /// the levels' cut time went to building and transposing them).
+    fn pad(&mut self, numerator_only: bool) {
         while !self.rows.len().is_multiple_of(LANES) {
             // A unit mean (+z) keeps the arithmetic finite; the weights multiply zeros.
             let mut empty = [0.0f32; COLS];
@@ -573,7 +588,9 @@ impl CellBlock {
         }
         for (k, col) in self.cols.iter_mut().enumerate() {
             col.clear();
-            col.extend(self.rows.iter().map(|r| r[k]));
+            if !(numerator_only && normalisation_column(k)) {
+                col.extend(self.rows.iter().map(|r| r[k]));
+            }
         }
     }
 }
@@ -584,6 +601,31 @@ impl CellBlock {
 pub(crate) struct CutList {
     smooth: CellBlock,
     horizon: CellBlock,
+    /// Only the numerator's columns are built: the sums made from it are `sums::<true, false>`.
+    numerator_only: bool,
+    /// The cells in the order pushed, as (level, cell, straddles) packed by [`pack_cell`]: what
+    /// [`CutList::fill_from_image`] carries to the symmetric tiles.
+    cells: Vec<u32>,
+}
+
+/// A cut's cell packed in 32 bits (the quadrant's cuts are held for a whole level): level
+/// (bits 28…31), cell index (1…27), straddles the horizon (bit 0). Trees past
+/// [`PACKED_CELLS`] cells a level or 16 levels are not packed (their levels are traversed
+/// tile by tile); the packing of such a tree's cells is never read.
+fn pack_cell(level: usize, c: usize, straddles: bool) -> u32 {
+    ((level as u32) << 28) | ((c as u32 & (PACKED_CELLS as u32 - 1)) << 1) | straddles as u32
+}
+
+/// Cells a level may have for [`pack_cell`] (6 × 4096² faces fit).
+const PACKED_CELLS: usize = 1 << 27;
+
+/// Level, cell and horizon flag of a [`pack_cell`].
+fn unpack_cell(e: u32) -> (usize, usize, bool) {
+    (
+        (e >> 28) as usize,
+        ((e >> 1) as usize) & (PACKED_CELLS - 1),
+        e & 1 == 1,
+    )
 }
 
 /// The cell sum of the kernel (see [`CellLevel`]) for one weight: mean at chord² + q = `dq`
@@ -713,7 +755,9 @@ fn accumulate<const HORIZON: bool, const NUM: bool, const DEN: bool>(
             geometry(block, 10, start, n, &mut dg[..m], vg);
         }
         let col = |k: usize| &block.cols[k][start..start + m];
-        let (er, eg, eb, om) = (col(20), col(21), col(22), col(23));
+        // Ω is not built in a numerator-only cut; the unused fourth lanes read the red energy.
+        let (er, eg, eb) = (col(20), col(21), col(22));
+        let om = if DEN { col(23) } else { er };
         for (&a2, wide) in a2s.iter().zip(lanes.iter_mut()) {
             let b = 1.0 - a2;
             // The weights over the pass's cells (a loop the compiler vectorises; its scalar
@@ -826,19 +870,41 @@ impl CutList {
             .for_each(Vec::clear);
         self.smooth.rows.clear();
         self.horizon.rows.clear();
+        self.cells.clear();
     }
 
-    fn push(&mut self, lv: &CellLevel, c: usize, straddles: bool) {
+    /// The cut of a tile from that of its image under a symmetry of the cube (`cells`, as
+    /// [`CutList::cells`] recorded it): every cell carried by `map`, in the same order.
+    fn fill_from_image(
+        &mut self,
+        tree: &CellTree,
+        cells: &[u32],
+        map: &CellMap,
+        numerator_only: bool,
+    ) {
+        self.clear();
+        self.numerator_only = numerator_only;
+        for &e in cells {
+            let (li, c, straddles) = unpack_cell(e);
+            let lv = &tree.levels[li];
+            self.push(lv, li, map.apply(lv.size, c), straddles);
+        }
+        self.finish();
+    }
+
+    fn push(&mut self, lv: &CellLevel, level: usize, c: usize, straddles: bool) {
+        self.cells.push(pack_cell(level, c, straddles));
+        let num = self.numerator_only;
         if straddles {
-            self.horizon.push(lv, c)
+            self.horizon.push(lv, c, num)
         } else {
-            self.smooth.push(lv, c)
+            self.smooth.push(lv, c, num)
         }
     }
 
     fn finish(&mut self) {
-        self.smooth.pad();
-        self.horizon.pad();
+        self.smooth.pad(self.numerator_only);
+        self.horizon.pad(self.numerator_only);
     }
 
     /// Cells summed (padding included).
@@ -865,6 +931,10 @@ impl CutList {
         scratch: &mut SumScratch,
         acc: &mut [[f64; 4]],
     ) {
+        assert!(
+            !(DEN && self.numerator_only),
+            "a numerator-only cut has no normalisation"
+        );
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU has just been checked for AVX2.
@@ -923,6 +993,81 @@ fn tile_cut(
     tree.cut(centre, radius, spec, &mut buf.cut, &mut buf.stack);
 }
 
+/// A symmetry of the cube (a signed permutation of x, y, z) acting on the cells of a level:
+/// for each face, the face its cells go to and how their (i, j) become the new (i, j).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct CellMap {
+    /// Per face: (the face it goes to, the new i is the old j (else i), flip the new i, flip
+    /// the new j), a flip taking k to s − 1 − k on an s × s level.
+    faces: [(usize, bool, bool, bool); 6],
+}
+
+/// A face's axis a, and the directions u, v its s and t run along: `Face::direction(s, t)` =
+/// a + s u + t v, each a signed unit axis.
+fn face_frame(f: Face) -> [[i32; 3]; 3] {
+    let v = |d: Vec3| [d.x as i32, d.y as i32, d.z as i32];
+    let a = f.direction(0.0, 0.0);
+    [
+        v(a),
+        v(f.direction(1.0, 0.0) - a),
+        v(f.direction(0.0, 1.0) - a),
+    ]
+}
+
+impl CellMap {
+    /// The symmetry that carries texel (i, j) of +X, mirrored in i if `flip_s` and in j if
+    /// `flip_t`, onto texel (i, j) of `face` (so a tile of `face` gets the cut of its image in
+    /// +X's quadrant [n/2, n)²).
+    ///
+    /// +X's direction at the mirrored (s', t') = (±s, ±t) is (1, −t', −s'); `face`'s at (s, t)
+    /// is a + s u + t v. The linear map G taking the first to the second for every (s, t) has
+    /// the columns G e_x = a, G e_y = −σ_t v, G e_z = −σ_s u (σ = −1 where mirrored).
+    fn new(face: Face, flip_s: bool, flip_t: bool) -> Self {
+        let [a, u, v] = face_frame(face);
+        let (ss, st) = (if flip_s { -1 } else { 1 }, if flip_t { -1 } else { 1 });
+        let cols = [a, v.map(|x| -st * x), u.map(|x| -ss * x)];
+        let g = |d: [i32; 3]| -> [i32; 3] {
+            let mut out = [0; 3];
+            for (k, col) in cols.iter().enumerate() {
+                for r in 0..3 {
+                    out[r] += col[r] * d[k];
+                }
+            }
+            out
+        };
+        let frames = Face::ALL.map(face_frame);
+        let faces = Face::ALL.map(|f| {
+            let [fa, fu, fv] = face_frame(f);
+            let (ga, gu, gv) = (g(fa), g(fu), g(fv));
+            let to = frames
+                .iter()
+                .position(|fr| fr[0] == ga)
+                .expect("a symmetry maps face axes to face axes");
+            let [_, tu, tv] = frames[to];
+            let neg = |x: [i32; 3]| x.map(|c| -c);
+            // The new i runs along tu: it is the old i if G u = ±tu, else the old j (G v = ±tu).
+            let swap = gv == tu || gv == neg(tu);
+            let (new_i_dir, new_j_dir) = if swap { (gv, gu) } else { (gu, gv) };
+            debug_assert!(new_i_dir == tu || new_i_dir == neg(tu));
+            debug_assert!(new_j_dir == tv || new_j_dir == neg(tv));
+            (to, swap, new_i_dir != tu, new_j_dir != tv)
+        });
+        CellMap { faces }
+    }
+
+    /// Where cell `c` of an s × s level goes.
+    #[inline]
+    fn apply(&self, s: usize, c: usize) -> usize {
+        let (f, r) = (c / (s * s), c % (s * s));
+        let (j, i) = (r / s, r % s);
+        let (to, swap, flip_i, flip_j) = self.faces[f];
+        let (i, j) = if swap { (j, i) } else { (i, j) };
+        let i = if flip_i { s - 1 - i } else { i };
+        let j = if flip_j { s - 1 - j } else { j };
+        (to * s + j) * s + i
+    }
+}
+
 /// Index within the quadrant [n/2, n) of texel index `k`'s mirror image across the face's
 /// centre line (itself when it is in that half).
 #[inline]
@@ -932,7 +1077,8 @@ fn fold(k: usize, n: usize) -> usize {
 
 /// The normalisation Σ W_den·Ω of a level's every texel, for every α² of `a2s`, from one
 /// quadrant of one face: `[(j' · n/2 + i') · a2s.len() + k]` for the texel (n/2 + i', n/2 + j')
-/// of +X. None where the tile grid is not symmetric (n not a multiple of 2t).
+/// of +X, and the cuts of its tiles. None where the tile grid is not symmetric (n not a
+/// multiple of 2t) or the tree too large for [`pack_cell`].
 ///
 /// The normalisation does not depend on the environment: its moments are the cells' solid
 /// angle ones, and the cut (cones of solid-angle axes, tile by tile) is geometry too. The cube
@@ -950,25 +1096,32 @@ fn normalisation_quadrant(
     t: usize,
     spec: &CutSpec,
     a2s: &[f32],
-) -> Option<Vec<f64>> {
+) -> Option<Quadrant> {
     use rayon::prelude::*;
     let h = n / 2;
-    if n < 2 * t || !n.is_multiple_of(2 * t) {
+    let packable =
+        tree.levels.len() <= 16 && tree.levels.iter().all(|l| l.axis.len() <= PACKED_CELLS);
+    if n < 2 * t || !n.is_multiple_of(2 * t) || !packable {
         return None;
     }
     let count = a2s.len();
     let tiles = h / t;
     // A job per row of tiles, concatenated in order: the same bits for any thread count.
-    let rows: Vec<Vec<f64>> = (0..tiles)
+    let rows: Vec<(Vec<f64>, Vec<u32>, Vec<usize>)> = (0..tiles)
         .into_par_iter()
         .map_init(
             || (TreeBuffers::default(), vec![[0.0f64; 4]; count]),
             |(buf, acc), ty| {
                 let j0 = h + ty * t;
                 let mut rows = vec![0.0f64; t * h * count];
+                // The row's cuts one after another (one allocation, not one a tile: the
+                // level's small allocations outlived it as heap the fit's peak then sat on).
+                let (mut cuts, mut ends) = (Vec::new(), Vec::with_capacity(tiles));
                 for tx in 0..tiles {
                     let i0 = h + tx * t;
                     tile_cut(tree, n, Face::Px, (i0, j0, t, t), spec, buf);
+                    cuts.extend_from_slice(&buf.cut.cells);
+                    ends.push(cuts.len());
                     for jj in 0..t {
                         for ii in 0..t {
                             let d = texel_direction(Face::Px, i0 + ii, j0 + jj, n);
@@ -980,11 +1133,61 @@ fn normalisation_quadrant(
                         }
                     }
                 }
-                rows
+                (rows, cuts, ends)
             },
         )
         .collect();
-    Some(rows.concat())
+    let mut q = Quadrant {
+        den: Vec::with_capacity(h * h * count),
+        cells: Vec::with_capacity(rows.iter().map(|r| r.1.len()).sum()),
+        ends: Vec::with_capacity(tiles * tiles),
+        tiles,
+    };
+    for (den, cells, ends) in rows {
+        q.den.extend_from_slice(&den);
+        let base = q.cells.len();
+        q.cells.extend_from_slice(&cells);
+        q.ends.extend(ends.into_iter().map(|e| base + e));
+    }
+    Some(q)
+}
+
+/// What a level's every tile takes from +X's quadrant [n/2, n)² (see
+/// [`normalisation_quadrant`]).
+struct Quadrant {
+    /// The normalisation: `[(j' · n/2 + i') · count + k]` for texel (n/2 + i', n/2 + j').
+    den: Vec<f64>,
+    /// The cuts of the quadrant's tiles one after another, as [`CutList::cells`] (tile
+    /// ty' · tiles + tx' ends at `ends[ty' · tiles + tx']`): every other tile's cut is its
+    /// image under a symmetry.
+    cells: Vec<u32>,
+    ends: Vec<usize>,
+    /// Tiles along the quadrant's edge.
+    tiles: usize,
+}
+
+impl Quadrant {
+    /// The cut of the tile of `face` whose first texel is (i0, j0) (t × t texels of an n × n
+    /// face), into `cut`: its image's in the quadrant, carried by the symmetry between them.
+    /// The cut a traversal would give, to an opening decision that rounding tips.
+    #[allow(clippy::too_many_arguments)]
+    fn cut(
+        &self,
+        tree: &CellTree,
+        face: Face,
+        (i0, j0): (usize, usize),
+        t: usize,
+        numerator_only: bool,
+        cut: &mut CutList,
+    ) {
+        let k = 2 * self.tiles;
+        let (tx, ty) = (i0 / t, j0 / t);
+        let fold = |x: usize| x.max(k - 1 - x) - self.tiles;
+        let map = CellMap::new(face, tx < self.tiles, ty < self.tiles);
+        let k = fold(ty) * self.tiles + fold(tx);
+        let start = if k == 0 { 0 } else { self.ends[k - 1] };
+        cut.fill_from_image(tree, &self.cells[start..self.ends[k]], &map, numerator_only);
+    }
 }
 
 /// Output texels per tile edge: tiles share one cut, so they must stay small next to the
@@ -1021,6 +1224,7 @@ pub(crate) fn tree_convolve(
         leaf: tree.leaf_level(alpha, p.kappa),
         theta: p.theta,
         horizon: p.horizon_at(roughness),
+        numerator_only: false,
     };
     let n = d.normalize();
     tree.cut(n, 1e-4, &spec, &mut buffers.cut, &mut buffers.stack);
@@ -1054,6 +1258,7 @@ pub(crate) fn tree_convolve_many(
                 .iter()
                 .map(|&j| p.horizon_at(roughness[j]))
                 .fold(f32::INFINITY, f32::min),
+            numerator_only: false,
         };
         tree.cut(n, 1e-4, &spec, &mut buffers.cut, &mut buffers.stack);
         a2s.clear();
@@ -1171,11 +1376,12 @@ fn tree_levels_one_cut(
             .iter()
             .map(|&r| p.horizon_at(r))
             .fold(f32::INFINITY, f32::min),
+        numerator_only: false,
     };
     let t = tile_size(n);
     let (work, cuts) = (AtomicU64::new(0), AtomicU64::new(0));
     let count = roughness.len();
-    let den = normalisation_quadrant(tree, n, t, &spec, &a2s);
+    let quadrant = normalisation_quadrant(tree, n, t, &spec, &a2s);
     let cubes = map_cube_tiles_with(
         n,
         t,
@@ -1189,14 +1395,17 @@ fn tree_levels_one_cut(
             )
         },
         |(buf, acc, texel), face, i0, j0, w, h, out| {
-            tile_cut(tree, n, face, (i0, j0, w, h), &spec, buf);
+            match &quadrant {
+                Some(q) => q.cut(tree, face, (i0, j0), t, true, &mut buf.cut),
+                None => tile_cut(tree, n, face, (i0, j0, w, h), &spec, buf),
+            }
             cuts.fetch_add(1, Ordering::Relaxed);
             work.fetch_add((w * h * buf.cut.len()) as u64, Ordering::Relaxed);
             for jj in 0..h {
                 for ii in 0..w {
                     let (i, j) = (i0 + ii, j0 + jj);
                     let d = texel_direction(face, i, j, n);
-                    match &den {
+                    match quadrant.as_ref().map(|q| &q.den) {
                         Some(den) => {
                             buf.cut.sums::<true, false>(d, &a2s, &mut buf.scratch, acc);
                             let q = (fold(j, n) * (n / 2) + fold(i, n)) * count;
@@ -1317,7 +1526,7 @@ mod tests {
                     let model =
                         |straddles: bool, drop_covariance: bool, scratch: &mut SumScratch| {
                             let mut cut = CutList::default();
-                            cut.push(lv, c, straddles);
+                            cut.push(lv, li, c, straddles);
                             cut.finish();
                             if drop_covariance {
                                 let block = if straddles {
@@ -1386,6 +1595,7 @@ mod tests {
             leaf: tree.leaf_level(0.25, p.kappa),
             theta: p.theta,
             horizon: p.horizon_at(0.5),
+            numerator_only: false,
         };
         let (mut cut, mut stack, mut scratch) =
             (CutList::default(), Vec::new(), SumScratch::default());
@@ -1430,10 +1640,13 @@ mod tests {
             leaf: tree.leaf_level(rs[0] * rs[0], p.kappa),
             theta: p.theta,
             horizon: p.horizon_at(rs[rs.len() - 1]),
+            numerator_only: false,
         };
         for n in [8usize, 16, 32, 64] {
             let t = tile_size(n);
-            let den = normalisation_quadrant(&tree, n, t, &spec, &a2s).expect("a folded size");
+            let den = normalisation_quadrant(&tree, n, t, &spec, &a2s)
+                .expect("a folded size")
+                .den;
             let (mut buf, mut acc) = (TreeBuffers::default(), vec![[0.0f64; 4]; a2s.len()]);
             let mut worst = 0.0f64;
             for face in Face::ALL {
@@ -1459,6 +1672,86 @@ mod tests {
         }
         assert!(normalisation_quadrant(&tree, 4, tile_size(4), &spec, &a2s).is_none());
         assert!(normalisation_quadrant(&tree, 20, tile_size(20), &spec, &a2s).is_none());
+    }
+
+    /// Each symmetry carries +X's texels (mirrored as asked) onto the face's same (i, j), moves
+    /// directions as a rotation or reflection does (the cell's direction is the image of the
+    /// original's), and is a bijection on the cells of every level.
+    #[test]
+    fn cell_maps_are_the_cube_symmetries_they_claim() {
+        for face in Face::ALL {
+            for (flip_s, flip_t) in [(false, false), (true, false), (false, true), (true, true)] {
+                let map = CellMap::new(face, flip_s, flip_t);
+                for s in [1usize, 2, 4, 8] {
+                    let mut seen = vec![false; 6 * s * s];
+                    for c in 0..6 * s * s {
+                        let m = map.apply(s, c);
+                        assert!(!seen[m], "{face:?} {flip_s} {flip_t}: not a bijection");
+                        seen[m] = true;
+                    }
+                    for j in 0..s {
+                        for i in 0..s {
+                            let (pi, pj) = (
+                                if flip_s { s - 1 - i } else { i },
+                                if flip_t { s - 1 - j } else { j },
+                            );
+                            let from = (Face::Px as usize * s + pj) * s + pi;
+                            let to = (face as usize * s + j) * s + i;
+                            assert_eq!(map.apply(s, from), to, "{face:?} {flip_s} {flip_t} s {s}");
+                        }
+                    }
+                }
+                // Dot products between cell directions are kept (an orthogonal map).
+                let s = 4;
+                let dir = |c: usize| {
+                    let (f, r) = (c / (s * s), c % (s * s));
+                    texel_direction(Face::from_index(f), r % s, r / s, s)
+                };
+                for (a, b) in [(0usize, 37usize), (5, 90), (17, 17), (63, 2)] {
+                    let before = dir(a).dot(dir(b));
+                    let after = dir(map.apply(s, a)).dot(dir(map.apply(s, b)));
+                    assert!(
+                        (before - after).abs() < 1e-6,
+                        "{face:?}: {before} vs {after}"
+                    );
+                }
+            }
+        }
+    }
+
+    /// A tile's cut carried from its image in the quadrant holds the cells a traversal of the
+    /// tile itself picks, with the same horizon split, on every face and quadrant.
+    #[test]
+    fn image_cuts_are_the_traversed_cuts() {
+        let tree = CellTree::new(&random_cube(64, 4));
+        let spec = CutSpec {
+            leaf: tree.leaf_level(0.01, 4.0),
+            theta: 0.7,
+            horizon: 0.12 / 0.5,
+            numerator_only: false,
+        };
+        let (n, t) = (32usize, tile_size(32));
+        let q = normalisation_quadrant(&tree, n, t, &spec, &[0.01]).expect("a folded size");
+        let mut buf = TreeBuffers::default();
+        let mut image = CutList::default();
+        let (mut tiles, mut differ) = (0, 0);
+        for face in Face::ALL {
+            for j0 in (0..n).step_by(t) {
+                for i0 in (0..n).step_by(t) {
+                    tile_cut(&tree, n, face, (i0, j0, t, t), &spec, &mut buf);
+                    q.cut(&tree, face, (i0, j0), t, false, &mut image);
+                    let mut a = buf.cut.cells.clone();
+                    let mut b = image.cells.clone();
+                    a.sort_unstable();
+                    b.sort_unstable();
+                    tiles += 1;
+                    differ += (a != b) as usize;
+                    assert_eq!(buf.cut.len(), image.len());
+                }
+            }
+        }
+        eprintln!("{differ} of {tiles} tiles' cuts differ from their images'");
+        assert_eq!(differ, 0);
     }
 
     #[test]
