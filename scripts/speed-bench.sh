@@ -148,7 +148,7 @@ for w, size in cases:
     fl_res = 6 * src * src * 12 / bw / 1e6
     fl_enc = 6 * size * size * 16 * 4 / 3 / bw / 1e6
     lines.append(f"| {w}×{w//2} | {size}² | {nl} | {c:.2f} | {m:.0f} | {d.get('working_set_estimate_mib', 0):.0f} | {st['read']:.3f} | {st['resample']:.3f} | {st['source']:.3f} | "
-                 f"{lv:.3f} | {st['fit']:.3f} | {st['runtime']:.3f} | {st['encode']:.3f} | {max(0.0, c - known):.3f} | "
+                 f"{lv:.3f} | {st['fit']:.3f} | {st['runtime'] + st.get('reference', 0.0):.3f} | {st['encode']:.3f} | {max(0.0, c - known):.3f} | "
                  f"{fl_read:.1f} / {fl_res:.1f} / {fl_enc:.1f} |")
     print(lines[-1], flush=True)
     chart.append((w, size, c, m))

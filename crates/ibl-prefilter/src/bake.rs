@@ -286,12 +286,6 @@ pub const RUNTIME_REFERENCE: TreeParams = TreeParams {
     horizon: 0.12,
 };
 
-#[cfg(test)]
-thread_local! {
-    /// Bakes on this thread whose runtime report read level 0 in place of the source.
-    static SOURCE_LET_GO: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
-}
-
 /// Largest level-0 face accepted.
 pub const MAX_SIZE: usize = 4096;
 /// Largest sample count accepted per texel.
@@ -1115,7 +1109,7 @@ fn bake_resampled(params: &Params, resampled: Resampled, progress: &dyn Progress
     let mut fit_kernel_seconds = 0.0;
     if fits {
         let sources = (&engine, &source, &texels);
-        fit_kernel_seconds = fit_to_lookup(
+        fit_kernel_seconds = fit_inputs(
             params,
             n_baked,
             sources,
@@ -1124,6 +1118,45 @@ fn bake_resampled(params: &Params, resampled: Resampled, progress: &dyn Progress
             &mut level_work,
             progress,
         );
+    }
+    fit_seconds += tf.elapsed().as_secs_f64();
+    // The runtime report's reference (the cell tree's exact kernel at the report's directions)
+    // needs the source structures and nothing the fit makes: computed here, it lets the tree
+    // and the texel table go before the fit's per-texel hulls are built (the 512² bake's peak
+    // was both at once). The custom lookup's midpoints, after the fit, still need them.
+    let tr = Instant::now();
+    let engine_kind = (
+        matches!(engine, Engine::Tree(..)),
+        matches!(engine, Engine::Fis(..)),
+    );
+    let reference_table = {
+        let own_tree;
+        let tree = match &engine {
+            Engine::Tree(t, _) => t,
+            _ => {
+                own_tree = CellTree::new(&source);
+                &own_tree
+            }
+        };
+        Reference::Tree {
+            tree,
+            source: &source,
+            params: RUNTIME_REFERENCE,
+        }
+        .table(runtime::REPORT_DIRECTIONS)
+    };
+    let engine_after_fit = if params.target == Target::Custom {
+        Some((engine, texels))
+    } else {
+        drop((engine, texels));
+        None
+    };
+    release_freed_memory();
+    let reference_seconds = tr.elapsed().as_secs_f64();
+    cpu.stage("reference".into());
+    let tf = Instant::now();
+    if fits {
+        fit_sweeps(params, n_baked, &mut stages);
     }
     fit_seconds += tf.elapsed().as_secs_f64();
     cpu.stages.push(("estimate".into(), estimate_cpu));
@@ -1186,15 +1219,12 @@ fn bake_resampled(params: &Params, resampled: Resampled, progress: &dyn Progress
         let mut alpha: Vec<Cubemap> = vec![custom::zero_alpha(&levels[top])];
         for l in (0..top).rev() {
             let n = levels[l].size;
-            let (mid, w) = convolve_level_many(
-                &engine,
-                &source,
-                &texels,
-                n,
-                &[lk.mid_roughness(l)],
-                progress,
-            )
-            .remove(0);
+            let (engine, texels) = engine_after_fit
+                .as_ref()
+                .expect("the custom target keeps its engine for the midpoints");
+            let (mid, w) =
+                convolve_level_many(engine, &source, texels, n, &[lk.mid_roughness(l)], progress)
+                    .remove(0);
             level_work[l] += w;
             let mut mid = reduce_to(mid, n);
             // The midpoint is a node of the read as the levels are: sharpened alike.
@@ -1264,9 +1294,9 @@ fn bake_resampled(params: &Params, resampled: Resampled, progress: &dyn Progress
         level_roughness: (0..n_written).map(|l| params.level_roughness(l)).collect(),
         fit_lookup: params.fits_lookup(),
         source_size: src_size,
-        tree: matches!(engine, Engine::Tree(..)).then(|| params.quality.tree_params()),
-        fis_samples: matches!(engine, Engine::Fis(..)).then(|| params.fis_samples()),
-        fis_lod_bias: matches!(engine, Engine::Fis(..)).then_some(LOD_BIAS),
+        tree: engine_kind.0.then(|| params.quality.tree_params()),
+        fis_samples: engine_kind.1.then(|| params.fis_samples()),
+        fis_lod_bias: engine_kind.1.then_some(LOD_BIAS),
         rotate: params.rotate,
         max_roughness: params.max_roughness,
         note,
@@ -1275,39 +1305,17 @@ fn bake_resampled(params: &Params, resampled: Resampled, progress: &dyn Progress
         runtime: None,
         custom_lookup: custom_lookup.clone(),
     };
-    // Where level 0 is the source itself (same size, and nothing after the fit changed it:
-    // the stock targets' read-power step and the custom sharpening skip the mirror), the
-    // chain's level 0 is a copy of it, bit for bit: the report reads the chain's, and the
-    // source goes before the report's bordered copy of the chain (12 bytes a texel: 19 MB of
-    // the 512² bake's peak, which the report set). The comparison is the whole condition.
-    let source = if levels[0] == source {
-        #[cfg(test)]
-        SOURCE_LET_GO.with(|c| c.set(c.get() + 1));
-        drop(source);
-        release_freed_memory();
-        None
-    } else {
-        Some(source)
-    };
+    // The report reads the reference computed before the fit: the source goes before the
+    // report's bordered copy of the chain (12 bytes a texel: 19 MB of the 512² bake).
+    drop(source);
+    release_freed_memory();
     let mips = CubeMips { levels };
-    let source = source.as_ref().unwrap_or(&mips.levels[0]);
     // The error the target's lookup sees, against the exact kernel (the cell tree at
     // RUNTIME_REFERENCE, 0.02% from brute force: far below the lookup errors it measures;
-    // built here when the method did not build one).
+    // computed before the fit, above).
     let tr = Instant::now();
-    let own_tree;
-    let tree = match &engine {
-        Engine::Tree(t, _) => t,
-        _ => {
-            own_tree = CellTree::new(source);
-            &own_tree
-        }
-    };
-    let reference = Reference::Tree {
-        tree,
-        source,
-        params: RUNTIME_REFERENCE,
-    };
+    drop(engine_after_fit);
+    let reference = Reference::Table(&reference_table);
     // The engine samples what the format decodes to: a lossy chain is looked up decoded.
     let enc = params.encoding()?;
     let decoded = if enc.format.is_lossless() {
@@ -1336,7 +1344,7 @@ fn bake_resampled(params: &Params, resampled: Resampled, progress: &dyn Progress
         ),
     };
     runtime_report.format = enc.format.name();
-    let runtime_seconds = tr.elapsed().as_secs_f64();
+    let runtime_seconds = reference_seconds + tr.elapsed().as_secs_f64();
     cpu.stage("runtime".into());
     let report = Report {
         runtime: Some(runtime_report),
@@ -1361,11 +1369,11 @@ fn bake_resampled(params: &Params, resampled: Resampled, progress: &dyn Progress
     })
 }
 
-/// Fits the chain's levels to the target's lookup, in place (`--fit-lookup`): the small levels
-/// to their bilinear read ([`crate::spatial`]), then every inner level to the engine's blend
-/// between levels ([`crate::fit`]), keeping each level's power. Returns the seconds spent
-/// in the kernel (the fit's nodes and the read fit's dense levels).
-fn fit_to_lookup(
+/// The part of the lookup fit (`--fit-lookup`) that needs the source structures: the small
+/// levels fitted to their bilinear read ([`crate::spatial`]), and the kernel at the nodes of
+/// every level [`fit_sweeps`] then fits to the engine's blend between levels. Returns the
+/// seconds spent in the kernel (the fit's nodes and the read fit's dense levels).
+fn fit_inputs(
     params: &Params,
     n_baked: usize,
     (engine, source, texels): (&Engine, &Cubemap, &SourceTexels),
@@ -1395,13 +1403,9 @@ fn fit_to_lookup(
         st.correction = Some(read);
         reports[l].read_fit = Some(report);
     }
-    // The per-texel lookup fit (crate::fit), fine to coarse: Gauss–Seidel sweeps. The
-    // neighbours enter as the engine reads them at this level's texel centres: the finer
-    // one as stored (fitted already), the coarser one exact (first sweep, assumed to
-    // follow) then as stored. The last level's values stay the kernel's: at r = 1 the
-    // lookup reads it alone.
-    let sweeps = if params.fits_blend() { fit::SWEEPS } else { 0 };
-    for sweep in 0..sweeps {
+    // The kernel at the fit's nodes of every level the sweeps fit (the level pass computes
+    // them beside each level; any it did not are computed here, while the engine is held).
+    if params.fits_blend() {
         for l in 1..n_baked.min(n_chain - 1) {
             let n = stages[l].exact.size;
             if stages[l].fitting.is_none() {
@@ -1420,6 +1424,24 @@ fn fit_to_lookup(
                 kernel_seconds += tk.elapsed().as_secs_f64();
                 stages[l].fitting = Some((plan, at_nodes));
             }
+        }
+    }
+    kernel_seconds
+}
+
+/// The per-texel lookup fit ([`crate::fit`]) of every inner level, from the kernel at its
+/// nodes that [`fit_inputs`] left in each stage: needs no source structure.
+fn fit_sweeps(params: &Params, n_baked: usize, stages: &mut [Stage]) {
+    let n_chain = params.chain_levels();
+    // The per-texel lookup fit (crate::fit), fine to coarse: Gauss–Seidel sweeps. The
+    // neighbours enter as the engine reads them at this level's texel centres: the finer
+    // one as stored (fitted already), the coarser one exact (first sweep, assumed to
+    // follow) then as stored. The last level's values stay the kernel's: at r = 1 the
+    // lookup reads it alone.
+    let sweeps = if params.fits_blend() { fit::SWEEPS } else { 0 };
+    for sweep in 0..sweeps {
+        for l in 1..n_baked.min(n_chain - 1) {
+            let n = stages[l].exact.size;
             // A level with no read correction is read as it is, not copied (`Stage::stored`
             // borrows it; a copy of level 0 was most of the reads' time at 512²).
             let lo = fit::read_at_texels(&stages[l - 1].stored(), n);
@@ -1445,7 +1467,6 @@ fn fit_to_lookup(
             release_freed_memory();
         }
     }
-    kernel_seconds
 }
 
 /// One level on its way through the lookup fit.
@@ -2118,32 +2139,6 @@ mod tests {
         }
         let (ra, rb) = (one.report.runtime.unwrap(), three.report.runtime.unwrap());
         assert_eq!(ra.mean_abs_rel, rb.mean_abs_rel);
-    }
-
-    #[test]
-    fn the_report_reads_level_0_in_place_of_an_equal_source_only() {
-        // studio_256.exr (256×128) holds about 64² texels a face. At --size 64 the source cube
-        // is 64², level 0 is the source, which goes before the report, and the report reads
-        // level 0 (bit-identical: the goldens' runtime blocks did not move when this came in).
-        // At --size 32 the source is 64² and level 0 its box reduction: the source is kept.
-        use ibl_core::envmap::load_environment;
-        let path = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-            .join("../../fixtures/hdri/studio_256.exr");
-        let d = tempfile::tempdir().unwrap();
-        let np = &ibl_core::progress::NoProgress;
-        for (size, let_go) in [(64, 1), (32, 0)] {
-            let before = SOURCE_LET_GO.with(|c| c.get());
-            let params = Params {
-                size,
-                levels: Some(4),
-                ..Default::default()
-            };
-            let out = d.path().join(size.to_string());
-            let baked = run(&params, load_environment(&path, false).unwrap(), &out, np).unwrap();
-            assert!(baked.chain.report.runtime.is_some());
-            let after = SOURCE_LET_GO.with(|c| c.get());
-            assert_eq!(after - before, let_go, "--size {size}");
-        }
     }
 
     #[test]

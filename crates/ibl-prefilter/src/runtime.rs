@@ -70,6 +70,55 @@ pub enum Reference<'a> {
         /// The source cube (roughness 0 reads it directly).
         source: &'a Cubemap,
     },
+    /// Another reference's values at the report's directions and roughness values, computed
+    /// beforehand ([`Reference::table`]); it answers only there.
+    Table(&'a ReferenceTable),
+}
+
+/// A reference's values at a report's directions and roughness values. The bake computes it
+/// before its lookup fit and lets the cell tree go: the fit's peak memory no longer holds the
+/// tree (100 MB of the 512² bake's 197).
+pub struct ReferenceTable {
+    dirs: Vec<Vec3>,
+    roughness: Vec<f32>,
+    /// `values[direction][roughness]`.
+    values: Vec<Vec<Rgb>>,
+    name: &'static str,
+}
+
+impl ReferenceTable {
+    /// The values at direction `d` (one of the table's) for every roughness of `roughness`
+    /// (each one of the table's).
+    fn at(&self, d: Vec3, roughness: &[f32]) -> Vec<Rgb> {
+        let i = self
+            .dirs
+            .iter()
+            .position(|&x| x == d)
+            .expect("a reference table answers at its own directions");
+        roughness
+            .iter()
+            .map(|r| {
+                let k = self
+                    .roughness
+                    .iter()
+                    .position(|x| x == r)
+                    .expect("a reference table answers at its own roughness values");
+                self.values[i][k]
+            })
+            .collect()
+    }
+}
+
+/// The reference at every direction of `dirs` and roughness of `roughness`
+/// (`[direction][roughness]`). Parallel over directions, collected in order: the same bits
+/// for any thread count.
+fn reference_values(reference: &Reference, roughness: &[f32], dirs: &[Vec3]) -> Vec<Vec<Rgb>> {
+    use rayon::prelude::*;
+    dirs.par_iter()
+        .map_init(TreeBuffers::default, |buf, &d| {
+            reference.radiance_many(d, roughness, buf)
+        })
+        .collect()
 }
 
 impl Reference<'_> {
@@ -81,6 +130,7 @@ impl Reference<'_> {
             }
             Reference::Tree { tree, params, .. } => tree_convolve(tree, d, r, params, buffers),
             Reference::Brute { texels, .. } => texels.convolve(d.normalize(), r * r),
+            Reference::Table(t) => t.at(d, &[r])[0],
         }
     }
 
@@ -116,6 +166,22 @@ impl Reference<'_> {
                 .iter()
                 .map(|&r| self.radiance(d, r, buffers))
                 .collect(),
+            Reference::Table(t) => t.at(d, roughness),
+        }
+    }
+
+    /// This reference's values at the report's roughness values and `directions` directions
+    /// (those [`evaluate_with`] and [`evaluate_custom`] read), to be read as
+    /// [`Reference::Table`] once this one is gone.
+    pub fn table(&self, directions: usize) -> ReferenceTable {
+        let roughness = roughness_grid(ROUGHNESS_STEPS);
+        let dirs = probe_directions(directions);
+        let values = reference_values(self, &roughness, &dirs);
+        ReferenceTable {
+            dirs,
+            roughness,
+            values,
+            name: self.name(),
         }
     }
 
@@ -124,6 +190,7 @@ impl Reference<'_> {
         match self {
             Reference::Tree { .. } => "exact GGX kernel, hierarchical sum (cell tree)",
             Reference::Brute { .. } => "exact GGX kernel, brute force over every source texel",
+            Reference::Table(t) => t.name,
         }
     }
 }
@@ -189,24 +256,24 @@ pub fn abs_rel_stats_of(
     dirs: &[Vec3],
     reference: &Reference,
 ) -> Vec<AbsRel> {
-    use rayon::prelude::*;
     // The reference per direction at every roughness at once (one cut per group of roughness
     // values sharing a leaf level, not one per roughness: the report cost 9% of the bake),
-    // then the statistics per roughness. Parallel over directions, collected in order: the
-    // same bits for any thread count.
-    let refs: Vec<Vec<Rgb>> = dirs
-        .par_iter()
-        .map_init(TreeBuffers::default, |buf, &d| {
-            reference.radiance_many(d, roughness, buf)
-        })
-        .collect();
+    // then the statistics per roughness; a table made at these directions is read as it is.
+    let computed;
+    let refs: &[Vec<Rgb>] = match reference {
+        Reference::Table(t) if t.dirs == dirs && t.roughness == roughness => &t.values,
+        _ => {
+            computed = reference_values(reference, roughness, dirs);
+            &computed
+        }
+    };
     roughness
         .iter()
         .enumerate()
         .map(|(k, &r)| {
             let pairs: Vec<(f64, f64)> = dirs
                 .iter()
-                .zip(&refs)
+                .zip(refs)
                 .map(|(&d, y)| {
                     let x = read(d, r);
                     (luminance(x) as f64, luminance(y[k]) as f64)
@@ -450,5 +517,55 @@ mod tests {
             e[1],
             e[0]
         );
+    }
+
+    /// The bake's report reads a table made before the fit (the tree gone by then): it is the
+    /// report the live tree gives, bit for bit; and a table answers single reads at its own
+    /// directions and roughness values as the tree does.
+    #[test]
+    fn a_reference_table_is_the_reference_it_was_made_from() {
+        let src = sky(32);
+        let env = Environment::Cube(src.clone());
+        let params = Params {
+            size: 16,
+            levels: Some(3),
+            ..Default::default()
+        };
+        let chain = bake_chain(&params, &env, &NoProgress).unwrap();
+        let tree = CellTree::new(&src);
+        let live = Reference::Tree {
+            tree: &tree,
+            source: &src,
+            params: crate::bake::RUNTIME_REFERENCE,
+        };
+        let table = live.table(REPORT_DIRECTIONS);
+        let read = Reference::Table(&table);
+        let a = evaluate_with(
+            &chain.mips,
+            Target::Gltf,
+            LodMapping::Linear,
+            REPORT_DIRECTIONS,
+            &live,
+        );
+        let b = evaluate_with(
+            &chain.mips,
+            Target::Gltf,
+            LodMapping::Linear,
+            REPORT_DIRECTIONS,
+            &read,
+        );
+        assert_eq!(a.mean_abs_rel, b.mean_abs_rel);
+        assert_eq!(a.p99_abs_rel, b.p99_abs_rel);
+        assert_eq!(a.reference, b.reference);
+        let d = probe_directions(REPORT_DIRECTIONS)[17];
+        let grid = roughness_grid(ROUGHNESS_STEPS);
+        let mut buf = TreeBuffers::default();
+        let many = live.radiance_many(d, &grid, &mut buf);
+        assert_eq!(read.radiance(d, grid[9], &mut buf), many[9]);
+        assert_eq!(
+            read.radiance(d, 0.0, &mut buf),
+            live.radiance(d, 0.0, &mut buf)
+        );
+        assert_eq!(read.radiance_many(d, &grid[3..6], &mut buf), many[3..6]);
     }
 }
