@@ -1120,6 +1120,8 @@ fn bake_resampled(params: &Params, resampled: Resampled, progress: &dyn Progress
         );
     }
     fit_seconds += tf.elapsed().as_secs_f64();
+    // Charged to the fit's stage below, not to the reference's.
+    let fit_inputs_cpu = cpu.lap();
     // The runtime report's reference (the cell tree's exact kernel at the report's directions)
     // needs the source structures and nothing the fit makes: computed here, it lets the tree
     // and the texel table go before the fit's per-texel hulls are built (the 512² bake's peak
@@ -1161,6 +1163,9 @@ fn bake_resampled(params: &Params, resampled: Resampled, progress: &dyn Progress
     fit_seconds += tf.elapsed().as_secs_f64();
     cpu.stages.push(("estimate".into(), estimate_cpu));
     cpu.stage("fit".into());
+    if let Some((_, fit_cpu)) = cpu.stages.last_mut() {
+        *fit_cpu += fit_inputs_cpu;
+    }
     // The extra coarser neighbour is not part of a cut chain.
     stages.truncate(n_written);
     reports.truncate(n_written);
