@@ -18,6 +18,10 @@
 //! environment is reproduced to rounding, and the finest cells are the source texels placed at
 //! their centres exactly as the brute-force reference places them: with θ → 0 the sum *is* the
 //! reference.
+//!
+//! Neither the normalisation nor the cuts depend on the radiance: both are summed or built for
+//! one quadrant of one face (where the tile grid is symmetric) and carried to every other tile
+//! by the cube's symmetries (`CellMap`); the levels sum only the numerator elsewhere.
 
 use glam::Vec3;
 use ibl_core::cube::{texel_direction, Cubemap, Face};
