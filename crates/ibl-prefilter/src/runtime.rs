@@ -71,7 +71,8 @@ pub enum Reference<'a> {
         source: &'a Cubemap,
     },
     /// Another reference's values at the report's directions and roughness values, computed
-    /// beforehand ([`Reference::table`]); it answers only there.
+    /// beforehand ([`Reference::table`]). It answers only there: a read at any other direction
+    /// or roughness panics (a caller's error, not an input's).
     Table(&'a ReferenceTable),
 }
 
@@ -540,20 +541,11 @@ mod tests {
         };
         let table = live.table(REPORT_DIRECTIONS);
         let read = Reference::Table(&table);
-        let a = evaluate_with(
-            &chain.mips,
-            Target::Gltf,
-            LodMapping::Linear,
-            REPORT_DIRECTIONS,
-            &live,
-        );
-        let b = evaluate_with(
-            &chain.mips,
-            Target::Gltf,
-            LodMapping::Linear,
-            REPORT_DIRECTIONS,
-            &read,
-        );
+        let report = |reference: &Reference| {
+            let (t, m) = (Target::Gltf, LodMapping::Linear);
+            evaluate_with(&chain.mips, t, m, REPORT_DIRECTIONS, reference)
+        };
+        let (a, b) = (report(&live), report(&read));
         assert_eq!(a.mean_abs_rel, b.mean_abs_rel);
         assert_eq!(a.p99_abs_rel, b.p99_abs_rel);
         assert_eq!(a.reference, b.reference);

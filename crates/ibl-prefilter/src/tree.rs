@@ -849,19 +849,29 @@ fn accumulate_cut_multi_avx2<const NUM: bool, const DEN: bool>(
     accumulate_cut_multi::<NUM, DEN>(cut, n, a2s, scratch, acc)
 }
 
-/// One roughness of [`accumulate_cut_multi`].
+/// One roughness of [`accumulate_cut_multi`] (both sums unless asked otherwise).
 #[cfg(test)]
-fn accumulate_cut(cut: &CutList, n: Vec3, a2: f32, scratch: &mut SumScratch) -> [f64; 4] {
+fn accumulate_cut<const NUM: bool, const DEN: bool>(
+    cut: &CutList,
+    n: Vec3,
+    a2: f32,
+    scratch: &mut SumScratch,
+) -> [f64; 4] {
     let mut acc = [[0.0f64; 4]];
-    accumulate_cut_multi::<true, true>(cut, n, &[a2], scratch, &mut acc);
+    accumulate_cut_multi::<NUM, DEN>(cut, n, &[a2], scratch, &mut acc);
     acc[0]
 }
 
 #[cfg(all(test, target_arch = "x86_64"))]
-fn accumulate_cut_avx2(cut: &CutList, n: Vec3, a2: f32, scratch: &mut SumScratch) -> [f64; 4] {
+fn accumulate_cut_avx2<const NUM: bool, const DEN: bool>(
+    cut: &CutList,
+    n: Vec3,
+    a2: f32,
+    scratch: &mut SumScratch,
+) -> [f64; 4] {
     let mut acc = [[0.0f64; 4]];
     // SAFETY: only called by the test after checking for AVX2.
-    unsafe { accumulate_cut_multi_avx2::<true, true>(cut, n, &[a2], scratch, &mut acc) };
+    unsafe { accumulate_cut_multi_avx2::<NUM, DEN>(cut, n, &[a2], scratch, &mut acc) };
     acc[0]
 }
 
@@ -1146,6 +1156,7 @@ fn normalisation_quadrant(
         cells: Vec::with_capacity(rows.iter().map(|r| r.1.len()).sum()),
         ends: Vec::with_capacity(tiles * tiles),
         tiles,
+        t,
     };
     for (den, cells, ends) in rows {
         q.den.extend_from_slice(&den);
@@ -1166,29 +1177,27 @@ struct Quadrant {
     /// image under a symmetry.
     cells: Vec<u32>,
     ends: Vec<usize>,
-    /// Tiles along the quadrant's edge.
+    /// Tiles along the quadrant's edge, and their edge in texels.
     tiles: usize,
+    t: usize,
 }
 
 impl Quadrant {
-    /// The cut of the tile of `face` whose first texel is (i0, j0) (t × t texels of an n × n
-    /// face), into `cut`: its image's in the quadrant, carried by the symmetry between them.
-    /// The cut a traversal would give, to an opening decision that rounding tips.
-    #[allow(clippy::too_many_arguments)]
+    /// The cut of the tile of `face` whose first texel is (i0, j0), into `cut`: its image's
+    /// in the quadrant, carried by the symmetry between them. The cut a traversal would give,
+    /// to an opening decision that rounding tips.
     fn cut(
         &self,
         tree: &CellTree,
         face: Face,
         (i0, j0): (usize, usize),
-        t: usize,
         numerator_only: bool,
         cut: &mut CutList,
     ) {
-        let k = 2 * self.tiles;
-        let (tx, ty) = (i0 / t, j0 / t);
-        let fold = |x: usize| x.max(k - 1 - x) - self.tiles;
+        // Tiles mirror as texels do, on a grid of 2 · tiles.
+        let (tx, ty, side) = (i0 / self.t, j0 / self.t, 2 * self.tiles);
         let map = CellMap::new(face, tx < self.tiles, ty < self.tiles);
-        let k = fold(ty) * self.tiles + fold(tx);
+        let k = fold(ty, side) * self.tiles + fold(tx, side);
         let start = if k == 0 { 0 } else { self.ends[k - 1] };
         cut.fill_from_image(tree, &self.cells[start..self.ends[k]], &map, numerator_only);
     }
@@ -1400,7 +1409,7 @@ fn tree_levels_one_cut(
         },
         |(buf, acc, texel), face, i0, j0, w, h, out| {
             match &quadrant {
-                Some(q) => q.cut(tree, face, (i0, j0), t, true, &mut buf.cut),
+                Some(q) => q.cut(tree, face, (i0, j0), true, &mut buf.cut),
                 None => tile_cut(tree, n, face, (i0, j0, w, h), &spec, buf),
             }
             cuts.fetch_add(1, Ordering::Relaxed);
@@ -1542,7 +1551,7 @@ mod tests {
                                     .iter_mut()
                                     .for_each(|col| col.iter_mut().for_each(|v| *v = 0.0));
                             }
-                            accumulate_cut(&cut, nd, a2, scratch)[0]
+                            accumulate_cut::<true, true>(&cut, nd, a2, scratch)[0]
                         };
                     if kind == 0 {
                         let e2 = (model(false, false, &mut scratch) - exact).abs() / exact;
@@ -1583,10 +1592,10 @@ mod tests {
 
     #[cfg(target_arch = "x86_64")]
     #[test]
-    fn avx2_and_baseline_sums_are_bit_identical() {
-        if !std::arch::is_x86_feature_detected!("avx2") {
-            eprintln!("no AVX2 here: nothing to compare");
-            return;
+    fn avx2_and_baseline_sums_are_bit_identical_and_each_sum_alone_too() {
+        let avx2 = std::arch::is_x86_feature_detected!("avx2");
+        if !avx2 {
+            eprintln!("no AVX2 here: the baseline's sums alone only");
         }
         let cube = random_cube(16, 4);
         let tree = CellTree::new(&cube);
@@ -1616,10 +1625,27 @@ mod tests {
                         rng.next_f32() - 0.5,
                     ))
             .normalize();
-            let a = accumulate_cut(&cut, n, 0.0625, &mut scratch);
-            // AVX2 checked above (the wrapper's safety condition).
-            let b = accumulate_cut_avx2(&cut, n, 0.0625, &mut scratch);
-            assert_eq!(a.map(f64::to_bits), b.map(f64::to_bits));
+            let bits = |v: [f64; 4]| v.map(f64::to_bits);
+            let a = accumulate_cut::<true, true>(&cut, n, 0.0625, &mut scratch);
+            // Each sum alone (the levels' numerator, the quadrant's normalisation) has the
+            // bits it has beside the other, and leaves the other at 0.
+            let (num, den) = ([a[0], a[1], a[2], 0.0], [0.0, 0.0, 0.0, a[3]]);
+            let sums = |s: &mut SumScratch| {
+                [
+                    accumulate_cut::<true, false>(&cut, n, 0.0625, s),
+                    accumulate_cut::<false, true>(&cut, n, 0.0625, s),
+                ]
+            };
+            assert_eq!(sums(&mut scratch).map(bits), [bits(num), bits(den)]);
+            if avx2 {
+                // AVX2 checked above (the wrapper's safety condition).
+                let b = [
+                    accumulate_cut_avx2::<true, true>(&cut, n, 0.0625, &mut scratch),
+                    accumulate_cut_avx2::<true, false>(&cut, n, 0.0625, &mut scratch),
+                    accumulate_cut_avx2::<false, true>(&cut, n, 0.0625, &mut scratch),
+                ];
+                assert_eq!(b.map(bits), [bits(a), bits(num), bits(den)]);
+            }
         }
     }
 
@@ -1743,7 +1769,7 @@ mod tests {
             for j0 in (0..n).step_by(t) {
                 for i0 in (0..n).step_by(t) {
                     tile_cut(&tree, n, face, (i0, j0, t, t), &spec, &mut buf);
-                    q.cut(&tree, face, (i0, j0), t, false, &mut image);
+                    q.cut(&tree, face, (i0, j0), false, &mut image);
                     let mut a = buf.cut.cells.clone();
                     let mut b = image.cells.clone();
                     a.sort_unstable();
