@@ -1,5 +1,6 @@
 //! OpenEXR reading (any channel set of R, G, B, A or one grey channel; half, float or uint;
-//! every compression the `exr` crate decodes, DWAB included) and writing (ZIP, float or half).
+//! every compression the `exr` crate decodes, DWAB included) and writing (float uncompressed,
+//! half in ZIP blocks).
 
 use super::FloatDepth;
 use crate::error::{Error, Result};
@@ -456,8 +457,8 @@ pub fn encode(path: &Path, img: &Image, depth: FloatDepth) -> Result<Vec<u8>> {
         _ => vec!["R", "G", "B", "A"],
     };
     let (w, h) = (img.width, img.height);
-    // The header the crate's own writer makes for this image (ZIP, 16-line blocks, the
-    // channels sorted by name); the samples are left empty, the blocks are made below.
+    // The header the crate's own writer makes for this image (the channels sorted by name);
+    // the samples are left empty, the blocks are made below.
     let list: SmallVec<[AnyChannel<FlatSamples>; 4]> = names
         .iter()
         .map(|name| {
@@ -478,47 +479,65 @@ pub fn encode(path: &Path, img: &Image, depth: FloatDepth) -> Result<Vec<u8>> {
             names.iter().position(|m| *m == n).expect("named above")
         })
         .collect();
-    let layer = Layer::new(
-        (w, h),
-        LayerAttributes::default(),
-        Encoding::SMALL_LOSSLESS,
-        channels,
-    );
-    let image = exr::image::Image::from_layer(layer);
-    let headers = image.write().infer_meta_data();
-    let lines = Compression::ZIP16.scan_lines_per_block();
     let sample = match depth {
         FloatDepth::F32 => 4,
         FloatDepth::F16 => 2,
     };
-    let fail = |e: exr::error::Error| Error::invalid(path, format!("EXR encoding failed: {e}"));
-    let mut out = Cursor::new(Vec::new());
-    exr::block::write(&mut out, headers, true, |_, writer| {
-        let mut raw = Vec::with_capacity(lines * w * order.len() * sample);
-        let mut packed = Vec::new();
-        for (k, y0) in (0..h).step_by(lines).enumerate() {
-            // The block as OpenEXR lays it out: line by line, each channel's run of samples,
-            // little-endian.
-            raw.clear();
-            for y in y0..(y0 + lines).min(h) {
-                let row = &img.data[y * w * img.channels..(y + 1) * w * img.channels];
-                for &c in &order {
-                    let values = row.iter().skip(c).step_by(img.channels);
-                    match depth {
-                        FloatDepth::F32 => values.for_each(|v| raw.extend(v.to_le_bytes())),
-                        FloatDepth::F16 => {
-                            values.for_each(|v| raw.extend(super::f16_saturating(*v).to_le_bytes()))
-                        }
+    // The block of lines [y0, y0 + lines) as OpenEXR lays it out: line by line, each
+    // channel's run of samples, little-endian.
+    let block = |y0: usize, lines: usize, raw: &mut Vec<u8>| {
+        raw.clear();
+        for y in y0..(y0 + lines).min(h) {
+            let row = &img.data[y * w * img.channels..(y + 1) * w * img.channels];
+            for &c in &order {
+                let values = row.iter().skip(c).step_by(img.channels);
+                match depth {
+                    FloatDepth::F32 => values.for_each(|v| raw.extend(v.to_le_bytes())),
+                    FloatDepth::F16 => {
+                        values.for_each(|v| raw.extend(super::f16_saturating(*v).to_le_bytes()))
                     }
                 }
             }
-            zip_block(&raw, &mut packed);
-            let data = if packed.len() < raw.len() {
-                std::mem::take(&mut packed)
-            } else {
-                // OpenEXR stores a block that does not shrink as it is (readers compare the
-                // block's size with its uncompressed size).
+        }
+    };
+    // ZIP where it pays: its first 16-line block is compressed, and the file is written
+    // uncompressed (NO_COMPRESSION, a line a block, which every OpenEXR reader takes) when
+    // that saved less than [`ZIP_MIN_SAVING`]. Radiance in f32 barely compresses (a chain of
+    // 256² faces: 0.3–1.6% on the fixtures) and its deflate was 5% of a default bake's
+    // instructions; halves and smooth tables (the LUTs) shrink by far more and keep ZIP.
+    let mut raw = Vec::with_capacity(16 * w * order.len() * sample);
+    let mut packed = Vec::new();
+    block(0, Compression::ZIP16.scan_lines_per_block(), &mut raw);
+    zip_block(&raw, &mut packed);
+    let zip = (packed.len() as f64) < (1.0 - ZIP_MIN_SAVING) * raw.len() as f64;
+    let encoding = if zip {
+        Encoding::SMALL_LOSSLESS
+    } else {
+        Encoding::UNCOMPRESSED
+    };
+    let layer = Layer::new((w, h), LayerAttributes::default(), encoding, channels);
+    let image = exr::image::Image::from_layer(layer);
+    let headers = image.write().infer_meta_data();
+    let lines = encoding.compression.scan_lines_per_block();
+    let fail = |e: exr::error::Error| Error::invalid(path, format!("EXR encoding failed: {e}"));
+    let mut out = Cursor::new(Vec::new());
+    exr::block::write(&mut out, headers, true, |_, writer| {
+        for (k, y0) in (0..h).step_by(lines).enumerate() {
+            block(y0, lines, &mut raw);
+            let data = if !zip {
                 raw.clone()
+            } else {
+                // The first block is the probe's.
+                if k > 0 {
+                    zip_block(&raw, &mut packed);
+                }
+                if packed.len() < raw.len() {
+                    std::mem::take(&mut packed)
+                } else {
+                    // OpenEXR stores a block that does not shrink as it is (readers compare
+                    // the block's size with its uncompressed size).
+                    raw.clone()
+                }
             };
             writer.write_chunk(
                 k,
@@ -538,6 +557,10 @@ pub fn encode(path: &Path, img: &Image, depth: FloatDepth) -> Result<Vec<u8>> {
     .map_err(fail)?;
     Ok(out.into_inner())
 }
+
+/// Least share of its bytes ZIP must save on a file's first block for the file to be
+/// compressed (see [`encode`]).
+const ZIP_MIN_SAVING: f64 = 0.1;
 
 /// Deflate level of the ZIP blocks. Radiance in f32 barely compresses (the bytes of a
 /// 256² × 5-level chain shrink by 2.6% at any level, measured 1 to 6), so the fastest level
@@ -566,7 +589,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn zip_blocks_read_back_exactly_for_every_channel_count_depth_and_partial_block() {
+    fn blocks_read_back_exactly_for_every_channel_count_depth_and_partial_block() {
         // Heights that end on a partial 16-line block, widths that are odd, 1 to 4 channels,
         // f32 and f16, blocks that compress (flat areas) and blocks stored as they are
         // (noise): the decoder (the exr crate, independent of the block writer here) gives
@@ -604,6 +627,42 @@ mod tests {
                     assert_eq!(back, want, "{w}x{h}x{channels} {depth:?}");
                 }
             }
+        }
+    }
+
+    /// ZIP is kept where it pays: a smooth table (as the LUTs are) is stored in ZIP blocks and
+    /// comes out much smaller than its samples; f32 noise (as radiance mostly is, to deflate)
+    /// is stored uncompressed; both read back exactly (the exr crate, independent of the
+    /// writer here) and both headers say what their blocks are.
+    #[test]
+    fn zip_is_kept_only_where_its_first_block_shrinks() {
+        let (w, h, channels) = (64, 40, 3);
+        let smooth: Vec<f32> = (0..w * h * channels)
+            .map(|k| ((k / channels) % w) as f32 / w as f32 + 0.25 * (k % channels) as f32)
+            .collect();
+        let mut x = 0x9e37_79b9_7f4a_7c15u64;
+        let noise: Vec<f32> = (0..w * h * channels)
+            .map(|_| {
+                x ^= x << 13;
+                x ^= x >> 7;
+                x ^= x << 17;
+                f32::from_bits(0x3f80_0000 | (x >> 41) as u32)
+            })
+            .collect();
+        for (data, want, smaller) in [
+            (smooth, Compression::ZIP16, true),
+            (noise, Compression::Uncompressed, false),
+        ] {
+            let img = Image::from_data(w, h, channels, data).unwrap();
+            let bytes = encode(Path::new("t.exr"), &img, FloatDepth::F32).unwrap();
+            let meta = exr::meta::MetaData::read_from_buffered(Cursor::new(&bytes), true).unwrap();
+            assert_eq!(meta.headers[0].compression, want);
+            assert_eq!(
+                bytes.len() < w * h * channels * 4 * 3 / 4,
+                smaller,
+                "{want:?}"
+            );
+            assert_eq!(decode(Path::new("t.exr"), &bytes).unwrap(), img);
         }
     }
 }
