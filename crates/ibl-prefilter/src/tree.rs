@@ -84,7 +84,33 @@ struct CellLevel {
     moments: Vec<Moments>,
 }
 
+/// Cells ahead of the one gathered whose data [`CellLevel::prefetch`] asks for.
+const PREFETCH_AHEAD: usize = 8;
+
 impl CellLevel {
+    /// Asks the cache for what gathering cell `c` reads first (its moments, or its direction
+    /// on the finest level, and its energy): a hint, which reads nothing.
+    #[inline(always)]
+    fn prefetch(&self, c: usize) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+            let first = if self.moments.is_empty() {
+                self.axis.as_ptr().wrapping_add(c) as *const i8
+            } else {
+                self.moments.as_ptr().wrapping_add(c) as *const i8
+            };
+            let energy = self.energy.as_ptr().wrapping_add(c) as *const i8;
+            // SAFETY: a prefetch only hints the cache; it cannot fault at any address.
+            unsafe {
+                _mm_prefetch::<_MM_HINT_T0>(first);
+                _mm_prefetch::<_MM_HINT_T0>(energy);
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        let _ = c;
+    }
+
     /// Half-angle of the cone holding cell `c`.
     #[inline]
     fn radius(&self, c: usize) -> f32 {
@@ -903,16 +929,32 @@ impl CutList {
     ) {
         self.clear();
         self.numerator_only = numerator_only;
-        for &e in cells {
+        self.cells.extend(cells.iter().map(|&e| {
             let (li, c, straddles) = unpack_cell(e);
-            let lv = &tree.levels[li];
-            self.push(lv, li, map.apply(lv.size, c), straddles);
+            pack_cell(li, map.apply(tree.levels[li].size, c), straddles)
+        }));
+        // Gathered with each cell's data prefetched PREFETCH_AHEAD cells ahead: the gather
+        // waited on the first load of every cell's moments (half of its time; the cells of a
+        // cut are scattered over the tree's levels).
+        for k in 0..self.cells.len() {
+            if let Some(&e) = self.cells.get(k + PREFETCH_AHEAD) {
+                let (li, c, _) = unpack_cell(e);
+                tree.levels[li].prefetch(c);
+            }
+            let (li, c, straddles) = unpack_cell(self.cells[k]);
+            self.gather(&tree.levels[li], c, straddles);
         }
         self.finish();
     }
 
     fn push(&mut self, lv: &CellLevel, level: usize, c: usize, straddles: bool) {
         self.cells.push(pack_cell(level, c, straddles));
+        self.gather(lv, c, straddles);
+    }
+
+    /// Adds cell `c` of `lv` to the block it belongs to.
+    #[inline]
+    fn gather(&mut self, lv: &CellLevel, c: usize, straddles: bool) {
         let num = self.numerator_only;
         if straddles {
             self.horizon.push(lv, c, num)
