@@ -405,6 +405,14 @@ mod tests {
         })
     }
 
+    /// The sky of `n`² faces and its chain baked with `params`.
+    fn sky_chain(n: usize, params: &Params) -> (Cubemap, crate::bake::Chain) {
+        let src = sky(n);
+        let env = Environment::Cube(src.clone());
+        let chain = bake_chain(params, &env, &NoProgress).unwrap();
+        (src, chain)
+    }
+
     #[test]
     fn grids_and_directions() {
         let r = roughness_grid(33);
@@ -428,15 +436,13 @@ mod tests {
     /// `mean_abs_rel` reports with the tree reference.
     #[test]
     fn lookup_and_error_match_a_brute_force_recomputation() {
-        let src = sky(32);
-        let env = Environment::Cube(src.clone());
         let params = Params {
             size: 16,
             levels: Some(5),
             quality: Quality::High,
             ..Default::default()
         };
-        let chain = bake_chain(&params, &env, &NoProgress).unwrap();
+        let (src, chain) = sky_chain(32, &params);
         let bordered = BorderedMips::new(&chain.mips);
         let texels = SourceTexels::new(&src);
         let tree = CellTree::new(&src);
@@ -488,15 +494,13 @@ mod tests {
     fn exact_levels_read_at_their_roughness_have_only_the_bake_error() {
         // Where the lod lands exactly on a level and the level is large next to the lobe, the
         // lookup's error is the bake's (< 1%); between levels it is larger.
-        let src = sky(64);
-        let env = Environment::Cube(src.clone());
         let params = Params {
             size: 32,
             levels: Some(3),
             fit_lookup: Some(false),
             ..Default::default()
         };
-        let chain = bake_chain(&params, &env, &NoProgress).unwrap();
+        let (src, chain) = sky_chain(64, &params);
         let tree = CellTree::new(&src);
         let reference = Reference::Tree {
             tree: &tree,
@@ -525,14 +529,12 @@ mod tests {
     /// directions and roughness values as the tree does.
     #[test]
     fn a_reference_table_is_the_reference_it_was_made_from() {
-        let src = sky(32);
-        let env = Environment::Cube(src.clone());
         let params = Params {
             size: 16,
             levels: Some(3),
             ..Default::default()
         };
-        let chain = bake_chain(&params, &env, &NoProgress).unwrap();
+        let (src, chain) = sky_chain(32, &params);
         let tree = CellTree::new(&src);
         let live = Reference::Tree {
             tree: &tree,

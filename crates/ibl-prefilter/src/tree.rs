@@ -880,29 +880,26 @@ fn accumulate_cut_multi_avx2<const NUM: bool, const DEN: bool>(
     accumulate_cut_multi::<NUM, DEN>(cut, n, a2s, scratch, acc)
 }
 
-/// One roughness of [`accumulate_cut_multi`] (both sums unless asked otherwise).
+/// One roughness of [`accumulate_cut_multi`] (the sums `NUM` and `DEN` pick), through its
+/// AVX2 build if `avx2` (the caller has checked the CPU for it) or the baseline one.
 #[cfg(test)]
 fn accumulate_cut<const NUM: bool, const DEN: bool>(
     cut: &CutList,
     n: Vec3,
     a2: f32,
     scratch: &mut SumScratch,
+    avx2: bool,
 ) -> [f64; 4] {
     let mut acc = [[0.0f64; 4]];
+    #[cfg(target_arch = "x86_64")]
+    if avx2 {
+        assert!(std::arch::is_x86_feature_detected!("avx2"));
+        // SAFETY: the CPU has just been checked for AVX2.
+        unsafe { accumulate_cut_multi_avx2::<NUM, DEN>(cut, n, &[a2], scratch, &mut acc) };
+        return acc[0];
+    }
+    assert!(!avx2, "AVX2 is an x86-64 build");
     accumulate_cut_multi::<NUM, DEN>(cut, n, &[a2], scratch, &mut acc);
-    acc[0]
-}
-
-#[cfg(all(test, target_arch = "x86_64"))]
-fn accumulate_cut_avx2<const NUM: bool, const DEN: bool>(
-    cut: &CutList,
-    n: Vec3,
-    a2: f32,
-    scratch: &mut SumScratch,
-) -> [f64; 4] {
-    let mut acc = [[0.0f64; 4]];
-    // SAFETY: only called by the test after checking for AVX2.
-    unsafe { accumulate_cut_multi_avx2::<NUM, DEN>(cut, n, &[a2], scratch, &mut acc) };
     acc[0]
 }
 
@@ -1598,7 +1595,7 @@ mod tests {
                                     .iter_mut()
                                     .for_each(|col| col.iter_mut().for_each(|v| *v = 0.0));
                             }
-                            accumulate_cut::<true, true>(&cut, nd, a2, scratch)[0]
+                            accumulate_cut::<true, true>(&cut, nd, a2, scratch, false)[0]
                         };
                     if kind == 0 {
                         let e2 = (model(false, false, &mut scratch) - exact).abs() / exact;
@@ -1673,23 +1670,23 @@ mod tests {
                     ))
             .normalize();
             let bits = |v: [f64; 4]| v.map(f64::to_bits);
-            let a = accumulate_cut::<true, true>(&cut, n, 0.0625, &mut scratch);
+            let a = accumulate_cut::<true, true>(&cut, n, 0.0625, &mut scratch, false);
             // Each sum alone (the levels' numerator, the quadrant's normalisation) has the
             // bits it has beside the other, and leaves the other at 0.
             let (num, den) = ([a[0], a[1], a[2], 0.0], [0.0, 0.0, 0.0, a[3]]);
             let sums = |s: &mut SumScratch| {
                 [
-                    accumulate_cut::<true, false>(&cut, n, 0.0625, s),
-                    accumulate_cut::<false, true>(&cut, n, 0.0625, s),
+                    accumulate_cut::<true, false>(&cut, n, 0.0625, s, false),
+                    accumulate_cut::<false, true>(&cut, n, 0.0625, s, false),
                 ]
             };
             assert_eq!(sums(&mut scratch).map(bits), [bits(num), bits(den)]);
             if avx2 {
-                // AVX2 checked above (the wrapper's safety condition).
+                let s = &mut scratch;
                 let b = [
-                    accumulate_cut_avx2::<true, true>(&cut, n, 0.0625, &mut scratch),
-                    accumulate_cut_avx2::<true, false>(&cut, n, 0.0625, &mut scratch),
-                    accumulate_cut_avx2::<false, true>(&cut, n, 0.0625, &mut scratch),
+                    accumulate_cut::<true, true>(&cut, n, 0.0625, s, true),
+                    accumulate_cut::<true, false>(&cut, n, 0.0625, s, true),
+                    accumulate_cut::<false, true>(&cut, n, 0.0625, s, true),
                 ];
                 assert_eq!(b.map(bits), [bits(a), bits(num), bits(den)]);
             }
