@@ -15,6 +15,9 @@ Run by `make conformance` (conformance/run.sh), which bakes the matrix first. Ch
 3. ktx-parse (npm) reads every KTX2 file.
 4. Files written by other code (ktx-parse's serializer, Python's zstandard, hand-built DDS and
    KTX1 headers) are read back by `equirect-to-cube` exactly.
+5. OpenEXR (the reference C++ library's Python bindings) reads every EXR face the three tools
+   write, f32 and f16 (ZIP where it pays, uncompressed elsewhere), to the values of the float
+   KTX2 bake (f16: rounded to nearest even, saturating at 65504, as the format holds them).
 
 Prints one line per check and "N passed, N failed" last; exits non-zero on any failure.
 """
@@ -311,6 +314,33 @@ def check_bakes(bake_dir, lib):
                         check(False, f"{tag}: no reported encoding error")
 
 
+FACE_NAMES = ["px", "nx", "py", "ny", "pz", "nz"]
+
+
+def check_exr_faces(bake_dir):
+    import OpenEXR
+
+    for tool, name in (("prefilter", "prefilter"), ("equirect-to-cube", "cube"), ("irradiance", "irradiance")):
+        twin = float_twin(bake_dir, tool, name)
+        for fmt, dtype in (("rgba32f", np.float32), ("rgba16f", np.float16)):
+            out = bake_dir / tool / f"exr-{fmt}"
+            files, equal, kinds = 0, True, {}
+            for l, faces in enumerate(twin):
+                for face, want in zip(FACE_NAMES, faces):
+                    path = out / (f"m{l}_{face}.exr" if tool == "prefilter" else f"{face}.exr")
+                    exr = OpenEXR.File(str(path))
+                    rgb = exr.channels()["RGB"].pixels
+                    kind = str(exr.header()["compression"]).split(".")[-1]
+                    kinds[kind] = kinds.get(kind, 0) + 1
+                    expect = np.clip(want, -65504.0, 65504.0).astype(dtype) if dtype == np.float16 else want.astype(dtype)
+                    equal &= rgb.dtype == dtype and rgb.shape == expect.shape and bool((rgb == expect).all())
+                    files += 1
+            # ZIP where its first block shrinks by 10%, uncompressed elsewhere (small faces).
+            known = set(kinds) <= {"ZIP_COMPRESSION", "NO_COMPRESSION"}
+            check(equal and known and files == 6 * len(twin),
+                  f"{tool} EXR faces {fmt}: OpenEXR reads {files} files ({kinds}) equal to the float bake")
+
+
 def write_foreign_files(work):
     """Cubes written by code that is not ours: values, the encoded bytes, and containers."""
     rng = np.random.default_rng(7)
@@ -424,6 +454,7 @@ def main():
     lib = load_libktx()
     check_bakes(bake_dir, lib)
     check_ktx_parse_reads(bake_dir)
+    check_exr_faces(bake_dir)
     with tempfile.TemporaryDirectory() as t:
         check_foreign(bin_dir, Path(t))
     print(f"containers: {passed} passed, {failed} failed")

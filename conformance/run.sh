@@ -34,6 +34,10 @@ for tool in prefilter equirect-to-cube irradiance; do
 			"$BIN/$tool" "$ENV_MAP" -o "$BAKES/$tool/$container-$format" "${size[@]}" "${layout[@]}" --format "$format" -q
 		done
 	done
+	# And as EXR faces, float and half (read by OpenEXR against the float KTX2).
+	for format in rgba32f rgba16f; do
+		"$BIN/$tool" "$ENV_MAP" -o "$BAKES/$tool/exr-$format" "${size[@]}" --layout faces --format "$format" -q
+	done
 done
 echo "baked $(find "$BAKES" -type f | wc -l) files from $ENV_MAP"
 "$WORK/venv/bin/python" conformance/containers.py "$BAKES" "$BIN"
