@@ -1180,12 +1180,38 @@ fn bake_resampled(params: &Params, resampled: Resampled, progress: &dyn Progress
     reports.truncate(n_written);
     level_seconds.truncate(n_written);
     level_work.truncate(n_written);
-    for (report, st) in reports.iter_mut().zip(&stages) {
-        if let Some((plan, _)) = &st.fitting {
-            report.fit = Some(fit::LevelFit::new(plan, st.values(), &st.exact));
-        }
+    {
+        // Each level's fit report on its own (its sums in their own order: the same bits
+        // for any thread count).
+        use rayon::prelude::*;
+        reports
+            .par_iter_mut()
+            .zip(stages.par_iter())
+            .for_each(|(report, st)| {
+                if let Some((plan, _)) = &st.fitting {
+                    report.fit = Some(fit::LevelFit::new(plan, st.values(), &st.exact));
+                }
+            });
     }
-    let mut levels: Vec<Cubemap> = stages.into_iter().map(Stage::into_stored).collect();
+    // A level 0 that is the source itself (--size the source's size: nothing is fitted or
+    // corrected on level 0) becomes the source, moved, not copied (a serial copy of the
+    // largest level), unless the custom target's midpoints still read the source.
+    let source_power = spatial::texel_power(&source);
+    let take_source = params.target != Target::Custom
+        && matches!(stages[0].exact, Cow::Borrowed(_))
+        && stages[0].values.is_none()
+        && stages[0].correction.is_none();
+    let mut levels: Vec<Cubemap> = stages
+        .into_iter()
+        .skip(usize::from(take_source))
+        .map(Stage::into_stored)
+        .collect();
+    let source = if take_source {
+        levels.insert(0, source);
+        None
+    } else {
+        Some(source)
+    };
     release_freed_memory();
     // The custom lookup reads its levels through its own bilinear taps: the levels too large
     // for the read fit store v − k·δ²v, whose bilinear read follows the kernel between the
@@ -1206,7 +1232,6 @@ fn bake_resampled(params: &Params, resampled: Resampled, progress: &dyn Progress
     // of a stock target stays the exact kernel's texels by definition, and so does its mirror
     // level ("the source box-reduced to --size", tests/stability.rs; only a chain of ≤ 32² has
     // a mirror this small).
-    let source_power = spatial::texel_power(&source);
     if params.target == Target::Custom || !params.reference {
         let power = source_power;
         let skip = usize::from(params.target != Target::Custom);
@@ -1236,8 +1261,9 @@ fn bake_resampled(params: &Params, resampled: Resampled, progress: &dyn Progress
             let (engine, texels) = engine_after_fit
                 .as_ref()
                 .expect("the custom target keeps its engine for the midpoints");
+            let source = source.as_ref().expect("the custom target keeps its source");
             let (mid, w) =
-                convolve_level_many(engine, &source, texels, n, &[lk.mid_roughness(l)], progress)
+                convolve_level_many(engine, source, texels, n, &[lk.mid_roughness(l)], progress)
                     .remove(0);
             level_work[l] += w;
             let mut mid = reduce_to(mid, n);

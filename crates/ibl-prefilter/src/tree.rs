@@ -141,6 +141,9 @@ struct Moments {
     area: (Vec3, f32, Sym3),
 }
 
+// SAFETY: every field is f32s (Vec3, f32, [f32; 6]), for which all-zero bits are 0.0.
+unsafe impl bytemuck::Zeroable for Moments {}
+
 /// Build-time sums of a cell in f64: energy, and for each weight (luminance × Ω, Ω) its total,
 /// first and second moments of the texel directions.
 #[derive(Clone, Copy, Default)]
@@ -253,7 +256,9 @@ impl CellTree {
         // largest thing the bake holds), a texel row at a time: a texel's face and row from
         // its index were two integer divisions a texel, a fifth of the stage.
         let m = 6 * n * n;
-        let mut axis = vec![Vec3::ZERO; m];
+        // Zeroed allocations (`vec!` of a glam vector or of a struct writes every element,
+        // on this thread; a zeroed one is fresh pages the fill below touches in parallel).
+        let mut axis: Vec<Vec3> = bytemuck::zeroed_vec(m);
         let mut energy = vec![[0.0f32; 3]; m];
         axis.par_chunks_mut(n)
             .zip(energy.par_chunks_mut(n))
@@ -327,19 +332,15 @@ impl CellTree {
     /// A level of s×s faces, zeroed, to be filled face by face.
     fn empty_level(s: usize) -> CellLevel {
         let len = 6 * s * s;
-        let empty = Moments {
-            lum: (Vec3::ZERO, 0.0, [0.0; 6]),
-            area: (Vec3::ZERO, 0.0, [0.0; 6]),
-        };
         CellLevel {
             size: s,
-            axis: vec![Vec3::ZERO; len],
+            axis: bytemuck::zeroed_vec(len),
             radius: vec![0.0; len],
             point_radius: 0.0,
             energy: vec![[0.0; 3]; len],
             omega: vec![0.0; len],
             face_omega: Vec::new(),
-            moments: vec![empty; len],
+            moments: bytemuck::zeroed_vec(len),
         }
     }
 

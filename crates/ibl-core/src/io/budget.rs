@@ -140,13 +140,12 @@ pub fn reserve(path: &Path, what: &str, bytes: u64) -> Result<Reservation> {
 }
 
 /// A zero-filled `Vec` of `n` values allocated fallibly: the system refusing the memory is
-/// an [`Error::Memory`] naming `path`, not an abort.
-pub fn try_zeroed<T: Clone + Default>(path: &Path, n: usize) -> Result<Vec<T>> {
-    let mut v = Vec::new();
-    v.try_reserve_exact(n)
-        .map_err(|_| out_of_memory(path, n.saturating_mul(std::mem::size_of::<T>()) as u64))?;
-    v.resize(n, T::default());
-    Ok(v)
+/// an [`Error::Memory`] naming `path`, not an abort. Zeroed by the allocator (`calloc`: a
+/// large one is fresh pages, which the caller's parallel fill is the first to touch; writing
+/// the zeros was a serial pass over a decoded image before it).
+pub fn try_zeroed<T: bytemuck::Zeroable>(path: &Path, n: usize) -> Result<Vec<T>> {
+    bytemuck::allocation::try_zeroed_vec(n)
+        .map_err(|_| out_of_memory(path, n.saturating_mul(std::mem::size_of::<T>()) as u64))
 }
 
 /// The error of an allocation the system refused.
