@@ -478,8 +478,9 @@ pub fn decode(path: &Path, bytes: &[u8]) -> Result<Image> {
     let size = header.layer_size;
     Image::check_size(path, size.0 as u64, size.1 as u64)?;
     let tables = check_chunks(path, bytes, &meta, &mut cursor)?;
-    // What decoding allocates: the crate's planes (every channel at its sample size) and our
-    // interleaved f32 copy of at most four of them.
+    // What decoding allocates at most (the crate's reader, below): its planes (every channel
+    // at its sample size) and our interleaved f32 copy of at most four of them; the block
+    // decode needs only the copy and a block a thread.
     let texels = size.0 as u64 * size.1 as u64;
     let plane_bytes: u64 = header
         .channels
@@ -787,13 +788,45 @@ mod tests {
             let path = e.path();
             if path.extension().is_some_and(|x| x == "exr") {
                 let bytes = std::fs::read(&path).unwrap();
-                let a = decode(&path, &bytes).unwrap();
+                let mut read = exr::io::PeekRead::new(Cursor::new(&bytes[..]));
+                let meta = exr::meta::MetaData::read_from_buffered(&mut read, false).unwrap();
+                let tables = check_chunks(&path, &bytes, &meta, &mut read).unwrap();
+                // The block decode itself, not `decode`'s fallback compared with itself.
+                let a = decode_blocks(&path, &bytes, &meta, &tables)
+                    .unwrap()
+                    .expect("the fixtures are flat scan-line files");
                 let b = decode_with_reader(&path, &bytes).unwrap();
                 assert_eq!(a, b, "{}", path.display());
                 real += 1;
             }
         }
         assert!(real >= 3, "the repository's HDRIs");
+    }
+
+    /// A damaged block in the middle of a file the block decode takes is an error naming the
+    /// file, whichever pool thread met it, never a panic nor an image with a hole. (Noise is
+    /// stored raw, and EXR has no checksum: a smooth image, so that every block is deflated.)
+    #[test]
+    fn a_damaged_block_is_an_error_naming_the_file() {
+        let (w, h, channels) = (64, 96, 3);
+        let data: Vec<f32> = (0..w * h * channels)
+            .map(|k| 1.0 + ((k / channels) % w) as f32 / w as f32)
+            .collect();
+        let img = Image::from_data(w, h, channels, data).unwrap();
+        let bytes = encode(Path::new("t.exr"), &img, FloatDepth::F16).unwrap();
+        let path = Path::new("t.exr");
+        let mut read = exr::io::PeekRead::new(Cursor::new(&bytes[..]));
+        let meta = exr::meta::MetaData::read_from_buffered(&mut read, false).unwrap();
+        assert_eq!(meta.headers[0].compression, Compression::ZIP16);
+        let tables = check_chunks(path, &bytes, &meta, &mut read).unwrap();
+        assert!(decode_blocks(path, &bytes, &meta, &tables)
+            .unwrap()
+            .is_some());
+        let mut bad = bytes.clone();
+        let at = tables[0][tables[0].len() / 2] as usize + 8;
+        bad[at..at + 16].fill(0xff);
+        let err = decode(path, &bad).unwrap_err().to_string();
+        assert!(err.contains("t.exr") && err.contains("EXR"), "{err}");
     }
 
     /// ZIP is kept where it pays: a smooth table (as the LUTs are) is stored in ZIP blocks and
