@@ -8,7 +8,7 @@ mod owned;
 mod pipeline;
 
 pub use images::{container, exr, hdr, jpeg, png, run_image_target, IMAGE_TARGETS};
-pub use owned::{budget, ownership, Counting};
+pub use owned::{budget, ownership, ownership_cleanup, Counting};
 #[cfg(feature = "pipeline")]
 pub use pipeline::pipeline;
 

@@ -27,7 +27,7 @@ use std::sync::OnceLock;
 fn ownership_root() -> &'static Path {
     static ROOT: OnceLock<PathBuf> = OnceLock::new();
     ROOT.get_or_init(|| {
-        let base = std::env::temp_dir().join(format!("ibl-fuzz-ownership-{}", std::process::id()));
+        let base = ownership_base();
         let root = base.join("root");
         let _ = std::fs::create_dir_all(root.join("sub"));
         let _ = std::fs::write(root.join("sub/a.exr"), b"a");
@@ -42,6 +42,17 @@ fn ownership_root() -> &'static Path {
         }
         ownership::resolve(&root)
     })
+}
+
+/// The folder above [`ownership_root`]'s (it holds `outside.exr`), one per process.
+fn ownership_base() -> PathBuf {
+    std::env::temp_dir().join(format!("ibl-fuzz-ownership-{}", std::process::id()))
+}
+
+/// Removes this process's `ownership` folders (what [`ownership_root`] made), for a test to
+/// call when it is done: the fuzzer's own process leaves them to the system's temp cleaning.
+pub fn ownership_cleanup() {
+    let _ = std::fs::remove_dir_all(ownership_base());
 }
 
 /// Splits an `ownership` input: the record's bytes up to the first NUL, then relative paths,

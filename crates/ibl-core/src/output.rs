@@ -216,7 +216,29 @@ pub fn encode_chain_with_alpha(
     name: &str,
     metadata: &[(String, Vec<u8>)],
 ) -> Result<EncodedCube> {
-    encode_with(dir, mips, Some(alpha), enc, name, metadata, true)
+    encode_with(dir, mips, None, Some(alpha), enc, name, metadata, true)
+}
+
+/// A chain's texels encoded once, in memory, before its files are made: what
+/// [`texture::encode_chain`] returns for the chain as it will be written (same format and BC6H
+/// effort). A bake that reads its own encoded chain back (the runtime report looks up what the
+/// engine will sample) hands it to [`encode_chain_from`] rather than encoding twice: BC6H's
+/// encode is most of a BC6H bake's extra time.
+pub type PreEncoded = (texture::Payload, Vec<LevelEncoding>);
+
+/// [`encode_chain`] (or, with `alpha`, [`encode_chain_with_alpha`]) of a chain whose texels
+/// `pre` already holds, encoded from these `mips` in `enc`'s format: the files are made from
+/// those bytes, and only face images (which do not use them) are encoded again.
+pub fn encode_chain_from(
+    dir: &Path,
+    mips: &CubeMips,
+    pre: PreEncoded,
+    alpha: Option<&CubeMips>,
+    enc: &Encoding,
+    name: &str,
+    metadata: &[(String, Vec<u8>)],
+) -> Result<EncodedCube> {
+    encode_with(dir, mips, Some(pre), alpha, enc, name, metadata, true)
 }
 
 fn encode(
@@ -227,19 +249,33 @@ fn encode(
     metadata: &[(String, Vec<u8>)],
     chain: bool,
 ) -> Result<EncodedCube> {
-    encode_with(dir, mips, None, enc, name, metadata, chain)
+    encode_with(dir, mips, None, None, enc, name, metadata, chain)
 }
 
+#[allow(clippy::too_many_arguments)]
 fn encode_with(
     dir: &Path,
     mips: &CubeMips,
+    pre: Option<PreEncoded>,
     alpha: Option<&CubeMips>,
     enc: &Encoding,
     name: &str,
     metadata: &[(String, Vec<u8>)],
     chain: bool,
 ) -> Result<EncodedCube> {
-    let (mut payload, levels) = texture::encode_chain(mips, enc.format, enc.bc6h_quality);
+    let (mut payload, levels) = match pre {
+        Some((payload, levels)) => {
+            // Bytes of another chain or format would be written under this one's name.
+            assert!(
+                payload.format == enc.format
+                    && payload.levels.len() == mips.levels.len()
+                    && mips.levels.first().map(|c| c.size) == Some(payload.width),
+                "pre-encoded chain does not match the chain written"
+            );
+            (payload, levels)
+        }
+        None => texture::encode_chain(mips, enc.format, enc.bc6h_quality),
+    };
     let files = match (enc.layout.codec(), enc.layout.container_path(dir, name)) {
         (Some(codec), Some(path)) => {
             if let Some(a) = alpha {

@@ -69,6 +69,7 @@ fn ownership_and_budget_seeds_replay_and_mutants_hold() {
     // A few thousand mutants per target (deterministic).
     let crash_dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("fuzz-owned-crashes");
     let report = mutate::quick_run(&fuzz_dir(), &TARGETS, 0x24_0a11, 3000, &crash_dir, &run);
+    owned::ownership_cleanup();
     assert!(
         report.is_empty(),
         "failures (copy the inputs into fuzz/regressions/<target>/):\n{}",
@@ -82,5 +83,6 @@ fn ownership_and_budget_seeds_replay_and_mutants_hold() {
 #[ignore]
 fn mutation_fuzz_long() {
     let report = mutate::long_run(&fuzz_dir(), &TARGETS, &run);
+    owned::ownership_cleanup();
     assert!(report.is_empty(), "panics:\n{}", report.join("\n"));
 }

@@ -662,6 +662,10 @@ pub struct Chain {
     /// `--target custom`: the chain's alpha channel, the lookup's midpoints
     /// ([`crate::custom::correction`]), in each of the three channels; none for the others.
     pub correction: Option<CubeMips>,
+    /// The levels as the files will hold them (in the target's orientation and the output's
+    /// lossy format), encoded once for the runtime report and written as they are; `None`
+    /// for rgba32f.
+    pub encoded: Option<output::PreEncoded>,
     /// What `prefilter.json` will record.
     pub report: Report,
     /// Seconds per level (0 for the mirror level).
@@ -764,9 +768,19 @@ pub fn run(
     if let Some(lk) = &chain.report.custom_lookup {
         metadata.extend(lk.metadata(&chain.report.level_roughness));
     }
-    let encoded = match &chain.correction {
-        // Custom chains are in our frame (no orientation to apply to the alpha).
-        Some(alpha) => output::encode_chain_with_alpha(
+    // Custom chains are in our frame (no orientation to apply to the alpha).
+    let alpha = chain.correction.as_ref();
+    let encoded = match (chain.encoded.take(), alpha) {
+        (Some(pre), alpha) => output::encode_chain_from(
+            out_dir,
+            &oriented,
+            pre,
+            alpha,
+            &enc,
+            params.chain_name(),
+            &metadata,
+        )?,
+        (None, Some(alpha)) => output::encode_chain_with_alpha(
             out_dir,
             &oriented,
             alpha,
@@ -774,7 +788,9 @@ pub fn run(
             params.chain_name(),
             &metadata,
         )?,
-        None => output::encode_chain(out_dir, &oriented, &enc, params.chain_name(), &metadata)?,
+        (None, None) => {
+            output::encode_chain(out_dir, &oriented, &enc, params.chain_name(), &metadata)?
+        }
     };
     chain.report.encoding = Some(output::encoding_report(&enc, &encoded.levels));
     chain.warnings.extend(encoded.warnings);
@@ -1356,16 +1372,28 @@ fn bake_resampled(params: &Params, resampled: Resampled, progress: &dyn Progress
     let tr = Instant::now();
     drop(engine_after_fit);
     let reference = Reference::Table(&reference_table);
-    // The engine samples what the format decodes to: a lossy chain is looked up decoded.
+    // The engine samples what the format decodes to: a lossy chain is looked up decoded, from
+    // the very bytes its file will hold (encoded in the target's orientation, as written: a
+    // BC6H block of a turned face is another block), then turned back into our frame.
+    // Those bytes are kept for the file, so the chain is encoded once.
     let enc = params.encoding()?;
-    let decoded = if enc.format.is_lossless() {
-        None
+    let (encoded, decoded) = if enc.format.is_lossless() {
+        (None, None)
     } else {
-        let (payload, _) = ibl_core::io::texture::encode_chain(&mips, enc.format, enc.bc6h_quality);
-        Some(ibl_core::io::texture::decode_cube(
-            Path::new("chain"),
-            &payload,
-        )?)
+        let orientation = params.target.spec().orientation;
+        let encoded = if orientation.is_identity() {
+            ibl_core::io::texture::encode_chain(&mips, enc.format, enc.bc6h_quality)
+        } else {
+            let oriented = orientation.apply_mips(&mips);
+            ibl_core::io::texture::encode_chain(&oriented, enc.format, enc.bc6h_quality)
+        };
+        let file = ibl_core::io::texture::decode_cube(Path::new("chain"), &encoded.0)?;
+        let decoded = if orientation.is_identity() {
+            file
+        } else {
+            orientation.inverse().apply_mips(&file)
+        };
+        (Some(encoded), Some(decoded))
     };
     let looked_up = decoded.as_ref().unwrap_or(&mips);
     let mut runtime_report = match (&correction, &custom_lookup) {
@@ -1393,6 +1421,7 @@ fn bake_resampled(params: &Params, resampled: Resampled, progress: &dyn Progress
     Ok(Chain {
         mips,
         correction,
+        encoded,
         report,
         level_seconds,
         level_work,
@@ -1804,6 +1833,85 @@ mod tests {
         for (f, g) in a.files.iter().zip(&b.files) {
             if f.0.extension().is_some_and(|e| e == "exr") {
                 assert!(f.1 == g.1, "{}", f.0.display());
+            }
+        }
+    }
+
+    /// A lossy chain is encoded once: the runtime report looks up the very blocks the file
+    /// holds (in Bevy's frame, z negated: a BC6H block of a mirrored face is another block),
+    /// and the sidecar's per-level encoding error is the file's.
+    #[test]
+    fn the_runtime_report_of_a_lossy_chain_reads_the_files_own_texels() {
+        use ibl_core::envmap::LoadedEnvironment;
+        use ibl_core::io::texture::{decode_cube, relative_errors};
+        let src = Cubemap::from_fn(32, |d| {
+            let d = d.normalize();
+            let sun = 40.0
+                * d.dot(glam::Vec3::new(0.6, 0.5, -0.62).normalize())
+                    .max(0.0)
+                    .powi(16);
+            [
+                0.8 + sun + 0.5 * d.z,
+                0.6 + 0.8 * sun + 0.4 * d.y * d.y,
+                0.3 + 0.3 * (3.0 * d.x).sin().abs() + 0.2 * d.z.max(0.0),
+            ]
+        });
+        let np = &ibl_core::progress::NoProgress;
+        let d = tempfile::tempdir().unwrap();
+        let table = Reference::Tree {
+            tree: &CellTree::new(&src),
+            source: &src,
+            params: RUNTIME_REFERENCE,
+        }
+        .table(runtime::REPORT_DIRECTIONS);
+        let orientation = Target::Bevy.spec().orientation;
+        assert!(!orientation.is_identity());
+        for format in [PixelFormat::Rgba32f, PixelFormat::Bc6h] {
+            let params = Params {
+                size: 16,
+                levels: Some(3),
+                target: Target::Bevy,
+                format: Some(format),
+                zstd: None,
+                ..Default::default()
+            };
+            let loaded = LoadedEnvironment {
+                env: Environment::Cube(src.clone()),
+                path: d.path().join("src.exr"),
+                report: Default::default(),
+                read_as: Vec::new(),
+                negative: Default::default(),
+            };
+            let baked = run(&params, loaded, d.path(), np).unwrap();
+            let (path, bytes) = baked
+                .files
+                .iter()
+                .find(|f| f.0.extension().is_some_and(|e| e == "ktx2"))
+                .unwrap();
+            let tex = io::container::read(path, bytes).unwrap().unwrap();
+            assert_eq!(tex.payload.format, format);
+            let file = decode_cube(path, &tex.payload).unwrap();
+            // The lookup of the file's texels, turned back into our frame, against the same
+            // reference the bake used: the report's numbers to the bit.
+            let ours = orientation.inverse().apply_mips(&file);
+            let want = runtime::evaluate_with(
+                &ours,
+                Target::Bevy,
+                params.lookup(),
+                runtime::REPORT_DIRECTIONS,
+                &Reference::Table(&table),
+            );
+            let got = baked.chain.report.runtime.as_ref().unwrap();
+            assert_eq!(got.mean_abs_rel, want.mean_abs_rel, "{format:?}");
+            assert_eq!(got.p99_abs_rel, want.p99_abs_rel, "{format:?}");
+            // Each level's reported encoding error is the file's against the float level.
+            let float = orientation.apply_mips(&baked.chain.mips);
+            for (l, e) in baked.encoding.iter().enumerate() {
+                let (mean, max) = relative_errors(&float.levels[l].faces, &file.levels[l].faces);
+                assert_eq!((e.mean_rel, e.max_rel), (mean, max), "{format:?} level {l}");
+            }
+            if format == PixelFormat::Bc6h {
+                assert!(baked.encoding.iter().all(|e| e.mean_rel > 0.0));
             }
         }
     }

@@ -41,6 +41,14 @@ impl Orientation {
         *self == Self::IDENTITY
     }
 
+    /// A⁻¹ = Aᵀ (a signed permutation is orthogonal): turns the engine's file back into our
+    /// frame, texel for texel.
+    pub fn inverse(&self) -> Orientation {
+        Orientation {
+            ours_from_file: ibl_core::orientation::transpose(&self.ours_from_file),
+        }
+    }
+
     /// KTX2 / KTX1 key/value data recording the orientation (every target, ours included, so
     /// a file without it is known to be foreign): [`ibl_core::orientation::METADATA_KEY`].
     pub fn metadata(&self, target: &str) -> Vec<(String, Vec<u8>)> {
@@ -236,5 +244,20 @@ mod tests {
         let four = t.apply(&t.apply(&t.apply(&t.apply(&ours))));
         assert_eq!(four.faces, ours.faces);
         assert_ne!(t.apply(&ours).faces, ours.faces);
+    }
+
+    #[test]
+    fn the_inverse_undoes_every_orientation_texel_for_texel() {
+        let ours = Cubemap::from_fn(5, field);
+        for o in ALL {
+            let inv = o.inverse();
+            assert_eq!(inv.apply(&o.apply(&ours)).faces, ours.faces, "{o:?}");
+            assert_eq!(o.apply(&inv.apply(&ours)).faces, ours.faces, "{o:?}");
+            for d in random_dirs(50) {
+                assert!((inv.ours_from_file(d) - o.file_from_ours(d)).length() < 1e-6);
+            }
+        }
+        // A turn's inverse is the turn the other way, not the turn itself.
+        assert_ne!(Orientation::TURN_Y_90.inverse(), Orientation::TURN_Y_90);
     }
 }
