@@ -126,7 +126,7 @@ t = time.process_time(); [np.copyto(y, x) for _ in range(4)]; bw = 4 * 2 * x.nby
 
 lines.append("\n### Where the time and the bytes go\n")
 lines.append(f"Per stage, CPU seconds of the process (`prefilter --json`: `stages_cpu`; write = the process's CPU minus "
-             f"the stages) and the peak RSS at the end of the stage (`stages_peak_mib`); reserved = what the bake reserves against the memory budget before it starts (`working_set_estimate_mib`, besides the process and the input's image). Procedural sources (sky, 1e5 sun, "
+             f"the stages; the default's rgba16f texels are encoded once, in `runtime`, whose lookup reads their decode, and `encode` makes the files from them) and the peak RSS at the end of the stage (`stages_peak_mib`); reserved = what the bake reserves against the memory budget before it starts (`working_set_estimate_mib`, besides the process and the input's image). Procedural sources (sky, 1e5 sun, "
              f"ground detail; `scripts/procedural-hdr.py`). Floor of a stage = its bytes moved once at the measured memory "
              f"bandwidth ({bw:.1f} GB/s, one core, numpy copy): the cube it writes (read, resample) or the float chain (encode).\n")
 cases = [(1024, 256), (1024, 512), (4096, 256), (4096, 512)]

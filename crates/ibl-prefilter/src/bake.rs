@@ -678,7 +678,8 @@ pub struct Chain {
     pub source_seconds: f64,
     /// Seconds spent on the error estimates.
     pub estimate_seconds: f64,
-    /// Seconds spent on the runtime-lookup error.
+    /// Seconds spent on the runtime-lookup error (with a lossy format, the chain's one encode
+    /// and its decode included: the files are made from those bytes).
     pub runtime_seconds: f64,
     /// Seconds spent fitting levels to the lookup (the extra kernel levels it evaluates).
     pub fit_seconds: f64,
@@ -704,7 +705,7 @@ pub struct Baked {
     /// What the output encoding cost per level (its seconds included).
     pub encoding: Vec<LevelEncoding>,
     /// Seconds from the float chain to the encoded bytes (orientation, metadata, every file
-    /// of the chain, the sidecar).
+    /// of the chain, the sidecar; a lossy format's texels were encoded by the runtime report).
     pub encode_seconds: f64,
     /// CPU seconds (all threads) of the same.
     pub encode_cpu_seconds: f64,
