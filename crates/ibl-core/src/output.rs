@@ -189,7 +189,16 @@ pub fn encode_cube(
     name: &str,
     metadata: &[(String, Vec<u8>)],
 ) -> Result<EncodedCube> {
-    encode(dir, mips, enc, name, metadata, mips.levels.len() > 1)
+    encode_with(
+        dir,
+        mips,
+        None,
+        None,
+        enc,
+        name,
+        metadata,
+        mips.levels.len() > 1,
+    )
 }
 
 /// Encodes a mip chain for `dir`: faces are `m{l}_px.exr`… for every level, a one-level chain
@@ -202,7 +211,7 @@ pub fn encode_chain(
     name: &str,
     metadata: &[(String, Vec<u8>)],
 ) -> Result<EncodedCube> {
-    encode(dir, mips, enc, name, metadata, true)
+    encode_with(dir, mips, None, None, enc, name, metadata, true)
 }
 
 /// [`encode_chain`] with a fourth channel: `alpha`'s channel 0 becomes each texel's A
@@ -226,30 +235,19 @@ pub fn encode_chain_with_alpha(
 /// encode is most of a BC6H bake's extra time.
 pub type PreEncoded = (texture::Payload, Vec<LevelEncoding>);
 
-/// [`encode_chain`] (or, with `alpha`, [`encode_chain_with_alpha`]) of a chain whose texels
-/// `pre` already holds, encoded from these `mips` in `enc`'s format: the files are made from
-/// those bytes, and only face images (which do not use them) are encoded again.
+/// [`encode_chain`] (or, with `alpha`, [`encode_chain_with_alpha`]), from the texels `pre`
+/// already holds when it is given (encoded from these `mips` in `enc`'s format): the files are
+/// made from those bytes, and only face images (which do not use them) are encoded again.
 pub fn encode_chain_from(
     dir: &Path,
     mips: &CubeMips,
-    pre: PreEncoded,
+    pre: Option<PreEncoded>,
     alpha: Option<&CubeMips>,
     enc: &Encoding,
     name: &str,
     metadata: &[(String, Vec<u8>)],
 ) -> Result<EncodedCube> {
-    encode_with(dir, mips, Some(pre), alpha, enc, name, metadata, true)
-}
-
-fn encode(
-    dir: &Path,
-    mips: &CubeMips,
-    enc: &Encoding,
-    name: &str,
-    metadata: &[(String, Vec<u8>)],
-    chain: bool,
-) -> Result<EncodedCube> {
-    encode_with(dir, mips, None, None, enc, name, metadata, chain)
+    encode_with(dir, mips, pre, alpha, enc, name, metadata, true)
 }
 
 #[allow(clippy::too_many_arguments)]

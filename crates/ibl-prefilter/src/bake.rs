@@ -770,29 +770,15 @@ pub fn run(
         metadata.extend(lk.metadata(&chain.report.level_roughness));
     }
     // Custom chains are in our frame (no orientation to apply to the alpha).
-    let alpha = chain.correction.as_ref();
-    let encoded = match (chain.encoded.take(), alpha) {
-        (Some(pre), alpha) => output::encode_chain_from(
-            out_dir,
-            &oriented,
-            pre,
-            alpha,
-            &enc,
-            params.chain_name(),
-            &metadata,
-        )?,
-        (None, Some(alpha)) => output::encode_chain_with_alpha(
-            out_dir,
-            &oriented,
-            alpha,
-            &enc,
-            params.chain_name(),
-            &metadata,
-        )?,
-        (None, None) => {
-            output::encode_chain(out_dir, &oriented, &enc, params.chain_name(), &metadata)?
-        }
-    };
+    let encoded = output::encode_chain_from(
+        out_dir,
+        &oriented,
+        chain.encoded.take(),
+        chain.correction.as_ref(),
+        &enc,
+        params.chain_name(),
+        &metadata,
+    )?;
     chain.report.encoding = Some(output::encoding_report(&enc, &encoded.levels));
     chain.warnings.extend(encoded.warnings);
     // Babylon loads the `.env` alone: the chain's own files (EXR faces) would be strays.

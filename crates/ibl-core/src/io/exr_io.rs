@@ -109,7 +109,11 @@ fn check_chunks<R: std::io::Read>(
 
 /// The channels read, by index into the file's (name-sorted) list: R, G, B (and A) by role,
 /// R and G for two-channel tables, else one grey channel (Y, or R, G, B, or the only one).
-fn pick_channels(path: &Path, names: &[String]) -> Result<Vec<usize>> {
+fn pick_channels<'a>(
+    path: &Path,
+    names: impl IntoIterator<Item = &'a exr::meta::attribute::Text>,
+) -> Result<Vec<usize>> {
+    let names: Vec<String> = names.into_iter().map(|n| n.to_string()).collect();
     let find = |r: &str| names.iter().position(|c| role(c) == r);
     let (ri, gi, bi, ai) = (find("R"), find("G"), find("B"), find("A"));
     Ok(match (ri, gi, bi) {
@@ -164,13 +168,7 @@ struct LineLayout {
 impl LineLayout {
     /// The layout of `header`'s lines and the channels [`pick_channels`] reads from them.
     fn new(path: &Path, header: &exr::meta::header::Header) -> Result<Self> {
-        let names: Vec<String> = header
-            .channels
-            .list
-            .iter()
-            .map(|c| c.name.to_string())
-            .collect();
-        let picked = pick_channels(path, &names)?;
+        let picked = pick_channels(path, header.channels.list.iter().map(|c| &c.name))?;
         let w = header.layer_size.0;
         let mut offsets = Vec::new();
         let mut at = 0;
@@ -517,13 +515,7 @@ fn decode_with_reader(path: &Path, bytes: &[u8]) -> Result<Image> {
         .map_err(bad)?;
     let layer = image.layer_data;
     let (w, h) = (layer.size.0, layer.size.1);
-    let names: Vec<String> = layer
-        .channel_data
-        .list
-        .iter()
-        .map(|c| c.name.to_string())
-        .collect();
-    let picked = pick_channels(path, &names)?;
+    let picked = pick_channels(path, layer.channel_data.list.iter().map(|c| &c.name))?;
     let n = w * h;
     let list = &layer.channel_data.list;
     if picked
