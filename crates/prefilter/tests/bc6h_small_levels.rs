@@ -13,20 +13,24 @@ use std::path::Path;
 
 const BIN: Bin = Bin::new(env!("CARGO_BIN_EXE_prefilter"), "prefilter");
 
-fn chain(input: &Path, out: &Path, format: &str) {
+fn chain(input: &Path, out: &Path, format: &str, rotate: &str) {
     let flags = [
-        "--size", "256", "--levels", "9", "-q", "--layout", "ktx2", "--format", format,
+        "--size", "256", "--levels", "9", "-q", "--layout", "ktx2", "--format", format, "--rotate",
+        rotate,
     ];
     BIN.bake(input, out, &flags);
 }
 
-/// Each ≤8² level's mean relative error (size, error) as `bcdec` decodes the chain,
-/// checked equal to the sidecar's.
-fn small_level_errors(name: &str, tmp: &Path) -> Vec<(usize, f64)> {
+/// Each ≤8² level's mean relative error (size, error) as `bcdec` decodes the chain of the
+/// fixture turned by `rotate` degrees, checked equal to the sidecar's.
+fn small_level_errors(name: &str, rotate: &str, tmp: &Path) -> Vec<(usize, f64)> {
     let input = fixture(&format!("hdri/{name}.exr"));
-    let (fd, bd) = (tmp.join(format!("{name}-f")), tmp.join(name));
-    chain(&input, &fd, "rgba32f");
-    chain(&input, &bd, "bc6h");
+    let (fd, bd) = (
+        tmp.join(format!("{name}-{rotate}-f")),
+        tmp.join(format!("{name}-{rotate}")),
+    );
+    chain(&input, &fd, "rgba32f", rotate);
+    chain(&input, &bd, "bc6h", rotate);
     let float = ibl_core::envmap::read_cube_chain(&fd.join("prefilter.ktx2")).unwrap();
     let back = ibl_core::envmap::read_cube_chain(&bd.join("prefilter.ktx2")).unwrap();
     let sidecar = ibl_testkit::read_json(&bd.join("prefilter.json"));
@@ -54,7 +58,7 @@ fn small_level_errors(name: &str, tmp: &Path) -> Vec<(usize, f64)> {
 fn every_level_of_8x8_or_less_is_under_3_percent_as_an_independent_decoder_reads_it() {
     let tmp = tempfile::tempdir().unwrap();
     for name in ["studio_256", "sunset_256", "city_512", "interior_256"] {
-        for (size, mean) in small_level_errors(name, tmp.path()) {
+        for (size, mean) in small_level_errors(name, "0", tmp.path()) {
             // The format's limit on one block a face (see the file's doc), measured + 0.1.
             let bound = match (name, size) {
                 ("sunset_256", 4) => 0.036,
@@ -66,6 +70,26 @@ fn every_level_of_8x8_or_less_is_under_3_percent_as_an_independent_decoder_reads
     }
 }
 
+/// Held out: the fixtures turned by 250° about the vertical, so every face sees other texels
+/// than the bounds above were measured on. Every ≤8² level but 4² is under 3% (measured:
+/// at most 2.01%); the 4² level, at BC6H's limit, under 4% (measured: studio 2.04%, city
+/// 2.50%, sunset 3.40%, interior 3.85%; a procedural sky with a 10⁵ sun reaches 4.9% there,
+/// `docs/notes/speed-bc6h.md`).
+#[test]
+fn held_out_turned_fixtures_keep_every_small_level_but_4x4_under_3_percent() {
+    let tmp = tempfile::tempdir().unwrap();
+    for name in ["studio_256", "sunset_256", "city_512", "interior_256"] {
+        for (size, mean) in small_level_errors(name, "250", tmp.path()) {
+            let bound = if size == 4 { 0.04 } else { 0.03 };
+            assert!(
+                mean < bound,
+                "{name} turned 250°, {size}²: {:.2}%",
+                100.0 * mean
+            );
+        }
+    }
+}
+
 /// The goal of issue 25 item 5 at 4² on the two fixtures where BC6H's one block a face does
 /// not reach it (`cargo test --release -p prefilter --test bc6h_small_levels -- --ignored`).
 #[test]
@@ -73,7 +97,7 @@ fn every_level_of_8x8_or_less_is_under_3_percent_as_an_independent_decoder_reads
 fn the_4x4_level_is_under_3_percent_on_every_fixture() {
     let tmp = tempfile::tempdir().unwrap();
     for name in ["sunset_256", "interior_256"] {
-        for (size, mean) in small_level_errors(name, tmp.path()) {
+        for (size, mean) in small_level_errors(name, "0", tmp.path()) {
             assert!(mean < 0.03, "{name} {size}²: {:.2}%", 100.0 * mean);
         }
     }
