@@ -18,6 +18,8 @@ mkdir -p bench
 	cargo run --release -q -p "$crate" --example "bench-$crate" -- $quick
 done
 [ -z "$gather" ] && echo "== containers" && cargo run --release -q -p ibl-env --example bench-containers -- $quick
+# Each tool's usual job as a whole process (the README's speed figures): bench/tools.md.
+[ -z "$gather" ] && echo "== tools" && scripts/tools-bench.sh $quick
 # Whole-process speed and memory of the default bake against a build of the base commit
 # (issue 25): bench/speed.md. Not in the quick run (it builds a second tree).
 [ -z "$gather" ] && [ -z "$quick" ] && echo "== speed" && scripts/speed-bench.sh
