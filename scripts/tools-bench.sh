@@ -67,7 +67,7 @@ def out(name):
 
 
 # The face folder the irradiance job reads (made once, by equirect-to-cube).
-faces = os.path.join(work, "faces_256")
+faces = os.path.join(work, "faces_256_" + city_name.split(".")[0])
 if not os.path.isdir(faces):
     subprocess.run([f"{bin_dir}/equirect-to-cube", city, "-o", faces, "--size", "256", "-q"], check=True)
 

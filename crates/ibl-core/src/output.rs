@@ -236,8 +236,9 @@ pub fn encode_chain_with_alpha(
 pub type PreEncoded = (texture::Payload, Vec<LevelEncoding>);
 
 /// [`encode_chain`] (or, with `alpha`, [`encode_chain_with_alpha`]), from the texels `pre`
-/// already holds when it is given (encoded from these `mips` in `enc`'s format): the files are
-/// made from those bytes, and only face images (which do not use them) are encoded again.
+/// already holds when it is given (encoded from `mips` as the file holds them, in `enc`'s
+/// format): a container is made from those bytes, reading only `mips`' shape (so a caller may
+/// pass the chain in another frame), and only face images read `mips`' texels.
 pub fn encode_chain_from(
     dir: &Path,
     mips: &CubeMips,

@@ -756,9 +756,13 @@ pub fn run(
     let te = Instant::now();
     let ce = process_cpu_seconds();
     // The engine's orientation: an exact texel permutation of every level.
-    // (No copy of the chain where the files hold our frame, as gltf's do.)
+    // (No copy of the chain where the files hold our frame, as gltf's do. Nor where the
+    // runtime stage already encoded the turned chain into a container: the file is made
+    // from those bytes, and only face images and Babylon's `.env` read float texels.)
     let orientation = params.target.spec().orientation;
-    let oriented = if orientation.is_identity() {
+    let floats_written =
+        chain.encoded.is_none() || enc.layout.codec().is_none() || params.target == Target::Babylon;
+    let oriented = if orientation.is_identity() || !floats_written {
         Cow::Borrowed(&chain.mips)
     } else {
         Cow::Owned(orientation.apply_mips(&chain.mips))
