@@ -353,9 +353,14 @@ def run(
             finally:
                 # A Ctrl-C after the last stage was committed interrupted nothing.
                 interrupted = stop.set and any(report[s["id"]]["status"] is None for s in to_run)
-                if interrupted:
-                    for ref in pending:
-                        ray.cancel(ref, force=True)
+                # No ray.cancel of the pending tasks: cancelling a task whose dependency is being
+                # resolved races Ray's own bookkeeping, and the driver's core worker aborts
+                # ("Check failed: submitted_task_ref_count > 0", reference_counter.cc; seen in CI
+                # on ray 2.60.0; ray-project/ray#55131 and PR #56123 fix only the actor-task
+                # path). ray.shutdown() below ends this driver's job instead, and Ray kills the
+                # job's workers with it (a stage's `bake` dies with its worker: task.py). Only a
+                # caller that brought its own Ray session (started_ray False) keeps the tasks:
+                # they run out and their results are dropped, none is committed.
                 shutil.rmtree(work, ignore_errors=True)
                 if started_ray:
                     ray.shutdown()
