@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# Installs what the render harness runs: Debian's `chromium` (apt, when missing; a bundled
-# browser cannot be downloaded here) and the pinned npm packages of package-lock.json
+# Installs what the render harness runs: Debian's `chromium` and `cmgen` (apt, when missing; a
+# bundled browser cannot be downloaded here) and the pinned npm packages of package-lock.json
 # (playwright-core, three, @babylonjs/core, filament, @khronosgroup/gltf-viewer, esbuild),
 # reinstalled only when the lock changed (npm's cache keeps the downloads between runs).
 set -euo pipefail
@@ -12,6 +12,15 @@ if ! command -v "${CHROMIUM:-chromium}" > /dev/null; then
 	fi
 	apt-get update -qq
 	DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium > /dev/null
+fi
+# Filament's own route from a panorama is its native cmgen: Debian's (libfilament-tools).
+if ! command -v cmgen > /dev/null; then
+	if [ "$(id -u)" != 0 ]; then
+		echo "conformance/render: cmgen is missing; install Debian's libfilament-tools (apt-get install libfilament-tools)" >&2
+		exit 1
+	fi
+	DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libfilament-tools > /dev/null ||
+		{ apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libfilament-tools > /dev/null; }
 fi
 want="$(sha256sum package-lock.json | cut -d' ' -f1)"
 if [ "$(cat node_modules/.lock-sha256 2> /dev/null)" != "$want" ]; then

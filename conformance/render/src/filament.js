@@ -1,6 +1,6 @@
 //! Filament 1.53 page (npm `filament`, its wasm build): the sphere-rows scene (spheres from a
 //! glTF through gltfio, Filament's own ubershader materials) lit by our `--target filament`
-//! env_ibl.ktx loaded by the LOAD.txt snippet; read back as floats from an RGBA32F render target.
+//! env_ibl.ktx loaded by the LOAD.txt snippet, or (`route: "own"`) by cmgen's KTX; read back as floats from an RGBA32F render target.
 import { params, SCENE, loadSnippet, finish, run } from "./common.js";
 
 /* global Filament */
@@ -48,9 +48,22 @@ run(async () => {
   await new Promise((ok) => asset.loadResources(ok, null, null, null));
   scene.addEntities(asset.getRenderableEntities());
 
-  const snippet = await loadSnippet(params.note, [], ["loadIndirectLight"]);
-  const { loadIndirectLight } = snippet();
-  const ibl = loadIndirectLight(Filament, engine, params.ktx);
+  let ibl;
+  if (params.route === "own") {
+    // Filament's own route: cmgen's deployment KTX through Filament's loader, as its samples
+    // load one. 1.53 keeps the file's `sh` metadata in .shfloats only (Ktx1Bundle), so the
+    // light is built again with them, as any page must.
+    const fromKtx = engine.createIblFromKtx1(params.ktx);
+    ibl = Filament.IndirectLight.Builder()
+      .reflections(fromKtx.getReflectionsTexture())
+      .irradianceSh(3, fromKtx.shfloats)
+      .intensity(1.0)
+      .build(engine);
+  } else {
+    const snippet = await loadSnippet(params.note, [], ["loadIndirectLight"]);
+    const { loadIndirectLight } = snippet();
+    ibl = loadIndirectLight(Filament, engine, params.ktx);
+  }
   // The file is oriented as cmgen orients the panorama; `rotation` (row-major 3×3, optional)
   // turns the page's world to the contract's.
   if (params.rotation) ibl.setRotation(params.rotation);

@@ -65,8 +65,14 @@ fn run(source: &Path, chain: &Path, dirs: usize) -> Result<(), Box<dyn std::erro
         lk.power = serde_json::from_value(field("custom_lookup")?["power"].clone())?;
         evaluate_custom(&CustomChain::new(&mips, &alpha), &lk, dirs, &reference)
     } else {
-        let mips = read_cube_chain(chain)?;
-        evaluate_with(&mips, target, target.spec().lod, dirs, &reference)
+        // The files hold the engine's orientation (Filament's and Unity's differ from ours);
+        // the lookup is emulated in our frame.
+        let spec = target.spec();
+        let mips = spec
+            .orientation
+            .inverse()
+            .apply_mips(&read_cube_chain(chain)?);
+        evaluate_with(&mips, target, spec.lod, dirs, &reference)
     };
     println!(
         "{}",
