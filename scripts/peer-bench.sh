@@ -17,9 +17,9 @@ if ! command -v cmgen >/dev/null 2>&1; then
 	DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libfilament-tools >/dev/null ||
 		{ apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libfilament-tools >/dev/null; }
 fi
-# The fixtures are DWA-compressed EXRs, which this cmgen's EXR reader (tinyexr) refuses
-# ("Unknown compression type"): both tools read the same pixels rewritten ZIP-compressed, by
-# the OpenEXR library's own Python binding.
+# The shared fixtures are DWA-compressed EXRs, which this cmgen's EXR reader (tinyexr) refuses
+# ("Unknown compression type"): every input is rewritten ZIP-compressed by the OpenEXR
+# library's own Python binding, and both tools read that file.
 if ! python3 -c 'import OpenEXR, numpy' >/dev/null 2>&1; then
 	echo "peer-bench: installing OpenEXR and numpy from PyPI (once)"
 	python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ignore OpenEXR numpy
@@ -46,20 +46,26 @@ if quick:
 timed = next(n for n in names if n.startswith("city")) if any(n.startswith("city") for n in names) else names[0]
 
 
+FACES = ("px", "nx", "py", "ny", "pz", "nz")
+
+
+def load_rgb(path):
+    with OpenEXR.File(path) as f:
+        ch = f.channels()
+        if "RGB" in ch or "RGBA" in ch:
+            return ch["RGB" if "RGB" in ch else "RGBA"].pixels[..., :3].astype(np.float64)
+        return np.stack([ch[c].pixels for c in "RGB"], -1).astype(np.float64)
+
+
 def zip_exr(name):
-    """The fixture's RGB rewritten as a ZIP-compressed float EXR (once)."""
+    """The fixture's RGB rewritten as a ZIP-compressed float EXR, on every run (a copy kept
+    from an earlier run could hold another file's pixels under the same name)."""
     dst = os.path.join(work, name + "_zip.exr")
-    if not os.path.exists(dst):
-        with OpenEXR.File(os.path.join(fx, name + ".exr")) as f:
-            ch = f.channels()
-            if "RGB" in ch or "RGBA" in ch:
-                rgb = ch["RGB" if "RGB" in ch else "RGBA"].pixels[..., :3]
-            else:
-                rgb = np.stack([ch[c].pixels for c in "RGB"], -1)
-        header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-        with OpenEXR.File(header, {"RGB": np.ascontiguousarray(rgb, dtype=np.float32)}) as o:
-            o.write(dst + ".tmp.exr")
-        os.replace(dst + ".tmp.exr", dst)
+    rgb = load_rgb(os.path.join(fx, name + ".exr")).astype(np.float32)
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    with OpenEXR.File(header, {"RGB": np.ascontiguousarray(rgb)}) as o:
+        o.write(dst + ".tmp.exr")
+    os.replace(dst + ".tmp.exr", dst)
     return dst
 
 
@@ -73,7 +79,8 @@ def fresh(name):
 def tools(size, levels):
     """name -> argv builder (input, output folder); cmgen's chain ends at --ibl-min-lod-size."""
     minimum = size >> (levels - 1)
-    # Float faces, as cmgen's: rgba32f (our faces' default for this target is rgba16f).
+    # Float faces, as cmgen's (rgba32f, the faces' default, named so that a change of default
+    # cannot move this row).
     filament = ["--target", "filament", "--layout", "faces", "--format", "rgba32f"]
     ours = lambda extra: (lambda i, o: [prefilter, i, "-o", o, "--size", str(size), "--levels", str(levels), "-q"] + extra)
     return [
@@ -95,7 +102,7 @@ def timed_run(argv):
 
 jobs = [(256, 5)] + ([] if quick else [(512, 6)])
 speed = []
-src = zip_exr(timed)
+src = src_timed = zip_exr(timed)
 for size, levels in jobs:
     ts = tools(size, levels)
     res = {name: [] for name, _ in ts}
@@ -111,17 +118,6 @@ for size, levels in jobs:
         speed.append(f"| {size}², {levels} levels | {name} | {c:.2f} | {w:.2f} | {max(x[2] for x in res[name]):.0f} | "
                      f"{cm[0] / c:.1f}× | {cm[1] / w:.1f}× |")
         print(speed[-1], flush=True)
-
-
-FACES = ("px", "nx", "py", "ny", "pz", "nz")
-
-
-def load_rgb(path):
-    with OpenEXR.File(path) as f:
-        ch = f.channels()
-        if "RGB" in ch or "RGBA" in ch:
-            return ch["RGB" if "RGB" in ch else "RGBA"].pixels[..., :3].astype(np.float64)
-        return np.stack([ch[c].pixels for c in "RGB"], -1).astype(np.float64)
 
 
 def same_frame(a, b, level):
@@ -160,7 +156,7 @@ accuracy = []
 size, levels = 256, 5
 ts = tools(size, levels)[1:]
 for n in names:
-    src = zip_exr(n)
+    src = zip_exr(n) if n != timed else src_timed
     row = []
     sidecar = None
     for name, argv in ts:
