@@ -3,8 +3,9 @@
 //! method the bake itself uses, so its errors and the levels' can correlate). Used by
 //! `scripts/speed-bench.sh` to compare two builds' chains on one footing.
 //!
-//! `runtime-check SOURCE CHAIN_DIR [DIRECTIONS]` (CHAIN_DIR holds the faces or the container
-//! and prefilter.json; DIRECTIONS defaults to the report's 128) prints
+//! `runtime-check SOURCE CHAIN_DIR [DIRECTIONS]` (CHAIN_DIR holds prefilter.json and the faces
+//! or `prefilter.ktx2`, which is read when present: a peer's KTX2 can be checked under our
+//! sidecar; DIRECTIONS defaults to the report's 128) prints
 //! `{"roughness": [...], "mean_abs_rel": [...], "p99_abs_rel": [...]}`. A `--target custom`
 //! chain is read through its own lookup: the constants rebuilt from the sidecar's α₀ and the
 //! chain's shape, the alpha channel from `prefilter.ktx2`.
@@ -68,10 +69,16 @@ fn run(source: &Path, chain: &Path, dirs: usize) -> Result<(), Box<dyn std::erro
         // The files hold the engine's orientation (Filament's and Unity's differ from ours);
         // the lookup is emulated in our frame.
         let spec = target.spec();
+        let ktx2 = chain.join("prefilter.ktx2");
+        let file = if ktx2.is_file() {
+            ktx2
+        } else {
+            chain.to_path_buf()
+        };
         let mips = spec
             .orientation
             .inverse()
-            .apply_mips(&read_cube_chain(chain)?);
+            .apply_mips(&read_cube_chain(&file)?);
         evaluate_with(&mips, target, spec.lod, dirs, &reference)
     };
     println!(
