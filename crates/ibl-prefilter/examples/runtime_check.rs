@@ -1,7 +1,8 @@
 //! The runtime error of a baked chain recomputed against the brute-force kernel: an independent
 //! check of `prefilter.json`'s `runtime` block, whose own reference is the cell tree (the
 //! method the bake itself uses, so its errors and the levels' can correlate). Used by
-//! `scripts/speed-bench.sh` to compare two builds' chains on one footing.
+//! `scripts/speed-bench.sh` to compare two builds' chains on one footing, and by
+//! `scripts/peer-bench.sh` to measure the peers' chains with ours.
 //!
 //! `runtime-check SOURCE CHAIN_DIR [DIRECTIONS]` (CHAIN_DIR holds prefilter.json and the faces
 //! or `prefilter.ktx2`, which is read when present: a peer's KTX2 can be checked under our
