@@ -36,6 +36,18 @@ const GAUSS: [(f64, f64); 3] = [
     (0.774_596_669_241_483_4, 5.0 / 9.0),
 ];
 
+/// Below this many source pixels a texel side ([`AreaPlan::texel_value`]'s ρ) the adaptive
+/// filter reads the bilinear reconstruction at the texel's centre alone.
+pub(crate) const RHO_BILINEAR: f64 = 0.5;
+
+/// From this many source pixels a texel side the adaptive filter is the footprint mean alone.
+pub(crate) const RHO_AREA: f64 = 0.75;
+
+/// b + (a − b)·w per channel: the bilinear reading `b` moved toward the footprint mean `a`.
+fn blend(b: [f64; 3], a: Rgb, w: f64) -> Rgb {
+    std::array::from_fn(|k| (b[k] + (a[k] as f64 - b[k]) * w) as f32)
+}
+
 /// One column piece of a side-face texel column: the source column and, per Gauss node, A =
 /// 1 + s² and the node's weight gw·half/A.
 #[derive(Clone, Copy, Debug)]
@@ -297,6 +309,137 @@ impl AreaPlan {
             [0.0; 3]
         };
         (mean, total)
+    }
+
+    /// The texel of the adaptive filter (`Filter::Adaptive`): the footprint mean
+    /// ([`Self::footprint_mean`]) where the texel covers a source pixel or more, the bilinear
+    /// reconstruction at its centre ([`Self::bilinear_at_centre`]) where it covers less, and
+    /// between [`RHO_BILINEAR`] and [`RHO_AREA`] a linear blend of the two.
+    ///
+    /// Why: the footprint mean reads the source as piecewise constant, which is exact for a
+    /// shrunk source but shows each source pixel as a flat block when the cube is finer than
+    /// the source (a low-resolution panorama, and every face's corners, whose texels subtend
+    /// about 0.44× the angle of the face centre's). A mirror then reflects blocks where the
+    /// engines' own routes and skyboxes show the bilinear reading of the same panorama
+    /// (measured through the glTF Sample Viewer: 4.2% mean error on the mirror sphere from a
+    /// 256×128 source at 256², 0.7% read bilinearly; `docs/notes/resample-adaptive.md`).
+    /// The blend band sits below one source pixel a texel so that a sun keeps its power: a
+    /// bilinear read at 2 samples or more a source pixel a side integrates the tent
+    /// reconstruction to within 1e-4, at one sample a pixel only to about 0.5%.
+    pub fn texel_value(&self, src: &Rows, sc: &mut Scratch, face: Face, i: usize, j: usize) -> Rgb {
+        let w_area = self.area_weight(face, i, j);
+        if w_area >= 1.0 {
+            return self.footprint_mean(src, sc, face, i, j).0;
+        }
+        let b = self.bilinear_at_centre(src, face, i, j);
+        if w_area <= 0.0 {
+            return b.map(|v| v as f32);
+        }
+        blend(b, self.footprint_mean(src, sc, face, i, j).0, w_area)
+    }
+
+    /// [`Self::texel_value`] of a texel whose footprint mean `area` is already known (a
+    /// resample that keeps both cubes): the same bits, without integrating again.
+    pub fn texel_value_with_area(
+        &self,
+        area: Rgb,
+        src: &Rows,
+        face: Face,
+        i: usize,
+        j: usize,
+    ) -> Rgb {
+        let w_area = self.area_weight(face, i, j);
+        if w_area >= 1.0 {
+            return area;
+        }
+        let b = self.bilinear_at_centre(src, face, i, j);
+        if w_area <= 0.0 {
+            return b.map(|v| v as f32);
+        }
+        blend(b, area, w_area)
+    }
+
+    /// The footprint mean's weight in [`Self::texel_value`]'s blend.
+    fn area_weight(&self, face: Face, i: usize, j: usize) -> f64 {
+        let rho = self.footprint_pixels(face, i, j);
+        ((rho - RHO_BILINEAR) / (RHO_AREA - RHO_BILINEAR)).clamp(0.0, 1.0)
+    }
+
+    /// ρ = sqrt(Ω_texel / Ω_pixel): how many source pixels texel (`face`, i, j) spans a side,
+    /// from its solid angle step²/(1 + s² + t²)^{3/2} at the centre and the solid angle
+    /// (2π/W)(π/H) sin θ of a source pixel at the centre's latitude (toward the poles the
+    /// source's pixels shrink, so the footprint mean takes over there).
+    fn footprint_pixels(&self, face: Face, i: usize, j: usize) -> f64 {
+        let [x, y, z] = self.centre_direction(face, i, j);
+        let q = x * x + y * y + z * z;
+        let omega_texel = self.step * self.step / (q * q.sqrt());
+        let sin_theta = ((x * x + z * z) / q).sqrt();
+        let omega_pixel = (2.0 * PI / self.w as f64) * (PI / self.h as f64) * sin_theta;
+        if omega_pixel <= 0.0 {
+            return f64::INFINITY;
+        }
+        (omega_texel / omega_pixel).sqrt()
+    }
+
+    /// Unnormalised direction of texel (`face`, i, j)'s centre, in f64 (the face table of
+    /// docs/CONVENTIONS.md: each component is ±1, ±s or ±t, so the f32 table read at 0 and at
+    /// the unit steps gives it exactly).
+    fn centre_direction(&self, face: Face, i: usize, j: usize) -> [f64; 3] {
+        let s = (i as f64 + 0.5) * self.step - 1.0;
+        let t = (j as f64 + 0.5) * self.step - 1.0;
+        let o = face.direction(0.0, 0.0);
+        let ds = face.direction(1.0, 0.0) - o;
+        let dt = face.direction(0.0, 1.0) - o;
+        [
+            o.x as f64 + s * ds.x as f64 + t * dt.x as f64,
+            o.y as f64 + s * ds.y as f64 + t * dt.y as f64,
+            o.z as f64 + s * ds.z as f64 + t * dt.z as f64,
+        ]
+    }
+
+    /// The source's bilinear reconstruction (wrapping in u, clamping in v, as
+    /// `equirect::sample_bilinear`) at texel (`face`, i, j)'s centre, the source turned by
+    /// the plan's rotation; reads only rows that [`Self::texel_rows`] names for the texel.
+    pub fn bilinear_at_centre(&self, src: &Rows, face: Face, i: usize, j: usize) -> [f64; 3] {
+        let [x, y, z] = self.centre_direction(face, i, j);
+        let u = 0.5 + (z.atan2(x) + self.rot) / (2.0 * PI);
+        let v = (x * x + z * z).sqrt().atan2(y) / PI;
+        let (w, h) = (self.w as i64, self.h as i64);
+        let fx = u * w as f64 - 0.5;
+        let fy = v * h as f64 - 0.5;
+        let (x0, y0) = (fx.floor(), fy.floor());
+        let (ax, ay) = (fx - x0, fy - y0);
+        let (x0, y0) = (x0 as i64, y0 as i64);
+        let cols = [x0.rem_euclid(w) as usize, (x0 + 1).rem_euclid(w) as usize];
+        let rows = [
+            y0.clamp(0, h - 1) as usize,
+            (y0 + 1).clamp(0, h - 1) as usize,
+        ];
+        assert!(
+            rows[0] >= src.first && rows[1] < src.first + src.rows,
+            "adaptive resample: rows {}..={} read outside the window {}..{}",
+            rows[0],
+            rows[1],
+            src.first,
+            src.first + src.rows
+        );
+        let ch = src.channels;
+        let texel = |r: usize, c: usize| -> [f64; 3] {
+            let t = &src.data[(r - src.first) * self.w * ch + c * ch..];
+            // Image::rgb's reading of 1, 2, 3 or 4 channels.
+            match ch {
+                1 => [t[0] as f64; 3],
+                2 => [t[0] as f64, t[1] as f64, 0.0],
+                _ => [t[0] as f64, t[1] as f64, t[2] as f64],
+            }
+        };
+        let (a, b) = (texel(rows[0], cols[0]), texel(rows[0], cols[1]));
+        let (c, d) = (texel(rows[1], cols[0]), texel(rows[1], cols[1]));
+        std::array::from_fn(|k| {
+            let top = a[k] + (b[k] - a[k]) * ax;
+            let bot = c[k] + (d[k] - c[k]) * ax;
+            top + (bot - top) * ay
+        })
     }
 
     /// Source rows `[a, b]` that [`Self::footprint_mean`] may read for texel (`face`, i, j):

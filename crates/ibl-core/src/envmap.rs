@@ -267,7 +267,7 @@ fn cube_to_cube(
     progress: &dyn Progress,
 ) -> Cubemap {
     if rotate_deg == 0.0
-        && filter == Filter::Area
+        && filter != Filter::Bilinear
         && n < src.size
         && src.size.is_multiple_of(n)
         && (src.size / n).is_power_of_two()
@@ -279,7 +279,7 @@ fn cube_to_cube(
         return c;
     }
     let k = match filter {
-        Filter::Area => (src.size.div_ceil(n) * 2).clamp(1, 16),
+        Filter::Area | Filter::Adaptive => (src.size.div_ceil(n) * 2).clamp(1, 16),
         Filter::Bilinear => 1,
     };
     crate::traverse::map_cube_texels(n, progress, |face, i, j| {
@@ -472,6 +472,9 @@ pub struct EquirectStream {
 pub struct StreamedCube {
     /// The cube, bit-identical to the whole-image resample of the checked input.
     pub cube: Cubemap,
+    /// With [`EquirectStream::to_cube_with_mirror`]: the adaptive cube of the same size
+    /// (`crate::equirect::adaptive_from_area` of `cube`, the same bits).
+    pub mirror: Option<Cubemap>,
     /// What the texel checks found (as [`LoadedEnvironment::report`]).
     pub report: TexelReport,
     /// How a file whose content and name disagree was read.
@@ -565,19 +568,44 @@ impl EquirectStream {
     }
 
     /// Reads the rows, checking them, into a cube with n×n faces turned by `rotate_deg`
-    /// (the area filter): the cube [`Environment::to_cube`] makes from the loaded image. A
+    /// (by `filter`): the cube [`Environment::to_cube`] makes from the loaded image. A
     /// NaN/Inf refused or negatives refused is the error of [`load_environment_with`], after
     /// the whole file is read (the counts are the file's).
     pub fn to_cube(
         self,
         n: usize,
+        filter: Filter,
+        rotate_deg: f32,
+        progress: &dyn Progress,
+    ) -> Result<StreamedCube> {
+        self.streamed_cube(n, filter, false, rotate_deg, progress)
+    }
+
+    /// [`Self::to_cube`] by the area filter, with its adaptive mirror (`mirror`) from the
+    /// same read.
+    pub fn to_cube_with_mirror(
+        self,
+        n: usize,
+        rotate_deg: f32,
+        progress: &dyn Progress,
+    ) -> Result<StreamedCube> {
+        self.streamed_cube(n, Filter::Area, true, rotate_deg, progress)
+    }
+
+    fn streamed_cube(
+        self,
+        n: usize,
+        filter: Filter,
+        mirror: bool,
         rotate_deg: f32,
         progress: &dyn Progress,
     ) -> Result<StreamedCube> {
         let (mut checked, path, read_as) = self.checked();
-        let (cube, window) = crate::stream::equirect_to_cube_streamed(
+        let (cube, mirror, window) = crate::stream::streamed(
             &mut checked,
             n,
+            filter,
+            mirror,
             rotate_deg,
             crate::stream::DEFAULT_BAND,
             progress,
@@ -585,6 +613,7 @@ impl EquirectStream {
         let checks = checked.finish(&path, read_as)?;
         Ok(StreamedCube {
             cube,
+            mirror,
             report: checks.report,
             read_as: checks.read_as,
             negative: checks.negative,
@@ -1216,7 +1245,7 @@ mod tests {
                 let Opened::Streamed(s) = open_streaming_from(&p, policy, 0).unwrap() else {
                     unreachable!()
                 };
-                let got = s.to_cube(n, rot, &NoProgress).unwrap();
+                let got = s.to_cube(n, Filter::Area, rot, &NoProgress).unwrap();
                 assert!(same_bits(&got.cube, &want), "{name} -> {n}");
                 assert_eq!(got.report, loaded.report);
                 assert_eq!(got.negative, loaded.negative);
@@ -1232,7 +1261,10 @@ mod tests {
             let Opened::Streamed(s) = open_streaming_from(&cut, policy, 0).unwrap() else {
                 panic!("streamed")
             };
-            let e = s.to_cube(32, 0.0, &NoProgress).unwrap_err().to_string();
+            let e = s
+                .to_cube(32, Filter::Area, 0.0, &NoProgress)
+                .unwrap_err()
+                .to_string();
             assert!(
                 e.starts_with(&format!("{}: ", cut.display()))
                     && e.contains("scan line")
@@ -1263,7 +1295,10 @@ mod tests {
             let q = d.path().join(format!("bad_{name}"));
             std::fs::write(&q, &bad).unwrap();
             if let Ok(Opened::Streamed(s)) = open_streaming_from(&q, policy, 0) {
-                let e = s.to_cube(32, 0.0, &NoProgress).unwrap_err().to_string();
+                let e = s
+                    .to_cube(32, Filter::Area, 0.0, &NoProgress)
+                    .unwrap_err()
+                    .to_string();
                 assert!(e.contains("bad_") && e.contains("scan line"), "{e}");
             }
         }
@@ -1359,7 +1394,7 @@ mod tests {
             assert!(streams, "{at}: streamed");
             let loaded = load_environment_with(&p, policy).unwrap();
             let want = loaded.env.to_cube(48, Filter::Area, 10.0, &NoProgress);
-            let got = s.to_cube(48, 10.0, &NoProgress).unwrap();
+            let got = s.to_cube(48, Filter::Area, 10.0, &NoProgress).unwrap();
             assert!(same_bits(&got.cube, &want), "{at}");
             assert_eq!(got.report, loaded.report, "{at}");
             assert!(got.report.non_finite_zeroed > 0 && got.report.negative_clamped > 0);
@@ -1373,7 +1408,10 @@ mod tests {
                 let q = d.path().join("damaged.exr");
                 std::fs::write(&q, &bytes).unwrap();
                 if let Ok(Opened::Streamed(s)) = open_streaming_from(&q, policy, 0) {
-                    let e = s.to_cube(48, 0.0, &NoProgress).unwrap_err().to_string();
+                    let e = s
+                        .to_cube(48, Filter::Area, 0.0, &NoProgress)
+                        .unwrap_err()
+                        .to_string();
                     assert!(e.starts_with(&format!("{}: ", q.display())), "{e}");
                 }
                 // Cut short: refused before any row is read, as the whole read refuses it.
@@ -1401,7 +1439,7 @@ mod tests {
             };
             let loaded = load_environment_with(&p, policy).unwrap();
             let want = loaded.env.to_cube(64, Filter::Area, 0.0, &NoProgress);
-            let got = s.to_cube(64, 0.0, &NoProgress).unwrap();
+            let got = s.to_cube(64, Filter::Area, 0.0, &NoProgress).unwrap();
             assert!(same_bits(&got.cube, &want), "{}", p.display());
             assert_eq!(got.warnings(&p), loaded.warnings());
             streamed += 1;
@@ -1472,7 +1510,7 @@ mod tests {
                         policy,
                         read_as: None,
                     };
-                    let got = stream.to_cube(11, 15.0, &NoProgress);
+                    let got = stream.to_cube(11, Filter::Area, 15.0, &NoProgress);
                     // The same rows handed out in bands of 7 (the last one 3).
                     let mut rows = Vec::new();
                     let banded = EquirectStream {

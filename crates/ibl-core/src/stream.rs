@@ -1,4 +1,4 @@
-//! Streamed equirect → cube area resampling: the source's rows arrive top to bottom in bands
+//! Streamed equirect → cube resampling: the source's rows arrive top to bottom in bands
 //! and only a window of them is held. Each cube texel is computed as soon as every source row
 //! its footprint can touch ([`AreaPlan::texel_rows`]) has arrived, by the very arithmetic of
 //! the whole-image resample ([`crate::equirect::equirect_to_cube`]): the same bits, only the
@@ -10,6 +10,7 @@
 
 use crate::area::{AreaPlan, Rows, Scratch};
 use crate::cube::{Cubemap, Face};
+use crate::equirect::Filter;
 use crate::error::Result;
 use crate::image::Image;
 use crate::progress::Progress;
@@ -191,18 +192,37 @@ impl Schedule {
     }
 }
 
-/// Equirect rows from `src` → cubemap with n×n faces turned by `rotate_deg` about +Y, by the
-/// area filter, reading `band` rows at a time and holding only the rows pending texels need.
-/// The texels are bit-identical to [`crate::equirect::equirect_to_cube`]'s (`Filter::Area`)
-/// for any band height and thread count; the window is reserved against the memory budget
+/// Equirect rows from `src` → cubemap with n×n faces turned by `rotate_deg` about +Y, by
+/// `filter`, reading `band` rows at a time and holding only the rows pending texels need.
+/// The texels are bit-identical to [`crate::equirect::equirect_to_cube`]'s (the same
+/// filter) for any band height and thread count; the window is reserved against the memory budget
 /// before the first row is read.
 pub fn equirect_to_cube_streamed(
     src: &mut dyn RowSource,
     n: usize,
+    filter: Filter,
     rotate_deg: f32,
     band: usize,
     progress: &dyn Progress,
 ) -> Result<(Cubemap, WindowStats)> {
+    let (cube, _, stats) = streamed(src, n, filter, false, rotate_deg, band, progress)?;
+    Ok((cube, stats))
+}
+
+/// The streamed resample by `filter`, and with `mirror` (`filter` being `Area`) in the same
+/// read the `Filter::Adaptive` cube (`crate::equirect::adaptive_from_area`'s bits): a bake's
+/// exact-power cube and its mirror from one pass over the rows.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn streamed(
+    src: &mut dyn RowSource,
+    n: usize,
+    filter: Filter,
+    mirror: bool,
+    rotate_deg: f32,
+    band: usize,
+    progress: &dyn Progress,
+) -> Result<(Cubemap, Option<Cubemap>, WindowStats)> {
+    debug_assert!(!mirror || filter == Filter::Area);
     let (w, h, ch) = (src.width(), src.height(), src.channels());
     let stride = w * ch;
     let plan = AreaPlan::new(w, h, n, (rotate_deg as f64).to_radians());
@@ -223,11 +243,12 @@ pub fn equirect_to_cube_streamed(
         .try_reserve_exact(stats.peak_rows * stride)
         .map_err(|_| crate::io::budget::out_of_memory(&path, stats.peak_bytes))?;
     let mut cube = Cubemap::new(n);
+    let mut mirror_cube = mirror.then(|| Cubemap::new(n));
     progress.start("texels", (6 * n * n) as u64);
     let mut lo = 0usize;
     // Rows held at most, as measured (the tests hold it to the schedule's and to the bound).
     let mut held = 0usize;
-    let mut values: Vec<Rgb> = Vec::new();
+    let mut values: Vec<(Rgb, Rgb)> = Vec::new();
     for k in 0..h.div_ceil(band) {
         let (_, r1) = sched.window(k);
         let r0 = k * band;
@@ -254,14 +275,23 @@ pub fn equirect_to_cube_streamed(
                     }
                     *last = t;
                     let (face, j, i) = (Face::from_index(t / (n * n)), (t / n) % n, t % n);
-                    plan.footprint_mean(&rows, sc, face, i, j).0
+                    let v = crate::equirect::resample_texel(&plan, filter, &rows, sc, face, i, j);
+                    let m = if mirror {
+                        plan.texel_value_with_area(v, &rows, face, i, j)
+                    } else {
+                        v
+                    };
+                    (v, m)
                 },
             )
             .collect_into_vec(&mut values);
         for (&t, v) in texels.iter().zip(&values) {
             let t = t as usize;
             let (f, j, i) = (t / (n * n), (t / n) % n, t % n);
-            cube.faces[f].texel_mut(i, j).copy_from_slice(v);
+            cube.faces[f].texel_mut(i, j).copy_from_slice(&v.0);
+            if let Some(m) = &mut mirror_cube {
+                m.faces[f].texel_mut(i, j).copy_from_slice(&v.1);
+            }
         }
         progress.inc(texels.len() as u64);
         // Rows no pending texel reads any more.
@@ -272,7 +302,7 @@ pub fn equirect_to_cube_streamed(
     progress.finish();
     stats.peak_rows = held;
     stats.peak_bytes = (held * stride * 4) as u64;
-    Ok((cube, stats))
+    Ok((cube, mirror_cube, stats))
 }
 
 /// A Radiance equirect at the streaming threshold (2048×1024, what
@@ -342,15 +372,26 @@ mod tests {
         ];
         for (c, &(w, h, ch, n, rot)) in cases.iter().enumerate() {
             let img = random(w, h, ch, 0x9e37_79b9 + c as u64);
-            let whole = equirect_to_cube(&img, n, Filter::Area, rot, &NoProgress);
             for band in [1, 2, 7, 32, 1000] {
-                let (got, stats) =
-                    equirect_to_cube_streamed(&mut ImageRows::new(&img), n, rot, band, &NoProgress)
-                        .unwrap();
-                assert!(
-                    same_bits(&got, &whole),
-                    "{w}x{h}x{ch} -> {n} rot {rot} band {band}: differs"
-                );
+                let mut stats = None;
+                for filter in [Filter::Adaptive, Filter::Area, Filter::Bilinear] {
+                    let whole = equirect_to_cube(&img, n, filter, rot, &NoProgress);
+                    let (got, s) = equirect_to_cube_streamed(
+                        &mut ImageRows::new(&img),
+                        n,
+                        filter,
+                        rot,
+                        band,
+                        &NoProgress,
+                    )
+                    .unwrap();
+                    assert!(
+                        same_bits(&got, &whole),
+                        "{w}x{h}x{ch} -> {n} rot {rot} band {band} {filter:?}: differs"
+                    );
+                    stats = Some(s);
+                }
+                let stats = stats.unwrap();
                 // The stated bound, and the window is a fraction of the image where the
                 // texels are small against it.
                 let b = band.min(h);
@@ -374,11 +415,19 @@ mod tests {
             let crate::envmap::Environment::Equirect(img) = loaded.env else {
                 panic!("{name} is an equirect")
             };
+            // (128² from the 256-wide studio enlarges it: the adaptive filter's bilinear
+            // reads and its blend band are streamed there too.)
             for (n, rot, band) in [(64usize, 0.0f32, 16usize), (33, 45.0, 1), (128, -90.0, 5)] {
-                let whole = equirect_to_cube(&img, n, Filter::Area, rot, &NoProgress);
-                let (got, stats) =
-                    equirect_to_cube_streamed(&mut ImageRows::new(&img), n, rot, band, &NoProgress)
-                        .unwrap();
+                let whole = equirect_to_cube(&img, n, Filter::Adaptive, rot, &NoProgress);
+                let (got, stats) = equirect_to_cube_streamed(
+                    &mut ImageRows::new(&img),
+                    n,
+                    Filter::Adaptive,
+                    rot,
+                    band,
+                    &NoProgress,
+                )
+                .unwrap();
                 assert!(same_bits(&got, &whole), "{name} -> {n}");
                 // A texel spans about (2/π)·H/n rows at a face centre, up to 0.9·H/n next
                 // to the pole, plus a row each way for rounding: the window is the band
@@ -411,8 +460,15 @@ mod tests {
     #[test]
     fn window_stats_agree_with_the_read() {
         let img = random(200, 100, 3, 7);
-        let (_, stats) =
-            equirect_to_cube_streamed(&mut ImageRows::new(&img), 9, 10.0, 4, &NoProgress).unwrap();
+        let (_, stats) = equirect_to_cube_streamed(
+            &mut ImageRows::new(&img),
+            9,
+            Filter::Adaptive,
+            10.0,
+            4,
+            &NoProgress,
+        )
+        .unwrap();
         assert_eq!(window_stats(200, 100, 3, 9, 4), stats);
     }
 
@@ -444,7 +500,8 @@ mod tests {
                 Ok(())
             }
         }
-        let e = equirect_to_cube_streamed(&mut Broken(0), 8, 0.0, 4, &NoProgress).unwrap_err();
+        let e = equirect_to_cube_streamed(&mut Broken(0), 8, Filter::Area, 0.0, 4, &NoProgress)
+            .unwrap_err();
         assert_eq!(e.to_string(), "broken.hdr: truncated");
     }
 }

@@ -79,9 +79,9 @@ impl Bake for EquirectToCube {
         progress: &dyn Progress,
     ) -> Result<Baked, BakeError> {
         // A large equirect whose format reads row by row is resampled as its rows arrive
-        // (the area filter's cube; --to-equirect and --filter bilinear read it whole).
+        // (the same cube, any filter; --to-equirect reads it whole).
         let input = ibl_bake::one_input(Self::NAME, inputs)?;
-        let env = if !p.to_equirect && p.filter == ibl_core::equirect::Filter::Area {
+        let env = if !p.to_equirect {
             ibl_core::envmap::open_environment_with(input, p.env_policy())?
         } else {
             ibl_core::envmap::load_environment_with(input, p.env_policy())?.into()

@@ -29,7 +29,9 @@ pub struct Params {
         allow_negative_numbers = true
     )]
     pub rotate: f32,
-    /// Resampling filter: exact footprint mean (area) or one bilinear tap.
+    /// Resampling filter: adaptive (the footprint mean where shrinking, the bilinear reading
+    /// where enlarging, blended between), area (the exact footprint mean of the source read
+    /// as piecewise constant) or one bilinear tap.
     #[arg(long, value_enum, default_value_t = Filter::Area)]
     pub filter: Filter,
     /// Write an equirect image instead (W×H = 4n×2n of the input cube's face size, or --size×2 by --size).
@@ -162,9 +164,8 @@ pub fn output_paths(params: &Params, out: &Path) -> Result<Vec<PathBuf>> {
 
 /// Resamples an environment to a cube (or an equirect with `to_equirect`) and encodes the
 /// outputs for `out_dir` (or the output file for equirect). A streamed equirect
-/// ([`ibl_core::envmap::open_environment_with`]) is resampled by the area filter as its rows
-/// arrive (the same texels; its input warnings lead the bake's); for another filter or
-/// `to_equirect` it is read whole.
+/// ([`ibl_core::envmap::open_environment_with`]) is resampled as its rows arrive (the same
+/// texels; its input warnings lead the bake's); for `to_equirect` it is read whole.
 pub fn run(
     params: &Params,
     input: impl Into<Opened>,
@@ -174,12 +175,12 @@ pub fn run(
     params.validate()?;
     let enc = params.encoding()?;
     let input = match input.into() {
-        Opened::Streamed(s) if !params.to_equirect && params.filter == Filter::Area => {
+        Opened::Streamed(s) if !params.to_equirect => {
             let n = params.size.unwrap_or_else(|| s.natural_face_size());
             let path = s.path().to_path_buf();
             let what = format!("a {}×{} equirect", s.width(), s.height());
             let have = s.width() as f64 / 4.0;
-            let streamed = s.to_cube(n, params.rotate, progress)?;
+            let streamed = s.to_cube(n, params.filter, params.rotate, progress)?;
             let mut warnings = streamed.warnings(&path);
             warnings.extend(upsampling(&path, have, &what, n));
             return encode_cube(params, enc, out, streamed.cube, n, warnings);

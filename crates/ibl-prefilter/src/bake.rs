@@ -582,6 +582,12 @@ pub struct Report {
     /// Face size of the cube the levels are filtered from: the input resampled (area filter)
     /// at up to [`MAX_SOURCE_FACTOR`]× --size when its resolution allows.
     pub source_size: usize,
+    /// How level 0, the mirror, was made from an equirect input: `adaptive` when the source
+    /// cube is --size itself (the input is not finer than the chain: the footprint mean where
+    /// a texel spans 0.75 source pixels or more, the bilinear reading where it spans half of
+    /// one or less, blended between; [`Resampled`]), `area` when it is the source cube
+    /// box-reduced (or the input is a cube).
+    pub level0_filter: Filter,
     /// Knobs of the tree method, or of FIS (samples per texel, mip bias).
     pub tree: Option<TreeParams>,
     /// FIS samples per texel (with `--method fis`).
@@ -900,8 +906,19 @@ pub fn bake_chain(params: &Params, env: &Environment, progress: &dyn Progress) -
 /// The source cube the levels are filtered from, resampled from the input (the first stage
 /// of [`bake_chain`], apart so that [`run`] can drop the input's image before the rest: a
 /// 4k equirect is 100 MB, more than everything the bake builds from it at 256²).
+///
+/// The rough levels integrate the footprint-mean cube (`Filter::Area`: a sun keeps its
+/// power exactly). Level 0 is the mirror, read texel for texel: where the input is no finer
+/// than the chain (a small panorama, and the faces' corners, whose texels subtend 0.44× the
+/// centre's angle) the footprint mean shows each source pixel as a flat block, so there
+/// level 0 is the adaptive resample (`mirror`), the panorama as a mirror, a skybox and the
+/// engines' own routes read it (bilinearly). Measured through the glTF Sample Viewer's
+/// lookup, the mirror sphere from interior_256 at 256²: 4.2% → 0.7% mean error
+/// (`docs/notes/resample-adaptive.md`).
 struct Resampled {
     cube: Cubemap,
+    /// Level 0 when it is not the (box-reduced) source cube.
+    mirror: Option<Cubemap>,
     natural: usize,
     seconds: f64,
     cpu: CpuStages,
@@ -914,10 +931,17 @@ impl Resampled {
         let natural = env.natural_face_size();
         let src_size = source_face_size(natural, params.size);
         let cube = env.to_cube(src_size, Filter::Area, params.rotate, progress);
+        let mirror = match env {
+            Environment::Equirect(img) if src_size == params.size => Some(
+                ibl_core::equirect::adaptive_from_area(img, &cube, params.rotate),
+            ),
+            _ => None,
+        };
         let seconds = t0.elapsed().as_secs_f64();
         cpu.stage("resample".into());
         Resampled {
             cube,
+            mirror,
             natural,
             seconds,
             cpu,
@@ -936,13 +960,18 @@ impl Resampled {
         let path = stream.path().to_path_buf();
         let natural = stream.natural_face_size();
         let src_size = source_face_size(natural, params.size);
-        let streamed = stream.to_cube(src_size, params.rotate, progress)?;
+        let streamed = if src_size == params.size {
+            stream.to_cube_with_mirror(src_size, params.rotate, progress)?
+        } else {
+            stream.to_cube(src_size, Filter::Area, params.rotate, progress)?
+        };
         let seconds = t0.elapsed().as_secs_f64();
         cpu.stage("resample".into());
         let warnings = streamed.warnings(&path);
         Ok((
             Resampled {
                 cube: streamed.cube,
+                mirror: streamed.mirror,
                 natural,
                 seconds,
                 cpu,
@@ -956,6 +985,7 @@ impl Resampled {
 fn bake_resampled(params: &Params, resampled: Resampled, progress: &dyn Progress) -> Result<Chain> {
     let Resampled {
         cube: source,
+        mirror,
         natural,
         seconds: resample_seconds,
         mut cpu,
@@ -969,9 +999,16 @@ fn bake_resampled(params: &Params, resampled: Resampled, progress: &dyn Progress
         warnings.push(format!("the input holds about {natural}² texels per cube face, less than --size {size}: level 0 is upsampled"));
     }
     let t1 = Instant::now();
-    // Level 0 is the mirror: the source box-reduced to --size (src_size = size·2^k); the
-    // source itself, not a copy, when they are the same size.
-    let level0 = if source.size > size {
+    // Level 0 is the mirror: the source box-reduced to --size (src_size = size·2^k); at the
+    // same size the adaptive resample ([`Resampled`]), or the source itself, not a copy.
+    let level0_filter = if mirror.is_some() {
+        Filter::Adaptive
+    } else {
+        Filter::Area
+    };
+    let level0 = if let Some(m) = mirror {
+        Cow::Owned(m)
+    } else if source.size > size {
         let mut l0 = source.downsample();
         while l0.size > size {
             l0 = l0.downsample();
@@ -1341,6 +1378,7 @@ fn bake_resampled(params: &Params, resampled: Resampled, progress: &dyn Progress
         level_roughness: (0..n_written).map(|l| params.level_roughness(l)).collect(),
         fit_lookup: params.fits_lookup(),
         source_size: src_size,
+        level0_filter,
         tree: engine_kind.0.then(|| params.quality.tree_params()),
         fis_samples: engine_kind.1.then(|| params.fis_samples()),
         fis_lod_bias: engine_kind.1.then_some(LOD_BIAS),
@@ -1805,25 +1843,37 @@ mod tests {
         use ibl_core::envmap::{load_environment, open_environment_with, EnvPolicy};
         let d = tempfile::tempdir().unwrap();
         let p = ibl_core::stream::write_streamable_equirect(d.path(), "env.hdr");
-        let params = Params {
-            size: 32,
-            levels: Some(4),
-            rotate: 20.0,
-            ..Default::default()
-        };
-        let opened = open_environment_with(&p, EnvPolicy::default()).unwrap();
-        assert!(matches!(opened, Opened::Streamed(_)));
-        let np = &ibl_core::progress::NoProgress;
-        let a = run(&params, opened, d.path(), np).unwrap();
-        let b = run(&params, load_environment(&p, false).unwrap(), d.path(), np).unwrap();
-        crate::test_util::assert_same_bits(&a.chain.mips, &b.chain.mips);
-        assert_eq!(a.chain.warnings, b.chain.warnings);
-        let names = |b: &Baked| b.files.iter().map(|f| f.0.clone()).collect::<Vec<_>>();
-        assert_eq!(names(&a), names(&b));
-        // The chain's files (not the sidecar, which records times).
-        for (f, g) in a.files.iter().zip(&b.files) {
-            if f.0.extension().is_some_and(|e| e == "exr") {
-                assert!(f.1 == g.1, "{}", f.0.display());
+        // 32²: the source cube (128²) box-reduced to level 0; 512², the input's natural
+        // size: level 0 is the adaptive mirror, which the streamed read makes in its one pass.
+        for (size, levels, level0) in [(32, 4, Filter::Area), (512, 2, Filter::Adaptive)] {
+            let params = Params {
+                size,
+                levels: Some(levels),
+                rotate: 20.0,
+                ..Default::default()
+            };
+            let opened = open_environment_with(&p, EnvPolicy::default()).unwrap();
+            assert!(matches!(opened, Opened::Streamed(_)));
+            let np = &ibl_core::progress::NoProgress;
+            let a = run(&params, opened, d.path(), np).unwrap();
+            let loaded = load_environment(&p, false).unwrap();
+            if level0 == Filter::Adaptive {
+                // The mirror is the adaptive resample itself (made from the area cube's texels).
+                let direct = loaded.env.to_cube(size, Filter::Adaptive, 20.0, np);
+                assert_eq!(a.chain.mips.levels[0].faces, direct.faces);
+            }
+            let b = run(&params, loaded, d.path(), np).unwrap();
+            assert_eq!(a.chain.report.level0_filter, level0);
+            assert_eq!(b.chain.report.level0_filter, level0);
+            crate::test_util::assert_same_bits(&a.chain.mips, &b.chain.mips);
+            assert_eq!(a.chain.warnings, b.chain.warnings);
+            let names = |b: &Baked| b.files.iter().map(|f| f.0.clone()).collect::<Vec<_>>();
+            assert_eq!(names(&a), names(&b));
+            // The chain's files (not the sidecar, which records times).
+            for (f, g) in a.files.iter().zip(&b.files) {
+                if f.0.extension().is_some_and(|e| e == "exr") {
+                    assert!(f.1 == g.1, "{}", f.0.display());
+                }
             }
         }
     }

@@ -789,7 +789,7 @@ fn working_cube_of(
         Opened::Streamed(s) => {
             let n = size.unwrap_or_else(|| s.natural_face_size());
             let path = s.path().to_path_buf();
-            let streamed = s.to_cube(n, 0.0, progress)?;
+            let streamed = s.to_cube(n, Filter::Area, 0.0, progress)?;
             let warnings = streamed.warnings(&path);
             Ok((streamed.cube, warnings))
         }
