@@ -312,9 +312,9 @@ impl AreaPlan {
     }
 
     /// The texel of the adaptive filter (`Filter::Adaptive`): the footprint mean
-    /// ([`Self::footprint_mean`]) where the texel covers a source pixel or more, the bilinear
-    /// reconstruction at its centre ([`Self::bilinear_at_centre`]) where it covers less, and
-    /// between [`RHO_BILINEAR`] and [`RHO_AREA`] a linear blend of the two.
+    /// ([`Self::footprint_mean`]) where the texel spans [`RHO_AREA`] source pixels a side or
+    /// more, the bilinear reconstruction at its centre ([`Self::bilinear_at_centre`]) where
+    /// it spans [`RHO_BILINEAR`] or less, and a linear blend of the two between.
     ///
     /// Why: the footprint mean reads the source as piecewise constant, which is exact for a
     /// shrunk source but shows each source pixel as a flat block when the cube is finer than
@@ -322,20 +322,16 @@ impl AreaPlan {
     /// about 0.44× the angle of the face centre's). A mirror then reflects blocks where the
     /// engines' own routes and skyboxes show the bilinear reading of the same panorama
     /// (measured through the glTF Sample Viewer: 4.2% mean error on the mirror sphere from a
-    /// 256×128 source at 256², 0.7% read bilinearly; `docs/notes/resample-adaptive.md`).
-    /// The blend band sits below one source pixel a texel so that a sun keeps its power: a
-    /// bilinear read at 2 samples or more a source pixel a side integrates the tent
-    /// reconstruction to within 1e-4, at one sample a pixel only to about 0.5%.
+    /// 256×128 source at 256², 1.6% with this filter; `docs/notes/resample-adaptive.md`).
+    /// The band sits below one source pixel a texel because a bilinear reading taken about
+    /// once a source pixel sums a sun's tent worst (0.26–0.43% of a procedural sky's power
+    /// with bands at 0.5–1.5 or 1–2, at most 7e-5 with this one). Even so a bilinear reading keeps a
+    /// single-pixel sun's power only to a few percent (2.5% measured), so bakes integrate the
+    /// area cube and use this one only as their mirror.
     pub fn texel_value(&self, src: &Rows, sc: &mut Scratch, face: Face, i: usize, j: usize) -> Rgb {
-        let w_area = self.area_weight(face, i, j);
-        if w_area >= 1.0 {
-            return self.footprint_mean(src, sc, face, i, j).0;
-        }
-        let b = self.bilinear_at_centre(src, face, i, j);
-        if w_area <= 0.0 {
-            return b.map(|v| v as f32);
-        }
-        blend(b, self.footprint_mean(src, sc, face, i, j).0, w_area)
+        self.adaptive(src, face, i, j, || {
+            self.footprint_mean(src, sc, face, i, j).0
+        })
     }
 
     /// [`Self::texel_value`] of a texel whose footprint mean `area` is already known (a
@@ -348,15 +344,28 @@ impl AreaPlan {
         i: usize,
         j: usize,
     ) -> Rgb {
+        self.adaptive(src, face, i, j, || area)
+    }
+
+    /// The adaptive blend of texel (`face`, i, j), its footprint mean asked of `area` only
+    /// where the blend uses it.
+    fn adaptive(
+        &self,
+        src: &Rows,
+        face: Face,
+        i: usize,
+        j: usize,
+        area: impl FnOnce() -> Rgb,
+    ) -> Rgb {
         let w_area = self.area_weight(face, i, j);
         if w_area >= 1.0 {
-            return area;
+            return area();
         }
         let b = self.bilinear_at_centre(src, face, i, j);
         if w_area <= 0.0 {
             return b.map(|v| v as f32);
         }
-        blend(b, area, w_area)
+        blend(b, area(), w_area)
     }
 
     /// The footprint mean's weight in [`Self::texel_value`]'s blend.
